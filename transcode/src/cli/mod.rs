@@ -1,0 +1,63 @@
+//! Command-line interface: one module per subcommand, each with its own `Args` and `run`.
+
+use clap::{Parser, Subcommand};
+
+mod colmap;
+mod config;
+mod demo;
+mod eval;
+mod info;
+mod render;
+mod run;
+mod synth;
+mod train;
+mod views;
+
+/// Turn plenoptic point clouds and meshes into 3D Gaussian Splatting models.
+#[derive(Debug, Parser)]
+#[command(name = "transcode", version, about)]
+pub struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Print what a point cloud, plenoptic cloud or mesh file holds.
+    Info(info::Args),
+    /// Inspect and convert COLMAP sparse models.
+    #[command(subcommand)]
+    Colmap(colmap::Command),
+    /// Render a 3DGS PLY from the cameras of a COLMAP model.
+    Render(render::Args),
+    /// Train splats on a COLMAP dataset folder (images/ + sparse/0/).
+    Train(train::Args),
+    /// Run the whole pipeline: input model to 3DGS model with a report.
+    Run(run::Args),
+    /// Render the reference views of an input and write the COLMAP dataset only.
+    Views(views::Args),
+    /// Evaluate a 3DGS model against reference views with their COLMAP cameras.
+    Eval(eval::Args),
+    /// Generate the built-in plenoptic demo scene and run the pipeline on it.
+    Demo(demo::Args),
+    /// Generate a synthetic plenoptic cloud from a real mesh.
+    Synth(synth::Args),
+    /// Print or check the configuration shared by all subcommands.
+    Config(config::Args),
+}
+
+/// Runs the chosen subcommand.
+pub fn dispatch(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::Info(a) => info::run(a),
+        Command::Colmap(c) => colmap::run(c),
+        Command::Render(a) => render::run(a),
+        Command::Train(a) => train::run(a),
+        Command::Run(a) => run::run(a),
+        Command::Views(a) => views::run(a),
+        Command::Eval(a) => eval::run(a),
+        Command::Demo(a) => demo::run(a),
+        Command::Synth(a) => synth::run(a),
+        Command::Config(a) => config::run(a),
+    }
+}
