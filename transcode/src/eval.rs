@@ -1,0 +1,1 @@
+//! Evaluation of a trained model against reference views: image metrics, masks, distance to the surface.

@@ -1,0 +1,1 @@
+//! The whole pipeline, input model to 3DGS model with a report, stage by stage.

@@ -1,0 +1,1 @@
+//! The run report: report.json and a self-contained report.html.

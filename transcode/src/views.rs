@@ -1,0 +1,1 @@
+//! Reference renderer: plenoptic clouds and meshes to RGB, alpha and depth images per camera.
