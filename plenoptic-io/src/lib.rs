@@ -1,1 +1,71 @@
 //! Read and write plenoptic point clouds (8iVSLF PLY), coloured point clouds and meshes (OBJ, glTF, PLY).
+//!
+//! - [`read_cloud`] / [`write_cloud`]: PLY point clouds with any number of per-camera colours
+//!   (`red{k}/green{k}/blue{k}`) and the capture-rig header comments read by MPEG's PccAppRenderer.
+//! - [`read_mesh`]: OBJ (tobj), glTF 2.0 / GLB (gltf) and PLY meshes.
+//! - [`load`]: either of the above, chosen from the file.
+//! - [`view_color`]: the PccAppRenderer view-dependent colour interpolation.
+
+mod cloud;
+mod error;
+mod gltf_mesh;
+mod mesh;
+mod obj;
+pub mod ply;
+pub mod view_color;
+
+pub use cloud::{CaptureCamera, ColorType, ExtraProperty, PlenopticCloud, PlyLayout};
+pub use error::Error;
+pub use mesh::{Material, Mesh, Texture};
+pub use ply::{PlyFormat, ScalarType};
+
+use std::path::Path;
+
+/// What [`load`] found in a file: a point cloud or a mesh.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Model {
+    /// A (plenoptic) point cloud.
+    Cloud(PlenopticCloud),
+    /// A triangle mesh.
+    Mesh(Mesh),
+}
+
+/// Reads a plenoptic or coloured point cloud from a PLY file.
+pub fn read_cloud(path: &Path) -> Result<PlenopticCloud, Error> {
+    ply::read_cloud(path)
+}
+
+/// Writes a point cloud as PLY (atomically: temp file + rename), in `cloud.layout` when set,
+/// else binary little endian with float positions/normals and uchar colours.
+pub fn write_cloud(path: &Path, cloud: &PlenopticCloud) -> Result<(), Error> {
+    ply::write_cloud(path, cloud)
+}
+
+/// Reads a triangle mesh from OBJ, glTF/GLB or PLY (chosen by extension; PLY must have faces).
+pub fn read_mesh(path: &Path) -> Result<Mesh, Error> {
+    match extension(path).as_str() {
+        "obj" => obj::read_obj(path),
+        "gltf" | "glb" => gltf_mesh::read_gltf(path),
+        "ply" => ply::read_mesh(path),
+        other => Err(Error::UnsupportedFormat {
+            path: path.to_path_buf(),
+            extension: other.to_string(),
+        }),
+    }
+}
+
+/// Reads any supported file: a PLY with a face element holding at least one face is a mesh,
+/// a PLY without is a cloud; `.obj`, `.gltf` and `.glb` are meshes.
+pub fn load(path: &Path) -> Result<Model, Error> {
+    match extension(path).as_str() {
+        "ply" => ply::load(path),
+        _ => read_mesh(path).map(Model::Mesh),
+    }
+}
+
+/// Lower-cased extension of `path`, empty when it has none.
+fn extension(path: &Path) -> String {
+    path.extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default()
+}

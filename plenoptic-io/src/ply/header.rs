@@ -1,0 +1,388 @@
+//! PLY header: format line, elements, properties, comments.
+
+use std::path::Path;
+
+use crate::Error;
+
+/// Longest header we accept; real headers (8iVSLF with 13 rig matrices) are ~3.5 KB.
+pub const MAX_HEADER_BYTES: usize = 1 << 20;
+
+/// How the PLY body is encoded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum PlyFormat {
+    /// `format ascii 1.0`: one element per line, whitespace-separated numbers.
+    Ascii,
+    /// `format binary_little_endian 1.0`.
+    BinaryLittleEndian,
+    /// `format binary_big_endian 1.0`.
+    BinaryBigEndian,
+}
+
+impl PlyFormat {
+    /// The keyword used on the `format` line.
+    #[must_use]
+    pub fn keyword(self) -> &'static str {
+        match self {
+            PlyFormat::Ascii => "ascii",
+            PlyFormat::BinaryLittleEndian => "binary_little_endian",
+            PlyFormat::BinaryBigEndian => "binary_big_endian",
+        }
+    }
+}
+
+/// A PLY scalar type.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum ScalarType {
+    /// `char` / `int8`.
+    I8,
+    /// `uchar` / `uint8`.
+    U8,
+    /// `short` / `int16`.
+    I16,
+    /// `ushort` / `uint16`.
+    U16,
+    /// `int` / `int32`.
+    I32,
+    /// `uint` / `uint32`.
+    U32,
+    /// `float` / `float32`.
+    F32,
+    /// `double` / `float64`.
+    F64,
+}
+
+impl ScalarType {
+    /// Parses a type name (both the classic and the sized spellings).
+    #[must_use]
+    pub fn parse(name: &str) -> Option<Self> {
+        Some(match name {
+            "char" | "int8" => ScalarType::I8,
+            "uchar" | "uint8" => ScalarType::U8,
+            "short" | "int16" => ScalarType::I16,
+            "ushort" | "uint16" => ScalarType::U16,
+            "int" | "int32" => ScalarType::I32,
+            "uint" | "uint32" => ScalarType::U32,
+            "float" | "float32" => ScalarType::F32,
+            "double" | "float64" => ScalarType::F64,
+            _ => return None,
+        })
+    }
+
+    /// The classic PLY name, as written in headers.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            ScalarType::I8 => "char",
+            ScalarType::U8 => "uchar",
+            ScalarType::I16 => "short",
+            ScalarType::U16 => "ushort",
+            ScalarType::I32 => "int",
+            ScalarType::U32 => "uint",
+            ScalarType::F32 => "float",
+            ScalarType::F64 => "double",
+        }
+    }
+
+    /// Size in bytes in binary formats.
+    #[must_use]
+    pub fn size(self) -> usize {
+        match self {
+            ScalarType::I8 | ScalarType::U8 => 1,
+            ScalarType::I16 | ScalarType::U16 => 2,
+            ScalarType::I32 | ScalarType::U32 | ScalarType::F32 => 4,
+            ScalarType::F64 => 8,
+        }
+    }
+
+    /// True for float and double.
+    #[must_use]
+    pub fn is_float(self) -> bool {
+        matches!(self, ScalarType::F32 | ScalarType::F64)
+    }
+}
+
+/// The kind of a property: one scalar, or a list with a count type and an item type.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PropertyKind {
+    /// `property TYPE name`.
+    Scalar(ScalarType),
+    /// `property list COUNT_TYPE ITEM_TYPE name`.
+    List {
+        /// Type of the leading count.
+        count: ScalarType,
+        /// Type of each item.
+        item: ScalarType,
+    },
+}
+
+/// One property of an element.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Property {
+    /// Its name.
+    pub name: String,
+    /// Scalar or list.
+    pub kind: PropertyKind,
+}
+
+/// One element declaration (`element vertex 1234`) with its properties.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Element {
+    /// Its name.
+    pub name: String,
+    /// How many rows the header promises.
+    pub count: u64,
+    /// Its properties in order.
+    pub properties: Vec<Property>,
+}
+
+impl Element {
+    /// Byte size of one row when every property is a scalar (binary formats), else `None`.
+    #[must_use]
+    pub fn fixed_stride(&self) -> Option<usize> {
+        self.properties
+            .iter()
+            .map(|p| match p.kind {
+                PropertyKind::Scalar(t) => Some(t.size()),
+                PropertyKind::List { .. } => None,
+            })
+            .sum()
+    }
+
+    /// Fewest bytes one row can take in the given format (lists may be empty).
+    #[must_use]
+    pub fn min_row_bytes(&self, format: PlyFormat) -> u64 {
+        match format {
+            // Every value needs at least one digit and one separator (space or newline).
+            PlyFormat::Ascii => 2 * self.properties.len() as u64,
+            _ => self
+                .properties
+                .iter()
+                .map(|p| match p.kind {
+                    PropertyKind::Scalar(t) => t.size() as u64,
+                    PropertyKind::List { count, .. } => count.size() as u64,
+                })
+                .sum(),
+        }
+    }
+
+    /// Index of the property called `name`.
+    #[must_use]
+    pub fn property_index(&self, name: &str) -> Option<usize> {
+        self.properties.iter().position(|p| p.name == name)
+    }
+}
+
+/// A parsed PLY header.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Header {
+    /// Body encoding.
+    pub format: PlyFormat,
+    /// Elements in file order.
+    pub elements: Vec<Element>,
+    /// `comment` lines (text after `comment `), in order, with their 1-based line numbers.
+    pub comments: Vec<(usize, String)>,
+    /// `obj_info` lines.
+    pub obj_info: Vec<String>,
+    /// Byte offset of the body (just after `end_header\n`).
+    pub body_offset: usize,
+}
+
+impl Header {
+    /// The element called `name`, with its index.
+    #[must_use]
+    pub fn element(&self, name: &str) -> Option<(usize, &Element)> {
+        self.elements
+            .iter()
+            .enumerate()
+            .find(|(_, e)| e.name == name)
+    }
+}
+
+/// Parses the header at the start of `bytes`.
+pub fn parse_header(path: &Path, bytes: &[u8]) -> Result<Header, Error> {
+    let err = |line: usize, message: String| Error::Header {
+        path: path.to_path_buf(),
+        line,
+        message,
+    };
+    if bytes.is_empty() {
+        return Err(err(
+            1,
+            "the file is empty (expected the magic line 'ply')".into(),
+        ));
+    }
+    let mut pos = 0usize;
+    let mut line_no = 0usize;
+    let mut format = None;
+    let mut elements: Vec<Element> = Vec::new();
+    let mut comments = Vec::new();
+    let mut obj_info = Vec::new();
+    loop {
+        if pos >= bytes.len() {
+            return Err(err(line_no, "the file ends before 'end_header'".into()));
+        }
+        if pos > MAX_HEADER_BYTES {
+            return Err(err(
+                line_no,
+                format!("no 'end_header' within the first {MAX_HEADER_BYTES} bytes"),
+            ));
+        }
+        let end = bytes[pos..]
+            .iter()
+            .position(|&b| b == b'\n')
+            .map_or(bytes.len(), |i| pos + i);
+        line_no += 1;
+        let raw = &bytes[pos..end];
+        pos = (end + 1).min(bytes.len());
+        let text = std::str::from_utf8(raw)
+            .map_err(|_| err(line_no, "the header line is not valid UTF-8".into()))?;
+        // Accept CRLF headers (written by some Windows tools); the body is unaffected.
+        let text = text.strip_suffix('\r').unwrap_or(text);
+        if line_no == 1 {
+            if text.trim_end() != "ply" {
+                return Err(err(
+                    1,
+                    format!("expected the magic line 'ply', found {text:?}"),
+                ));
+            }
+            continue;
+        }
+        let mut words = text.split_whitespace();
+        let Some(keyword) = words.next() else {
+            continue;
+        };
+        match keyword {
+            "format" => {
+                let kind = words.next().unwrap_or("");
+                format = Some(match kind {
+                    "ascii" => PlyFormat::Ascii,
+                    "binary_little_endian" => PlyFormat::BinaryLittleEndian,
+                    "binary_big_endian" => PlyFormat::BinaryBigEndian,
+                    _ => return Err(err(line_no, format!("unknown format {kind:?}"))),
+                });
+                match words.next() {
+                    Some("1.0") | Some("1") => {}
+                    v => return Err(err(line_no, format!("unsupported format version {v:?}"))),
+                }
+            }
+            "comment" => {
+                let rest = text.trim_start()["comment".len()..].trim();
+                comments.push((line_no, rest.to_string()));
+            }
+            "obj_info" => {
+                obj_info.push(text.trim_start()["obj_info".len()..].trim().to_string());
+            }
+            "element" => {
+                let (Some(name), Some(count)) = (words.next(), words.next()) else {
+                    return Err(err(line_no, "expected 'element NAME COUNT'".into()));
+                };
+                let count: u64 = count.parse().map_err(|_| {
+                    err(
+                        line_no,
+                        format!("element count {count:?} is not a non-negative integer"),
+                    )
+                })?;
+                elements.push(Element {
+                    name: name.to_string(),
+                    count,
+                    properties: Vec::new(),
+                });
+            }
+            "property" => {
+                let Some(element) = elements.last_mut() else {
+                    return Err(err(line_no, "property before any element".into()));
+                };
+                let parts: Vec<&str> = words.collect();
+                let ty = |s: &str| {
+                    ScalarType::parse(s)
+                        .ok_or_else(|| err(line_no, format!("unknown property type {s:?}")))
+                };
+                let property = match parts.as_slice() {
+                    ["list", count, item, name] => {
+                        let count = ty(count)?;
+                        if count.is_float() {
+                            return Err(err(
+                                line_no,
+                                format!(
+                                    "list count type must be an integer, found {}",
+                                    count.name()
+                                ),
+                            ));
+                        }
+                        Property {
+                            name: (*name).to_string(),
+                            kind: PropertyKind::List {
+                                count,
+                                item: ty(item)?,
+                            },
+                        }
+                    }
+                    [t, name] => Property {
+                        name: (*name).to_string(),
+                        kind: PropertyKind::Scalar(ty(t)?),
+                    },
+                    _ => return Err(err(line_no, format!("malformed property line {text:?}"))),
+                };
+                if element.property_index(&property.name).is_some() {
+                    return Err(err(
+                        line_no,
+                        format!(
+                            "element '{}' declares property '{}' twice",
+                            element.name, property.name
+                        ),
+                    ));
+                }
+                element.properties.push(property);
+            }
+            "end_header" => break,
+            other => return Err(err(line_no, format!("unknown header keyword {other:?}"))),
+        }
+    }
+    let Some(format) = format else {
+        return Err(err(2, "no 'format' line in the header".into()));
+    };
+    Ok(Header {
+        format,
+        elements,
+        comments,
+        obj_info,
+        body_offset: pos,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<Header, Error> {
+        parse_header(Path::new("t.ply"), text.as_bytes())
+    }
+
+    #[test]
+    fn parses_elements_lists_and_comments() {
+        let h = parse(
+            "ply\nformat binary_big_endian 1.0\ncomment width 1023\nelement vertex 3\nproperty float x\n\
+             property uint8 red\nelement face 1\nproperty list uchar int vertex_indices\nend_header\nXYZ",
+        )
+        .unwrap();
+        assert_eq!(h.format, PlyFormat::BinaryBigEndian);
+        assert_eq!(h.comments, vec![(3, "width 1023".to_string())]);
+        assert_eq!(h.elements[0].fixed_stride(), Some(5));
+        assert_eq!(h.elements[1].fixed_stride(), None);
+        assert_eq!(h.elements[1].min_row_bytes(h.format), 1);
+        assert_eq!(&"ply\nformat binary_big_endian 1.0\ncomment width 1023\nelement vertex 3\nproperty float x\nproperty uint8 red\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n".len(), &h.body_offset);
+    }
+
+    #[test]
+    fn rejects_bad_headers_with_line_numbers() {
+        let e = parse("ply\nformat ascii 1.0\nelement vertex -3\nend_header\n").unwrap_err();
+        assert!(matches!(e, Error::Header { line: 3, .. }), "{e}");
+        let e = parse("ply\nformat ascii 1.0\nelement vertex 3\nproperty flot x\nend_header\n")
+            .unwrap_err();
+        assert!(e.to_string().contains("flot"), "{e}");
+        let e = parse("ply\nformat ascii 1.0\nelement vertex 3\n").unwrap_err();
+        assert!(e.to_string().contains("end_header"), "{e}");
+        let e = parse("plx\n").unwrap_err();
+        assert!(matches!(e, Error::Header { line: 1, .. }), "{e}");
+    }
+}

@@ -1,0 +1,116 @@
+//! The view-dependent colour of a plenoptic point, exactly as MPEG's PccAppRenderer computes it.
+//!
+//! Its vertex shaders weight camera `i` by `max(0, cos∠(C_i − P, V − P))^n` with n = 10 and
+//! normalised vectors, and fall back to the main colour when the weights vanish
+//! (see `shared/reference/formats.md` §2.3). This is the only implementation in the project.
+
+use glam::Vec3;
+
+/// The renderer's exponent n ("Currently, color interpolation uses n=10", InterDigital slides p. 17).
+pub const DEFAULT_EXPONENT: i32 = 10;
+
+/// Below this total weight the renderer uses the main colour (`PccAppRenderer` shader threshold).
+pub const MIN_TOTAL_WEIGHT: f32 = 1e-6;
+
+/// w_i = max(0, dot(normalize(C_i − P), normalize(V − P)))^n; colour = Σ w_i c_i / Σ w_i, main colour if Σw ≤ 1e-6.
+///
+/// `cameras` and `colors` pair up (the shorter length wins). A camera or viewer that sits exactly
+/// on the point has no direction and gets weight 0.
+#[must_use]
+pub fn interpolate(
+    point: Vec3,
+    viewer: Vec3,
+    cameras: &[Vec3],
+    colors: &[[f32; 3]],
+    main: [f32; 3],
+    exponent: i32,
+) -> [f32; 3] {
+    let view_dir = (viewer - point).normalize_or_zero();
+    let mut sum = [0.0f32; 3];
+    let mut total = 0.0f32;
+    for (camera, color) in cameras.iter().zip(colors) {
+        let w = weight((*camera - point).normalize_or_zero(), view_dir, exponent);
+        total += w;
+        for c in 0..3 {
+            sum[c] += w * color[c];
+        }
+    }
+    if total <= MIN_TOTAL_WEIGHT {
+        return main;
+    }
+    [sum[0] / total, sum[1] / total, sum[2] / total]
+}
+
+/// The weight of one camera from unit directions point→camera and point→viewer.
+#[must_use]
+pub fn weight(to_camera: Vec3, to_viewer: Vec3, exponent: i32) -> f32 {
+    to_camera.dot(to_viewer).max(0.0).powi(exponent)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    #[test]
+    fn single_camera_facing_viewer_gives_its_colour() {
+        let c = interpolate(
+            Vec3::ZERO,
+            Vec3::new(0.0, 0.0, 10.0),
+            &[Vec3::new(0.0, 0.0, 2000.0)],
+            &[[0.2, 0.4, 0.6]],
+            [1.0, 1.0, 1.0],
+            DEFAULT_EXPONENT,
+        );
+        assert_eq!(c, [0.2, 0.4, 0.6]);
+    }
+
+    #[test]
+    fn viewer_behind_every_camera_gets_main_colour() {
+        let c = interpolate(
+            Vec3::ZERO,
+            Vec3::new(0.0, 0.0, -10.0),
+            &[Vec3::new(0.0, 0.0, 5.0), Vec3::new(1.0, 0.0, 5.0)],
+            &[[0.2, 0.4, 0.6], [0.1, 0.1, 0.1]],
+            [0.9, 0.8, 0.7],
+            DEFAULT_EXPONENT,
+        );
+        assert_eq!(c, [0.9, 0.8, 0.7]);
+    }
+
+    #[test]
+    fn two_cameras_mix_by_cosine_power() {
+        // Cameras at ±30° from the viewer direction in the x-z plane, at very different
+        // distances (4000 voxels and 3): normalisation must make the distance irrelevant.
+        let a = 30f32.to_radians();
+        let cam0 = Vec3::new(a.sin(), 0.0, a.cos()) * 4000.0;
+        let cam1 = Vec3::new(-(2.0 * a).sin(), 0.0, (2.0 * a).cos()) * 3.0;
+        let c = interpolate(
+            Vec3::ZERO,
+            Vec3::new(0.0, 0.0, 1.0),
+            &[cam0, cam1],
+            &[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+            [0.0, 0.0, 0.0],
+            DEFAULT_EXPONENT,
+        );
+        let w0 = a.cos().powi(10);
+        let w1 = (2.0 * a).cos().powi(10);
+        assert_relative_eq!(c[0], w0 / (w0 + w1), epsilon = 1e-6);
+        assert_relative_eq!(c[1], w1 / (w0 + w1), epsilon = 1e-6);
+        assert_eq!(c[2], 0.0);
+    }
+
+    #[test]
+    fn far_cameras_do_not_overflow() {
+        // Unnormalised dot products of ~1e4-voxel vectors raised to 10 overflow f32 (formats.md §2.3).
+        let c = interpolate(
+            Vec3::new(4000.0, 4000.0, 4000.0),
+            Vec3::new(-40000.0, 4000.0, 4000.0),
+            &[Vec3::new(-50000.0, 4000.0, 4000.0)],
+            &[[0.5, 0.25, 0.125]],
+            [0.0, 0.0, 0.0],
+            DEFAULT_EXPONENT,
+        );
+        assert_eq!(c, [0.5, 0.25, 0.125]);
+    }
+}
