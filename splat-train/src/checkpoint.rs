@@ -1,0 +1,222 @@
+//! Checkpoints: the whole state of a run, so that resuming gives the same result as not stopping.
+//!
+//! Layout (little endian): the 8 bytes `SPLTCKPT`, a u32 version, a u64 header length, a JSON
+//! header (run state including the generator, splat count, SH degree, lengths), then f32 blocks:
+//! means, log-scales, rotations, opacity logits, SH; the Adam first and second moments of each
+//! in the same order; the strategy's statistics. Values are stored bit-exactly.
+
+use std::fs;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+use splat_core::{Splats, num_sh_coeffs};
+
+use crate::adam::Moments;
+use crate::config::TrainConfig;
+use crate::error::Error;
+use crate::state::{ParamState, SplatMoments};
+use crate::trainer::{RunState, Trainer};
+use crate::view::View;
+
+const MAGIC: &[u8; 8] = b"SPLTCKPT";
+const VERSION: u32 = 1;
+/// Refuse headers beyond this size before allocating (a corrupt length must not allocate GiBs).
+const MAX_HEADER: u64 = 1 << 30;
+
+#[derive(Debug, Serialize, Deserialize)]
+struct Header {
+    run: RunState,
+    splats: usize,
+    sh_degree: u32,
+    views: usize,
+    strategy_values: usize,
+}
+
+/// Writes `trainer`'s state to `path` atomically (temporary sibling, fsync, rename).
+pub(crate) fn save(trainer: &Trainer, path: &Path) -> Result<(), Error> {
+    let st = &trainer.state;
+    let strategy = trainer.strategy.export_state();
+    let header = Header {
+        run: trainer.run.clone(),
+        splats: st.len(),
+        sh_degree: st.splats.sh_degree,
+        views: trainer.views().len(),
+        strategy_values: strategy.len(),
+    };
+    let json = serde_json::to_vec(&header)
+        .map_err(|e| Error::Config(format!("checkpoint header cannot be encoded: {e}")))?;
+    let mut buf =
+        Vec::with_capacity(20 + json.len() + 4 * 3 * (st.len() * 14 + st.splats.sh.len() * 3));
+    buf.extend_from_slice(MAGIC);
+    buf.extend_from_slice(&VERSION.to_le_bytes());
+    buf.extend_from_slice(&(json.len() as u64).to_le_bytes());
+    buf.extend_from_slice(&json);
+    let s = &st.splats;
+    let m = &st.moments;
+    let blocks: [&[f32]; 16] = [
+        bytemuck::cast_slice(&s.means),
+        bytemuck::cast_slice(&s.log_scales),
+        s.rotations.as_flattened(),
+        &s.opacity_logits,
+        s.sh.as_flattened(),
+        &m.means.m,
+        &m.log_scales.m,
+        &m.rotations.m,
+        &m.opacity_logits.m,
+        &m.sh.m,
+        &m.means.v,
+        &m.log_scales.v,
+        &m.rotations.v,
+        &m.opacity_logits.v,
+        &m.sh.v,
+        &strategy,
+    ];
+    for b in blocks {
+        for v in b {
+            buf.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    write_atomic(path, &buf).map_err(|source| Error::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// Reads a checkpoint and rebuilds the trainer on `views` with `config`.
+pub(crate) fn load(path: &Path, views: Vec<View>, config: TrainConfig) -> Result<Trainer, Error> {
+    let bytes = fs::read(path).map_err(|source| Error::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let bad = |offset: usize, problem: String| Error::Checkpoint {
+        path: path.to_path_buf(),
+        offset: offset as u64,
+        problem,
+    };
+    if bytes.len() < 20 || &bytes[..8] != MAGIC {
+        return Err(bad(
+            0,
+            "not a splat-train checkpoint (magic SPLTCKPT missing)".into(),
+        ));
+    }
+    let version = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]);
+    if version != VERSION {
+        return Err(bad(
+            8,
+            format!("version {version}, this build reads {VERSION}"),
+        ));
+    }
+    let mut len8 = [0u8; 8];
+    len8.copy_from_slice(&bytes[12..20]);
+    let hlen = u64::from_le_bytes(len8);
+    if hlen > MAX_HEADER || 20 + hlen > bytes.len() as u64 {
+        return Err(bad(
+            12,
+            format!(
+                "header length {hlen} exceeds the file ({} bytes)",
+                bytes.len()
+            ),
+        ));
+    }
+    let hend = 20 + hlen as usize;
+    let header: Header = serde_json::from_slice(&bytes[20..hend])
+        .map_err(|e| bad(20, format!("header is not valid: {e}")))?;
+    if header.sh_degree > 3 {
+        return Err(bad(20, format!("SH degree {} exceeds 3", header.sh_degree)));
+    }
+    if header.views != views.len() {
+        return Err(bad(
+            20,
+            format!(
+                "saved with {} views, resumed with {}",
+                header.views,
+                views.len()
+            ),
+        ));
+    }
+    if header.run.order.iter().any(|&v| v as usize >= views.len())
+        || header.run.cursor > header.run.order.len()
+    {
+        return Err(bad(
+            20,
+            "view order refers to views that do not exist".into(),
+        ));
+    }
+    let n = header.splats;
+    let k = num_sh_coeffs(header.sh_degree);
+    let sizes = [3 * n, 3 * n, 4 * n, n, 3 * k * n];
+    let floats: usize = 3 * sizes.iter().sum::<usize>() + header.strategy_values;
+    let expected = floats.checked_mul(4).and_then(|b| b.checked_add(hend));
+    if expected != Some(bytes.len()) {
+        return Err(bad(
+            hend,
+            format!(
+                "{} bytes of data, expected {} for {n} splats",
+                bytes.len() - hend,
+                floats * 4
+            ),
+        ));
+    }
+    let mut cursor = hend;
+    let mut take = |count: usize| -> Vec<f32> {
+        let v = bytes[cursor..cursor + 4 * count]
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect();
+        cursor += 4 * count;
+        v
+    };
+    let means = take(sizes[0]);
+    let log_scales = take(sizes[1]);
+    let rotations = take(sizes[2]);
+    let opacity_logits = take(sizes[3]);
+    let sh = take(sizes[4]);
+    let m: Vec<Vec<f32>> = sizes.iter().map(|&s| take(s)).collect();
+    let v: Vec<Vec<f32>> = sizes.iter().map(|&s| take(s)).collect();
+    let strategy = take(header.strategy_values);
+    let splats = Splats {
+        means: bytemuck::cast_slice(&means).to_vec(),
+        log_scales: bytemuck::cast_slice(&log_scales).to_vec(),
+        rotations: rotations
+            .chunks_exact(4)
+            .map(|c| [c[0], c[1], c[2], c[3]])
+            .collect(),
+        opacity_logits,
+        sh_degree: header.sh_degree,
+        sh: sh.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+    };
+    let mut mv = m.into_iter().zip(v).map(|(m, v)| Moments { m, v });
+    let mut next = || mv.next().unwrap_or_default();
+    let moments = SplatMoments {
+        means: next(),
+        log_scales: next(),
+        rotations: next(),
+        opacity_logits: next(),
+        sh: next(),
+    };
+    let mut trainer = Trainer::new(splats.clone(), views, config)?;
+    trainer
+        .restore(ParamState { splats, moments }, header.run, &strategy)
+        .map_err(|p| bad(hend, p))?;
+    Ok(trainer)
+}
+
+/// Writes `bytes` to `path` through a temporary sibling renamed over it.
+fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let tmp: PathBuf = path.with_file_name(format!(".{name}.tmp{}", std::process::id()));
+    let result = (|| {
+        let mut f = fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        fs::rename(&tmp, path)
+    })();
+    if result.is_err() {
+        let _ = fs::remove_file(&tmp);
+    }
+    result
+}

@@ -1,0 +1,269 @@
+//! Training configuration with Inria's 3DGS defaults (`arguments/__init__.py`).
+
+use std::time::Duration;
+
+use serde::{Deserialize, Serialize};
+
+use crate::adam::AdamParams;
+use crate::error::Error;
+
+/// Learning rates per parameter group.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct LearningRates {
+    /// Initial position rate, multiplied by the scene extent (Inria `position_lr_init`).
+    pub position_init: f32,
+    /// Final position rate, multiplied by the scene extent (Inria `position_lr_final`).
+    pub position_final: f32,
+    /// Iterations over which the position rate decays; `None` = the run's iteration count.
+    pub position_max_steps: Option<u32>,
+    /// Rate of the SH DC coefficients (Inria `feature_lr`).
+    pub sh_dc: f32,
+    /// Rate of the higher SH bands = `sh_dc / sh_rest_divisor` (Inria divides by 20).
+    pub sh_rest_divisor: f32,
+    /// Opacity-logit rate (Inria 2023 `opacity_lr`).
+    pub opacity: f32,
+    /// Log-scale rate (Inria `scaling_lr`).
+    pub scale: f32,
+    /// Quaternion rate (Inria `rotation_lr`).
+    pub rotation: f32,
+}
+
+impl Default for LearningRates {
+    fn default() -> Self {
+        Self {
+            position_init: 1.6e-4,
+            position_final: 1.6e-6,
+            position_max_steps: None,
+            sh_dc: 2.5e-3,
+            sh_rest_divisor: 20.0,
+            opacity: 0.05,
+            scale: 5e-3,
+            rotation: 1e-3,
+        }
+    }
+}
+
+/// Attribute groups held fixed during training: a frozen group is never written.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct Frozen {
+    /// Means.
+    pub positions: bool,
+    /// Log-scales.
+    pub scales: bool,
+    /// Quaternions.
+    pub rotations: bool,
+    /// Opacity logits.
+    pub opacities: bool,
+    /// SH coefficients.
+    pub colors: bool,
+}
+
+/// Inria's adaptive density control (`densify_and_prune`, `reset_opacity`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct DensifyConfig {
+    /// Densify every this many iterations (Inria `densification_interval`).
+    pub interval: u32,
+    /// Densify only after this iteration (Inria `densify_from_iter`).
+    pub start: u32,
+    /// Densify and reset opacity only before this iteration (Inria `densify_until_iter`).
+    pub stop: u32,
+    /// Mean view-space gradient norm (NDC units) that selects a splat (Inria 2e-4).
+    pub grad_threshold: f32,
+    /// Splats larger than this fraction of the extent split, smaller ones clone (Inria 0.01).
+    pub percent_dense: f32,
+    /// Clamp every opacity to 0.01 every this many iterations (Inria 3000); 0 = never.
+    pub opacity_reset_interval: u32,
+    /// Prune splats less opaque than this (Inria 0.005).
+    pub min_opacity: f32,
+    /// After the first opacity reset, prune splats larger than this fraction of the extent (Inria 0.1).
+    pub max_world_scale: f32,
+    /// Never grow beyond this many splats; candidates with the largest gradients go first.
+    pub max_splats: usize,
+}
+
+impl Default for DensifyConfig {
+    fn default() -> Self {
+        Self {
+            interval: 100,
+            start: 500,
+            stop: 15_000,
+            grad_threshold: 2e-4,
+            percent_dense: 0.01,
+            opacity_reset_interval: 3000,
+            min_opacity: 0.005,
+            max_world_scale: 0.1,
+            max_splats: 3_000_000,
+        }
+    }
+}
+
+/// Background colour composited behind the splats.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub enum Background {
+    /// The same colour every step (RGB in [0, 1]).
+    Fixed([f32; 3]),
+    /// A uniform random colour drawn every step (for views with a mask).
+    Random,
+}
+
+/// Everything that steers a training run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TrainConfig {
+    /// Number of optimisation steps (one view per step).
+    pub iterations: u32,
+    /// Seed of the run's random generator (view order, random background, split samples).
+    pub seed: u64,
+    /// Learning rates per group.
+    pub lr: LearningRates,
+    /// Adam hyper-parameters.
+    pub adam: AdamParams,
+    /// Weight λ of the D-SSIM term (Inria 0.2).
+    pub ssim_weight: f32,
+    /// Highest SH degree trained; `None` = the model's degree.
+    pub sh_degree: Option<u32>,
+    /// One more SH band every this many iterations (Inria 1000); 0 = all bands from the start.
+    pub sh_degree_interval: u32,
+    /// Attribute groups that are not trained.
+    pub frozen: Frozen,
+    /// Adaptive density control; `None` keeps the splat set fixed.
+    pub densify: Option<DensifyConfig>,
+    /// Background behind the splats.
+    pub background: Background,
+    /// Render with the anti-aliased (Mip-Splatting style) opacity compensation.
+    pub antialiased: bool,
+    /// Stop early once this much training time has passed.
+    pub time_budget: Option<Duration>,
+    /// Weight of the L1 loss of rendered alpha against a view's mask (0 = off).
+    pub alpha_loss_weight: f32,
+    /// Record a history entry every this many iterations (and at the last).
+    pub history_every: u32,
+}
+
+impl Default for TrainConfig {
+    fn default() -> Self {
+        Self {
+            iterations: 30_000,
+            seed: 0,
+            lr: LearningRates::default(),
+            adam: AdamParams::default(),
+            ssim_weight: 0.2,
+            sh_degree: None,
+            sh_degree_interval: 1000,
+            frozen: Frozen::default(),
+            densify: Some(DensifyConfig::default()),
+            background: Background::Fixed([0.0; 3]),
+            antialiased: false,
+            time_budget: None,
+            alpha_loss_weight: 0.0,
+            history_every: 10,
+        }
+    }
+}
+
+impl TrainConfig {
+    /// Checks ranges and combinations, naming the first bad field.
+    ///
+    /// # Errors
+    /// [`Error::Config`] naming the field and the value.
+    pub fn validate(&self) -> Result<(), Error> {
+        let rate = |name: &str, v: f32| {
+            if v.is_finite() && (0.0..=1.0).contains(&v) {
+                Ok(())
+            } else {
+                Err(Error::Config(format!(
+                    "{name} = {v} is not a learning rate in [0, 1]"
+                )))
+            }
+        };
+        let lr = &self.lr;
+        rate("lr.position_init", lr.position_init)?;
+        rate("lr.position_final", lr.position_final)?;
+        rate("lr.sh_dc", lr.sh_dc)?;
+        rate("lr.opacity", lr.opacity)?;
+        rate("lr.scale", lr.scale)?;
+        rate("lr.rotation", lr.rotation)?;
+        if !(lr.sh_rest_divisor.is_finite() && lr.sh_rest_divisor >= 1.0) {
+            return Err(Error::Config(format!(
+                "lr.sh_rest_divisor = {} must be at least 1",
+                lr.sh_rest_divisor
+            )));
+        }
+        let a = &self.adam;
+        if !((0.0..1.0).contains(&a.beta1) && (0.0..1.0).contains(&a.beta2) && a.eps > 0.0) {
+            return Err(Error::Config(format!("Adam parameters {a:?} out of range")));
+        }
+        if !(0.0..=1.0).contains(&self.ssim_weight) {
+            return Err(Error::Config(format!(
+                "ssim_weight = {} not in [0, 1]",
+                self.ssim_weight
+            )));
+        }
+        if !(self.alpha_loss_weight.is_finite() && self.alpha_loss_weight >= 0.0) {
+            return Err(Error::Config(format!(
+                "alpha_loss_weight = {} must be finite and non-negative",
+                self.alpha_loss_weight
+            )));
+        }
+        if let Some(d) = self.sh_degree
+            && d > 3
+        {
+            return Err(Error::Config(format!("sh_degree = {d} exceeds 3")));
+        }
+        if let Background::Fixed(c) = self.background
+            && !c.iter().all(|v| v.is_finite())
+        {
+            return Err(Error::Config(format!("background {c:?} is not finite")));
+        }
+        if let Some(d) = &self.densify {
+            if self.frozen.positions {
+                return Err(Error::Config(
+                    "densification moves and removes splats, so it cannot run with frozen positions"
+                        .into(),
+                ));
+            }
+            if d.interval == 0 {
+                return Err(Error::Config("densify.interval must be at least 1".into()));
+            }
+            if !(d.grad_threshold.is_finite() && d.grad_threshold > 0.0) {
+                return Err(Error::Config(format!(
+                    "densify.grad_threshold = {} must be positive",
+                    d.grad_threshold
+                )));
+            }
+            if d.max_splats == 0 {
+                return Err(Error::Config(
+                    "densify.max_splats must be at least 1".into(),
+                ));
+            }
+        }
+        if self.history_every == 0 {
+            return Err(Error::Config("history_every must be at least 1".into()));
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_are_valid_and_inria() {
+        let c = TrainConfig::default();
+        c.validate().unwrap();
+        assert_eq!(c.ssim_weight, 0.2);
+        assert_eq!(c.densify.unwrap().grad_threshold, 2e-4);
+    }
+
+    #[test]
+    fn rejects_bad_values() {
+        let mut c = TrainConfig::default();
+        c.lr.scale = f32::NAN;
+        assert!(matches!(c.validate(), Err(Error::Config(m)) if m.contains("lr.scale")));
+        let mut c = TrainConfig::default();
+        c.frozen.positions = true;
+        assert!(c.validate().is_err());
+        c.densify = None;
+        c.validate().unwrap();
+    }
+}

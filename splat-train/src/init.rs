@@ -1,0 +1,90 @@
+//! Initial splat scales from point spacing.
+
+use std::num::NonZero;
+
+use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use rayon::prelude::*;
+
+/// Inria's isotropic initial log-scales: log √(max(mean squared distance to the 3 nearest other
+/// points, 1e-7)) per point (`distCUDA2` in `gaussian_model.py`). With fewer than 4 points the
+/// mean runs over the neighbours there are; a lone point gets the 1e-7 floor.
+#[must_use]
+pub fn scales_from_knn(points: &[glam::Vec3]) -> Vec<glam::Vec3> {
+    if points.is_empty() {
+        return Vec::new();
+    }
+    let coords: Vec<[f32; 3]> = points.iter().map(|p| p.to_array()).collect();
+    let Ok(tree) = ImmutableKdTree::<f32, 3>::new_from_slice(&coords) else {
+        return vec![glam::Vec3::splat(0.5 * 1e-7f32.ln()); points.len()];
+    };
+    let k = points.len().min(4);
+    let want = NonZero::new(k).unwrap_or(NonZero::<usize>::MIN);
+    coords
+        .par_iter()
+        .enumerate()
+        .map(|(i, q)| {
+            let found = tree
+                .query(q)
+                .nearest_n::<SquaredEuclidean<f32>>(want)
+                .execute();
+            // The query point itself is among the results (distance 0); skip it by index so that
+            // duplicate points still count each other as neighbours at distance 0.
+            let mut sum = 0.0f64;
+            let mut count = 0usize;
+            let mut skipped = false;
+            for r in &found {
+                if !skipped && r.item as usize == i {
+                    skipped = true;
+                    continue;
+                }
+                if count < 3 {
+                    sum += f64::from(r.distance);
+                    count += 1;
+                }
+            }
+            let mean = if count == 0 { 0.0 } else { sum / count as f64 };
+            glam::Vec3::splat((0.5 * mean.max(1e-7).ln()) as f32)
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{RngExt, SeedableRng};
+
+    #[test]
+    fn matches_brute_force() {
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(5);
+        let pts: Vec<glam::Vec3> = (0..300)
+            .map(|_| glam::Vec3::new(rng.random(), rng.random(), rng.random::<f32>() * 0.1))
+            .collect();
+        let ours = scales_from_knn(&pts);
+        for (i, p) in pts.iter().enumerate() {
+            let mut d: Vec<f64> = pts
+                .iter()
+                .enumerate()
+                .filter(|&(j, _)| j != i)
+                .map(|(_, q)| f64::from(p.distance_squared(*q)))
+                .collect();
+            d.sort_by(f64::total_cmp);
+            let expect = (0.5 * ((d[0] + d[1] + d[2]) / 3.0).max(1e-7).ln()) as f32;
+            assert!(
+                (ours[i].x - expect).abs() < 1e-4,
+                "point {i}: {} vs {expect}",
+                ours[i].x
+            );
+            assert_eq!(ours[i].x, ours[i].y);
+            assert_eq!(ours[i].x, ours[i].z);
+        }
+    }
+
+    #[test]
+    fn degenerate_inputs() {
+        assert!(scales_from_knn(&[]).is_empty());
+        let one = scales_from_knn(&[glam::Vec3::ONE]);
+        assert!((one[0].x - 0.5 * 1e-7f32.ln()).abs() < 1e-5);
+        let dup = scales_from_knn(&[glam::Vec3::ZERO; 5]);
+        assert!(dup.iter().all(|s| s.x.is_finite()));
+    }
+}

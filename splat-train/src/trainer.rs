@@ -1,0 +1,732 @@
+//! The training loop: one view per step, render, loss, backward, Adam, refinement.
+
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use glam::Vec3;
+use rand::{RngExt, SeedableRng};
+use rand_pcg::Pcg64;
+use serde::{Deserialize, Serialize};
+use splat_core::{Rasterizer, RenderCamera, RenderOptions, SplatGrads, Splats, logit};
+
+use crate::config::{Background, TrainConfig};
+use crate::error::Error;
+use crate::loss::{Loss, alpha_l1};
+use crate::metrics::psnr_from_mse;
+use crate::schedule::{camera_extent, exponential_lr, sh_degree_at};
+use crate::ssim::SsimTarget;
+use crate::state::ParamState;
+use crate::strategy::{DensifyStrategy, InriaDensify, RefineContext, RefineReport};
+use crate::view::View;
+
+/// Log-scale range a splat is clamped to, relative to the scene extent: from a millionth of the
+/// extent (far below a pixel at any sensible distance) to ten extents (larger than the scene).
+const MIN_SCALE_OF_EXTENT: f32 = 1e-6;
+const MAX_SCALE_OF_EXTENT: f32 = 10.0;
+/// Opacity logits are clamped to ±this: sigmoid(±20) is 1 − 2e-9 and 2e-9, saturated in f32.
+const MAX_OPACITY_LOGIT: f32 = 20.0;
+/// Opacity given to a splat whose parameters became non-finite and are reset (Inria's initial 0.1).
+const RESET_OPACITY: f32 = 0.1;
+
+/// Figures of one step.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct StepStats {
+    /// 1-based index of the step.
+    pub iteration: u32,
+    /// Index of the view trained on.
+    pub view: usize,
+    /// Total loss of the step (NaN if the render was not finite).
+    pub loss: f64,
+    /// PSNR of the step's render against its view, in dB.
+    pub psnr: f64,
+    /// Splats after the step.
+    pub splats: usize,
+    /// What the refinement strategy did at this step.
+    pub refine: RefineReport,
+}
+
+/// One line of the training history.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct HistoryEntry {
+    /// 1-based iteration.
+    pub iteration: u32,
+    /// Training time in seconds since the run started (checkpoint pauses excluded).
+    pub elapsed_s: f64,
+    /// Loss of this step's view.
+    pub loss: f64,
+    /// PSNR of this step's view, in dB.
+    pub psnr: f64,
+    /// Splat count.
+    pub splats: usize,
+}
+
+/// Counts of non-finite events handled.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct NonFinite {
+    /// Steps whose render or loss was not finite (skipped, no update).
+    pub skipped_steps: u64,
+    /// Splat gradients that were not finite (zeroed for that step).
+    pub zeroed_gradients: u64,
+    /// Splats whose parameters became non-finite and were reset (positions frozen).
+    pub reset_splats: u64,
+    /// Splats whose parameters became non-finite and were removed.
+    pub removed_splats: u64,
+}
+
+/// Wall time spent in each phase, summed over the steps of this session.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct Timings {
+    /// Forward rasterisation (projection, sorting, compositing).
+    pub forward: Duration,
+    /// Loss and its image gradient.
+    pub loss: Duration,
+    /// Backward rasterisation.
+    pub backward: Duration,
+    /// Adam updates, clamps and the non-finite scan.
+    pub adam: Duration,
+    /// Refinement strategy.
+    pub refine: Duration,
+    /// Steps timed.
+    pub steps: u64,
+}
+
+/// Progress reported to a callback after each step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Progress {
+    /// The step just done.
+    pub step: StepStats,
+    /// Steps the run is configured for.
+    pub total: u32,
+    /// Training time so far.
+    pub elapsed: Duration,
+}
+
+/// Summary of a run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TrainReport {
+    /// Iterations completed.
+    pub iterations: u32,
+    /// Training time in seconds.
+    pub elapsed_s: f64,
+    /// Whether the time budget stopped the run early.
+    pub stopped_by_budget: bool,
+    /// Final splat count.
+    pub splats: usize,
+    /// (iteration, elapsed, loss, PSNR, splats) every `history_every` steps.
+    pub history: Vec<HistoryEntry>,
+    /// Non-finite events handled.
+    pub non_finite: NonFinite,
+    /// Refinement totals.
+    pub refine: RefineReport,
+    /// Time per phase in this session.
+    pub timings: Timings,
+}
+
+/// Everything about a run that a checkpoint restores besides the parameters.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub(crate) struct RunState {
+    pub iteration: u32,
+    pub rng: Pcg64,
+    pub order: Vec<u32>,
+    pub cursor: usize,
+    pub elapsed_s: f64,
+    pub history: Vec<HistoryEntry>,
+    pub non_finite: NonFinite,
+    pub refine: RefineReport,
+    /// Log-scale given to a reset splat: the median of the initial model's largest log-scales.
+    pub reset_log_scale: f32,
+}
+
+/// A CPU trainer of splats on posed images.
+#[derive(Debug)]
+pub struct Trainer {
+    pub(crate) config: TrainConfig,
+    views: Vec<View>,
+    cameras: Vec<RenderCamera>,
+    pub(crate) state: ParamState,
+    pub(crate) strategy: Box<dyn DensifyStrategy>,
+    pub(crate) run: RunState,
+    grads: SplatGrads,
+    rasterizer: Rasterizer,
+    loss: Option<Loss>,
+    targets: Vec<Option<SsimTarget>>,
+    composite: Vec<f32>,
+    d_alpha: Vec<f32>,
+    extent: f32,
+    max_sh_degree: u32,
+    timings: Timings,
+}
+
+impl Trainer {
+    /// Prepares a run of `config` on `views` from `splats` with Inria's density control when
+    /// `config.densify` is set.
+    ///
+    /// # Errors
+    /// [`Error::Config`] for a bad configuration, [`Error::View`] for a view whose image or mask
+    /// does not fit its camera, [`Error::Splats`] for inconsistent or non-finite splats.
+    pub fn new(splats: Splats, views: Vec<View>, config: TrainConfig) -> Result<Self, Error> {
+        let strategy: Box<dyn DensifyStrategy> =
+            Box::new(InriaDensify::new(config.densify.unwrap_or_default()));
+        Self::with_strategy(splats, views, config, strategy)
+    }
+
+    /// Like [`Trainer::new`] with a caller-chosen refinement strategy (used when
+    /// `config.densify` is set).
+    ///
+    /// # Errors
+    /// As [`Trainer::new`].
+    pub fn with_strategy(
+        splats: Splats,
+        views: Vec<View>,
+        config: TrainConfig,
+        strategy: Box<dyn DensifyStrategy>,
+    ) -> Result<Self, Error> {
+        config.validate()?;
+        splats
+            .validate()
+            .map_err(|e| Error::Splats(e.to_string()))?;
+        if splats.is_empty() {
+            return Err(Error::Splats("no splats to train".into()));
+        }
+        if let Some(i) = first_non_finite(&splats) {
+            return Err(Error::Splats(format!(
+                "splat {i} has a non-finite parameter"
+            )));
+        }
+        if views.is_empty() {
+            return Err(Error::Config("no training views".into()));
+        }
+        for (index, v) in views.iter().enumerate() {
+            v.check().map_err(|problem| Error::View {
+                index,
+                name: v.name.clone(),
+                problem,
+            })?;
+        }
+        let cameras: Vec<RenderCamera> = views
+            .iter()
+            .map(|v| RenderCamera::from(&v.camera))
+            .collect();
+        let centres: Vec<glam::DVec3> = views.iter().map(|v| v.camera.center()).collect();
+        let extent = camera_extent(&centres) as f32;
+        let max_sh_degree = config
+            .sh_degree
+            .unwrap_or(splats.sh_degree)
+            .min(splats.sh_degree);
+        let mut sorted: Vec<f32> = splats.log_scales.iter().map(|s| s.max_element()).collect();
+        sorted.sort_by(f32::total_cmp);
+        let reset_log_scale = sorted[sorted.len() / 2];
+        let n_views = views.len();
+        let mut strategy = strategy;
+        strategy
+            .import_state(&[], splats.len())
+            .map_err(Error::Config)?;
+        let run = RunState {
+            iteration: 0,
+            rng: Pcg64::seed_from_u64(config.seed),
+            order: Vec::new(),
+            cursor: 0,
+            elapsed_s: 0.0,
+            history: Vec::new(),
+            non_finite: NonFinite::default(),
+            refine: RefineReport::default(),
+            reset_log_scale,
+        };
+        let mut t = Self {
+            grads: SplatGrads::zeros_like(&splats),
+            state: ParamState::new(splats),
+            config,
+            views,
+            cameras,
+            strategy,
+            run,
+            rasterizer: Rasterizer::new(),
+            loss: None,
+            targets: vec![None; n_views],
+            composite: Vec::new(),
+            d_alpha: Vec::new(),
+            extent,
+            max_sh_degree,
+            timings: Timings::default(),
+        };
+        t.composite_fixed_background();
+        Ok(t)
+    }
+
+    /// With a fixed background, views with a mask are composited over it once, so the target
+    /// of every step is the photo as it would look over that background.
+    fn composite_fixed_background(&mut self) {
+        if let Background::Fixed(bg) = self.config.background {
+            for v in &mut self.views {
+                if let Some(mask) = &v.mask {
+                    for (px, &a) in v.image.chunks_exact_mut(3).zip(mask) {
+                        for c in 0..3 {
+                            px[c] = px[c] * a + bg[c] * (1.0 - a);
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// The splats being trained.
+    #[must_use]
+    pub fn splats(&self) -> &Splats {
+        &self.state.splats
+    }
+
+    /// The training views (masked views composited over a fixed background).
+    #[must_use]
+    pub fn views(&self) -> &[View] {
+        &self.views
+    }
+
+    /// Steps done so far.
+    #[must_use]
+    pub fn iteration(&self) -> u32 {
+        self.run.iteration
+    }
+
+    /// Scene extent used to scale position rates and thresholds.
+    #[must_use]
+    pub fn extent(&self) -> f32 {
+        self.extent
+    }
+
+    /// The configuration of the run.
+    #[must_use]
+    pub fn config(&self) -> &TrainConfig {
+        &self.config
+    }
+
+    /// Time per phase in this session.
+    #[must_use]
+    pub fn timings(&self) -> Timings {
+        self.timings
+    }
+
+    /// History recorded so far.
+    #[must_use]
+    pub fn history(&self) -> &[HistoryEntry] {
+        &self.run.history
+    }
+
+    /// Non-finite events handled so far.
+    #[must_use]
+    pub fn non_finite(&self) -> NonFinite {
+        self.run.non_finite
+    }
+
+    /// Background of this step: the fixed colour, or a random one from the run's generator.
+    fn background(&mut self) -> Vec3 {
+        match self.config.background {
+            Background::Fixed(c) => Vec3::from(c),
+            Background::Random => {
+                let r = &mut self.run.rng;
+                Vec3::new(r.random(), r.random(), r.random())
+            }
+        }
+    }
+
+    /// Next view of a random permutation of all views, reshuffled when used up (as Inria's
+    /// `viewpoint_stack`).
+    fn next_view(&mut self) -> usize {
+        if self.run.cursor >= self.run.order.len() {
+            let n = self.views.len();
+            self.run.order = (0..n as u32).collect();
+            for i in (1..n).rev() {
+                let j = self.run.rng.random_range(0..=i);
+                self.run.order.swap(i, j);
+            }
+            self.run.cursor = 0;
+        }
+        let v = self.run.order[self.run.cursor] as usize;
+        self.run.cursor += 1;
+        v
+    }
+
+    /// Runs one optimisation step.
+    pub fn step(&mut self) -> StepStats {
+        let iteration = self.run.iteration + 1;
+        let vi = self.next_view();
+        let bg = self.background();
+        let opts = RenderOptions {
+            background: bg,
+            active_sh_degree: sh_degree_at(
+                self.run.iteration,
+                self.config.sh_degree_interval,
+                self.max_sh_degree,
+            ),
+            antialiased: self.config.antialiased,
+        };
+        let cam = self.cameras[vi];
+        let (w, h) = (cam.width, cam.height);
+        if self
+            .loss
+            .as_ref()
+            .is_none_or(|l| l.width() != w || l.height() != h)
+        {
+            self.loss = Some(Loss::new(w, h));
+        }
+        let Some(loss) = self.loss.as_mut() else {
+            unreachable!("the loss buffers were just created")
+        };
+
+        // Target: the photo, or the photo over this step's random background.
+        let view = &self.views[vi];
+        let random_bg = matches!(self.config.background, Background::Random);
+        let (target_img, fresh_target) = match (&view.mask, random_bg) {
+            (Some(mask), true) => {
+                self.composite.resize(view.image.len(), 0.0);
+                for ((o, px), &a) in self
+                    .composite
+                    .chunks_exact_mut(3)
+                    .zip(view.image.chunks_exact(3))
+                    .zip(mask)
+                {
+                    for c in 0..3 {
+                        o[c] = px[c] * a + bg[c] * (1.0 - a);
+                    }
+                }
+                (&self.composite[..], Some(loss.target(&self.composite)))
+            }
+            _ => {
+                if self.targets[vi].is_none() {
+                    self.targets[vi] = Some(loss.target(&view.image));
+                }
+                (&view.image[..], None)
+            }
+        };
+
+        let t0 = Instant::now();
+        let out = self.rasterizer.forward(&self.state.splats, &cam, &opts);
+        let t1 = Instant::now();
+        let Some(target) = fresh_target.as_ref().or(self.targets[vi].as_ref()) else {
+            unreachable!("the SSIM target was just computed")
+        };
+        let value = loss.evaluate(&out.rgb, target_img, target, self.config.ssim_weight);
+        let mut total = value.total;
+        let use_alpha = self.config.alpha_loss_weight > 0.0 && view.mask.is_some();
+        if let (true, Some(mask)) = (use_alpha, &view.mask) {
+            self.d_alpha.resize(mask.len(), 0.0);
+            let e = alpha_l1(
+                &out.alpha,
+                mask,
+                self.config.alpha_loss_weight,
+                &mut self.d_alpha,
+            );
+            total += f64::from(self.config.alpha_loss_weight) * e;
+        }
+        let t2 = Instant::now();
+        self.timings.forward += t1 - t0;
+        self.timings.loss += t2 - t1;
+
+        let mut refine = RefineReport::default();
+        if total.is_finite() {
+            self.grads.reset(&self.state.splats);
+            let d_alpha = if use_alpha {
+                Some(&self.d_alpha[..])
+            } else {
+                None
+            };
+            self.rasterizer.backward(
+                &self.state.splats,
+                &cam,
+                &opts,
+                loss.d_rgb(),
+                d_alpha,
+                None,
+                &mut self.grads,
+            );
+            let t3 = Instant::now();
+            self.timings.backward += t3 - t2;
+            self.run.non_finite.zeroed_gradients += zero_non_finite_grads(&mut self.grads);
+            if self.config.densify.is_some() {
+                self.strategy
+                    .observe(iteration, &self.grads, self.rasterizer.radii());
+            }
+            self.adam_step(iteration);
+            self.sanitize();
+            let t4 = Instant::now();
+            self.timings.adam += t4 - t3;
+            if self.config.densify.is_some() {
+                refine = self.strategy.refine(
+                    iteration,
+                    RefineContext {
+                        state: &mut self.state,
+                        extent: self.extent,
+                        rng: &mut self.run.rng,
+                    },
+                );
+                self.run.refine.add(&refine);
+            }
+            self.timings.refine += t4.elapsed();
+        } else {
+            self.run.non_finite.skipped_steps += 1;
+        }
+        self.timings.steps += 1;
+        self.run.iteration = iteration;
+        StepStats {
+            iteration,
+            view: vi,
+            loss: total,
+            psnr: psnr_from_mse(value.mse),
+            splats: self.state.len(),
+            refine,
+        }
+    }
+
+    /// Adam on every group that is not frozen, at this step's rates.
+    fn adam_step(&mut self, iteration: u32) {
+        let c = &self.config;
+        let hp = c.adam;
+        let t = u64::from(iteration);
+        let st = &mut self.state;
+        let g = &self.grads;
+        let f = c.frozen;
+        if !f.positions {
+            let max_steps = c.lr.position_max_steps.unwrap_or(c.iterations);
+            let lr = exponential_lr(
+                c.lr.position_init,
+                c.lr.position_final,
+                iteration - 1,
+                max_steps,
+            ) * self.extent;
+            st.moments.means.step(
+                &hp,
+                t,
+                bytemuck::cast_slice_mut(&mut st.splats.means),
+                bytemuck::cast_slice(&g.means),
+                |_| lr,
+            );
+        }
+        if !f.scales {
+            let lr = c.lr.scale;
+            st.moments.log_scales.step(
+                &hp,
+                t,
+                bytemuck::cast_slice_mut(&mut st.splats.log_scales),
+                bytemuck::cast_slice(&g.log_scales),
+                |_| lr,
+            );
+        }
+        if !f.rotations {
+            let lr = c.lr.rotation;
+            st.moments.rotations.step(
+                &hp,
+                t,
+                st.splats.rotations.as_flattened_mut(),
+                g.rotations.as_flattened(),
+                |_| lr,
+            );
+        }
+        if !f.opacities {
+            let lr = c.lr.opacity;
+            st.moments.opacity_logits.step(
+                &hp,
+                t,
+                &mut st.splats.opacity_logits,
+                &g.opacity_logits,
+                |_| lr,
+            );
+        }
+        if !f.colors {
+            let k = st.splats.coeffs_per_splat();
+            let (dc, rest) = (c.lr.sh_dc, c.lr.sh_dc / c.lr.sh_rest_divisor);
+            st.moments.sh.step(
+                &hp,
+                t,
+                st.splats.sh.as_flattened_mut(),
+                g.sh.as_flattened(),
+                |e| {
+                    if (e / 3) % k == 0 { dc } else { rest }
+                },
+            );
+        }
+    }
+
+    /// Clamps scales and opacities to sane ranges, then resets or removes splats whose
+    /// parameters are no longer finite.
+    fn sanitize(&mut self) {
+        let lo = (MIN_SCALE_OF_EXTENT * self.extent).ln();
+        let hi = (MAX_SCALE_OF_EXTENT * self.extent).ln();
+        let s = &mut self.state.splats;
+        if !self.config.frozen.scales {
+            for ls in &mut s.log_scales {
+                *ls = ls.clamp(Vec3::splat(lo), Vec3::splat(hi));
+            }
+        }
+        if !self.config.frozen.opacities {
+            for o in &mut s.opacity_logits {
+                *o = o.clamp(-MAX_OPACITY_LOGIT, MAX_OPACITY_LOGIT);
+            }
+        }
+        // NaN survives the clamps above, so the scan below still sees it.
+        let bad: Vec<usize> = (0..s.len()).filter(|&i| !splat_is_finite(s, i)).collect();
+        if bad.is_empty() {
+            return;
+        }
+        if self.config.frozen.positions {
+            for &i in &bad {
+                self.reset_splat(i);
+            }
+            self.run.non_finite.reset_splats += bad.len() as u64;
+        } else {
+            let mut keep = vec![true; s.len()];
+            for &i in &bad {
+                keep[i] = false;
+            }
+            if bad.len() == keep.len() {
+                // Removing every splat would leave nothing to train: reset the first instead.
+                keep[0] = true;
+            }
+            self.state.retain(&keep);
+            self.strategy.retain(&keep);
+            self.run.non_finite.removed_splats += bad.len() as u64;
+            if let Some(i) = first_non_finite(&self.state.splats) {
+                self.state.splats.means[i] = Vec3::ZERO;
+                self.reset_splat(i);
+            }
+        }
+    }
+
+    /// Gives splat `i` safe attributes (keeping its mean) and fresh moments.
+    fn reset_splat(&mut self, i: usize) {
+        let s = &mut self.state.splats;
+        let k = s.coeffs_per_splat();
+        s.log_scales[i] = Vec3::splat(self.run.reset_log_scale);
+        s.rotations[i] = [1.0, 0.0, 0.0, 0.0];
+        s.opacity_logits[i] = logit(RESET_OPACITY);
+        s.sh[i * k..(i + 1) * k].fill([0.0; 3]);
+        self.state.reset_moments(i);
+    }
+
+    /// Trains until the configured iteration count or time budget, calling `on_progress` after
+    /// every step.
+    pub fn run(&mut self, mut on_progress: impl FnMut(&Progress)) -> TrainReport {
+        let start = Instant::now();
+        let before = self.run.elapsed_s;
+        let mut stopped_by_budget = false;
+        while self.run.iteration < self.config.iterations {
+            if let Some(b) = self.config.time_budget
+                && before + start.elapsed().as_secs_f64() >= b.as_secs_f64()
+            {
+                stopped_by_budget = true;
+                break;
+            }
+            let s = self.step();
+            let elapsed = before + start.elapsed().as_secs_f64();
+            self.run.elapsed_s = elapsed;
+            if s.iteration.is_multiple_of(self.config.history_every)
+                || s.iteration == self.config.iterations
+            {
+                self.run.history.push(HistoryEntry {
+                    iteration: s.iteration,
+                    elapsed_s: elapsed,
+                    loss: s.loss,
+                    psnr: s.psnr,
+                    splats: s.splats,
+                });
+            }
+            on_progress(&Progress {
+                step: s,
+                total: self.config.iterations,
+                elapsed: Duration::from_secs_f64(elapsed),
+            });
+        }
+        self.report(stopped_by_budget)
+    }
+
+    /// The summary of the run so far.
+    #[must_use]
+    pub fn report(&self, stopped_by_budget: bool) -> TrainReport {
+        TrainReport {
+            iterations: self.run.iteration,
+            elapsed_s: self.run.elapsed_s,
+            stopped_by_budget,
+            splats: self.state.len(),
+            history: self.run.history.clone(),
+            non_finite: self.run.non_finite,
+            refine: self.run.refine,
+            timings: self.timings,
+        }
+    }
+
+    /// Writes the whole run state to `path` atomically (see [`crate::checkpoint`]).
+    ///
+    /// # Errors
+    /// [`Error::Io`] when the file cannot be written.
+    pub fn save_checkpoint(&self, path: &Path) -> Result<(), Error> {
+        crate::checkpoint::save(self, path)
+    }
+
+    /// Continues the run saved at `path` on the same `views` with `config` (its iteration count
+    /// and time budget may differ from the saved run's).
+    ///
+    /// # Errors
+    /// [`Error::Checkpoint`] when the file is malformed or does not match the views and
+    /// configuration, and the errors of [`Trainer::new`].
+    pub fn resume(path: &Path, views: Vec<View>, config: TrainConfig) -> Result<Self, Error> {
+        crate::checkpoint::load(path, views, config)
+    }
+
+    /// Replaces the parameters, optimiser and run state (used when resuming).
+    pub(crate) fn restore(
+        &mut self,
+        state: ParamState,
+        run: RunState,
+        strategy_state: &[f32],
+    ) -> Result<(), String> {
+        self.strategy.import_state(strategy_state, state.len())?;
+        self.grads = SplatGrads::zeros_like(&state.splats);
+        self.state = state;
+        self.run = run;
+        Ok(())
+    }
+}
+
+/// Whether every parameter of splat `i` is finite.
+fn splat_is_finite(s: &Splats, i: usize) -> bool {
+    let k = s.coeffs_per_splat();
+    s.means[i].is_finite()
+        && s.log_scales[i].is_finite()
+        && s.rotations[i].iter().all(|v| v.is_finite())
+        && s.opacity_logits[i].is_finite()
+        && s.sh[i * k..(i + 1) * k]
+            .iter()
+            .flatten()
+            .all(|v| v.is_finite())
+}
+
+/// Index of the first splat with a non-finite parameter.
+fn first_non_finite(s: &Splats) -> Option<usize> {
+    (0..s.len()).find(|&i| !splat_is_finite(s, i))
+}
+
+/// Zeroes the gradients of splats with any non-finite gradient; returns how many.
+fn zero_non_finite_grads(g: &mut SplatGrads) -> u64 {
+    let n = g.means.len();
+    let k = if n == 0 { 0 } else { g.sh.len() / n };
+    let mut count = 0;
+    for i in 0..n {
+        let ok = g.means[i].is_finite()
+            && g.log_scales[i].is_finite()
+            && g.rotations[i].iter().all(|v| v.is_finite())
+            && g.opacity_logits[i].is_finite()
+            && g.sh[i * k..(i + 1) * k]
+                .iter()
+                .flatten()
+                .all(|v| v.is_finite())
+            && g.screen_grad_norm[i].is_finite();
+        if !ok {
+            g.means[i] = Vec3::ZERO;
+            g.log_scales[i] = Vec3::ZERO;
+            g.rotations[i] = [0.0; 4];
+            g.opacity_logits[i] = 0.0;
+            g.sh[i * k..(i + 1) * k].fill([0.0; 3]);
+            g.screen_grad_norm[i] = 0.0;
+            count += 1;
+        }
+    }
+    count
+}
