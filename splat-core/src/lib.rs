@@ -1,1 +1,50 @@
 //! 3D Gaussian splats: spherical harmonics, EWA projection, tile rasteriser with exact gradients, 3DGS PLY.
+//!
+//! Conventions follow Inria's `diff-gaussian-rasterization` and gsplat so that models render the
+//! same in their viewers (see `ARCHITECTURE.md`): COLMAP camera axes, pixel (0, 0)'s centre at
+//! (0.5, 0.5), Inria's SH basis and signs, +0.3 px² dilation, alpha = min(0.99, o·G), skip alpha
+//! below 1/255, stop when transmittance falls below 1e-4, 16×16 tiles, 3σ extent.
+//!
+//! - [`Splats`]: the model in structure-of-arrays form, with activations ([`sigmoid`], [`logit`]).
+//! - [`sh`]: real spherical harmonics of degree 0–3 with their gradients.
+//! - [`RenderCamera`], [`RenderOptions`], [`RenderOutput`], [`SplatGrads`]: rasteriser inputs/outputs.
+//! - [`Rasterizer`]: forward and backward passes (projection, tile binning, compositing).
+//! - [`ply`]: the Inria 3DGS PLY, read and write; [`export`]: the antimatter15 `.splat` layout.
+
+mod camera;
+mod error;
+mod project;
+mod rasterize;
+mod rasterize_backward;
+mod render;
+pub mod sh;
+mod splats;
+mod tiles;
+
+pub use camera::RenderCamera;
+pub use error::Error;
+pub use rasterize::{Rasterizer, RenderStats};
+pub use render::{RenderOptions, RenderOutput, SplatGrads};
+pub use splats::{Splats, logit, num_sh_coeffs, rgb_to_sh_dc, sh_dc_to_rgb, sigmoid};
+pub use tiles::TILE_SIZE;
+
+/// Rasteriser constants shared by the forward and backward passes (Inria/gsplat values).
+pub mod constants {
+    /// Added to the 2D covariance diagonal so every splat is at least about a pixel wide
+    /// (Inria `forward.cu`: "every Gaussian should be at least one pixel wide").
+    pub const DILATION: f32 = 0.3;
+    /// Upper clamp of a splat's alpha (Inria/gsplat).
+    pub const MAX_ALPHA: f32 = 0.99;
+    /// Contributions with alpha below this are skipped (Inria/gsplat).
+    pub const MIN_ALPHA: f32 = 1.0 / 255.0;
+    /// A pixel stops compositing when its transmittance would fall below this (Inria/gsplat).
+    pub const MIN_TRANSMITTANCE: f32 = 1e-4;
+    /// Splats whose camera-space depth is at or below this are culled (gsplat and Brush use 0.01;
+    /// Inria 0.2, which would cull too much in scenes measured in small units).
+    pub const NEAR_PLANE: f32 = 0.01;
+    /// The extent of a splat in standard deviations of its largest 2D axis (Inria's 3σ radius).
+    pub const EXTENT_SIGMAS: f32 = 3.0;
+    /// The projection Jacobian is evaluated with x/z clamped to 1.3·tan(fov/2) (Inria; gsplat
+    /// writes the margin as 0.3·tan(fov/2) beyond each image edge).
+    pub const FOV_CLAMP_MARGIN: f32 = 0.3;
+}

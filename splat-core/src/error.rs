@@ -1,0 +1,41 @@
+//! Typed errors of this crate; each names the file and the place of the problem.
+
+use std::path::PathBuf;
+
+/// Errors from reading, writing or validating splats.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// An operating-system error on a file.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The underlying error.
+        source: std::io::Error,
+    },
+    /// The PLY header is malformed or lacks what a 3DGS model needs.
+    #[error("{path}: PLY header line {line}: {message}")]
+    Header {
+        /// The file.
+        path: PathBuf,
+        /// One-based header line number (0 when the problem is the header as a whole).
+        line: usize,
+        /// What is wrong.
+        message: String,
+    },
+    /// The PLY body is malformed (truncated, wrong size, unparsable values).
+    #[error("{path}: byte offset {offset} (vertex {index}): {message}")]
+    Body {
+        /// The file.
+        path: PathBuf,
+        /// Byte offset in the file where the problem starts.
+        offset: u64,
+        /// Vertex index being read.
+        index: usize,
+        /// What is wrong.
+        message: String,
+    },
+    /// A [`crate::Splats`] value whose arrays disagree in length or whose degree is unsupported.
+    #[error("inconsistent splats: {0}")]
+    Inconsistent(String),
+}

@@ -1,0 +1,461 @@
+//! Per-splat projection: covariance from scale and rotation, EWA projection to the image
+//! (Zwicker et al. 2002, as in Inria's `forward.cu::computeCov2D`), conic, 3σ extent, colour,
+//! and the exact backward of all of it.
+
+use glam::{Mat3, Quat, Vec2, Vec3};
+
+use crate::constants::{DILATION, EXTENT_SIGMAS, FOV_CLAMP_MARGIN, MIN_ALPHA, NEAR_PLANE};
+use crate::{RenderCamera, RenderOptions, Splats, num_sh_coeffs, sh, sigmoid};
+
+/// What the compositor needs of a visible splat, packed for the per-tile loop.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct Projected {
+    /// Centre in pixel-index coordinates (pixel centres at integers: mean2d − 0.5).
+    pub xy: [f32; 2],
+    /// Inverse 2D covariance (a, b, c) of [[a, b], [b, c]].
+    pub conic: [f32; 3],
+    /// Effective opacity (sigmoid, times the antialiasing compensation when enabled).
+    pub opacity: f32,
+    /// View-dependent colour, clamped at 0.
+    pub color: [f32; 3],
+    /// Camera-space depth.
+    pub depth: f32,
+}
+
+/// Why a splat was not drawn.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Cull {
+    /// Not drawn for a geometric or opacity reason (behind the near plane, off screen, invisible).
+    Hidden,
+    /// An input or an intermediate was NaN or infinite.
+    NonFinite,
+}
+
+/// Per-view constants of the projection.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct ViewConsts {
+    pub rot: Mat3,
+    pub trans: Vec3,
+    pub center: Vec3,
+    pub fx: f32,
+    pub fy: f32,
+    pub cx: f32,
+    pub cy: f32,
+    /// Jacobian clamp limits for x/z: [−lim_x_neg, lim_x_pos] (gsplat's form of Inria's 1.3·tan).
+    pub lim_x: (f32, f32),
+    pub lim_y: (f32, f32),
+    pub tiles_x: u32,
+    pub tiles_y: u32,
+    pub degree: u32,
+    pub antialiased: bool,
+}
+
+impl ViewConsts {
+    pub fn new(cam: &RenderCamera, opts: &RenderOptions, splats: &Splats) -> Self {
+        let (tx, ty) = cam.tan_half_fov();
+        let (w, h) = (cam.width as f32, cam.height as f32);
+        Self {
+            rot: cam.rotation,
+            trans: cam.translation,
+            center: cam.center(),
+            fx: cam.fx,
+            fy: cam.fy,
+            cx: cam.cx,
+            cy: cam.cy,
+            lim_x: (
+                cam.cx / cam.fx + FOV_CLAMP_MARGIN * tx,
+                (w - cam.cx) / cam.fx + FOV_CLAMP_MARGIN * tx,
+            ),
+            lim_y: (
+                cam.cy / cam.fy + FOV_CLAMP_MARGIN * ty,
+                (h - cam.cy) / cam.fy + FOV_CLAMP_MARGIN * ty,
+            ),
+            tiles_x: cam.width.div_ceil(crate::TILE_SIZE),
+            tiles_y: cam.height.div_ceil(crate::TILE_SIZE),
+            degree: opts.active_sh_degree.min(splats.sh_degree),
+            antialiased: opts.antialiased,
+        }
+    }
+}
+
+/// Every intermediate of one splat's projection, kept for the backward pass.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Intermediates {
+    pub out: Projected,
+    /// Tile rectangle [x0, x1) × [y0, y1).
+    pub rect: [u32; 4],
+    pub radius: u32,
+    quat: Quat,
+    quat_norm: f32,
+    quat_zero: bool,
+    scale: Vec3,
+    rot: Mat3,
+    /// M_c = W·R·S, so Σ_cam = M_c·M_cᵀ.
+    mc: Mat3,
+    p_cam: Vec3,
+    /// x/z and y/z after the clamp, and whether each clamp acted.
+    u: Vec2,
+    clamped: [bool; 2],
+    /// Rows of J·M_c (2×3), so Σ₂ = T·Tᵀ before dilation.
+    t_rows: [Vec3; 2],
+    cov2: [f32; 3],
+    det: f32,
+    comp: f32,
+    det0: f32,
+    sigmoid_o: f32,
+    dir: Vec3,
+    dir_len: f32,
+    color_raw: Vec3,
+}
+
+fn finite3(v: Vec3) -> bool {
+    v.is_finite()
+}
+
+/// Projects splat `i`; returns its intermediates or why it is culled.
+pub(crate) fn project(splats: &Splats, i: usize, v: &ViewConsts) -> Result<Intermediates, Cull> {
+    let mean = splats.means[i];
+    let ls = splats.log_scales[i];
+    let [qw, qx, qy, qz] = splats.rotations[i];
+    let logit = splats.opacity_logits[i];
+    let k = splats.coeffs_per_splat();
+    let coeffs = &splats.sh[i * k..i * k + num_sh_coeffs(v.degree)];
+    let inputs_finite = finite3(mean)
+        && finite3(ls)
+        && [qw, qx, qy, qz, logit].iter().all(|x| x.is_finite())
+        && coeffs.iter().all(|c| c.iter().all(|x| x.is_finite()));
+    if !inputs_finite {
+        return Err(Cull::NonFinite);
+    }
+    let p_cam = v.rot * mean + v.trans;
+    if !finite3(p_cam) {
+        return Err(Cull::NonFinite);
+    }
+    if p_cam.z <= NEAR_PLANE {
+        return Err(Cull::Hidden);
+    }
+    let sigmoid_o = sigmoid(logit);
+    // A splat with o < 1/255 can never pass the alpha threshold anywhere: skip it early.
+    if sigmoid_o < MIN_ALPHA {
+        return Err(Cull::Hidden);
+    }
+
+    // Σ = R S Sᵀ Rᵀ (Inria `computeCov3D`), carried as the factor M_c = W R S in camera space.
+    let q_raw = Quat::from_xyzw(qx, qy, qz, qw);
+    let quat_norm = q_raw.length();
+    let quat_zero = quat_norm.is_nan() || quat_norm <= 1e-30;
+    // A zero quaternion carries no rotation: treat it as the identity (and give it no gradient).
+    let quat = if quat_zero {
+        Quat::IDENTITY
+    } else {
+        q_raw / quat_norm
+    };
+    let rot = Mat3::from_quat(quat);
+    let scale = ls.exp();
+    let m = Mat3::from_cols(
+        rot.x_axis * scale.x,
+        rot.y_axis * scale.y,
+        rot.z_axis * scale.z,
+    );
+    let mc = v.rot * m;
+
+    // EWA: J evaluated at the clamped x/z, y/z (Inria clamps to 1.3·tan(fov/2)).
+    let z = p_cam.z;
+    let ux_raw = p_cam.x / z;
+    let uy_raw = p_cam.y / z;
+    let ux = ux_raw.clamp(-v.lim_x.0, v.lim_x.1);
+    let uy = uy_raw.clamp(-v.lim_y.0, v.lim_y.1);
+    let clamped = [ux != ux_raw, uy != uy_raw];
+    let j0 = Vec3::new(v.fx / z, 0.0, -v.fx * ux / z);
+    let j1 = Vec3::new(0.0, v.fy / z, -v.fy * uy / z);
+    let mct = mc.transpose();
+    let t_rows = [mct * j0, mct * j1];
+    let s00 = t_rows[0].length_squared();
+    let s01 = t_rows[0].dot(t_rows[1]);
+    let s11 = t_rows[1].length_squared();
+    let det0 = s00 * s11 - s01 * s01;
+    let a = s00 + DILATION;
+    let b = s01;
+    let c = s11 + DILATION;
+    let det = a * c - b * b;
+    if !(a.is_finite() && b.is_finite() && c.is_finite() && det.is_finite()) {
+        return Err(Cull::NonFinite);
+    }
+    if det <= 0.0 {
+        return Err(Cull::Hidden);
+    }
+    let comp = if v.antialiased {
+        (det0.max(0.0) / det).sqrt()
+    } else {
+        1.0
+    };
+    let opacity = sigmoid_o * comp;
+    if opacity < MIN_ALPHA {
+        return Err(Cull::Hidden);
+    }
+    let conic = [c / det, -b / det, a / det];
+
+    // Inria's extent: 3·√λmax with λ from the dilated covariance, and its tile rectangle.
+    let mid = 0.5 * (a + c);
+    let lambda = mid + (mid * mid - det).max(0.1).sqrt();
+    let radius_f = (EXTENT_SIGMAS * lambda.sqrt()).ceil();
+    let xy = [v.fx * ux_raw + v.cx - 0.5, v.fy * uy_raw + v.cy - 0.5];
+    if !(xy[0].is_finite() && xy[1].is_finite() && radius_f.is_finite()) {
+        return Err(Cull::NonFinite);
+    }
+    let ts = crate::TILE_SIZE as f32;
+    let rect_coord = |p: f32, lo: bool, n: u32| -> u32 {
+        let t = if lo {
+            ((p - radius_f) / ts).floor()
+        } else {
+            ((p + radius_f + ts - 1.0) / ts).floor()
+        };
+        t.clamp(0.0, n as f32) as u32
+    };
+    let rect = [
+        rect_coord(xy[0], true, v.tiles_x),
+        rect_coord(xy[0], false, v.tiles_x),
+        rect_coord(xy[1], true, v.tiles_y),
+        rect_coord(xy[1], false, v.tiles_y),
+    ];
+    if radius_f <= 0.0 || rect[0] >= rect[1] || rect[2] >= rect[3] {
+        return Err(Cull::Hidden);
+    }
+
+    // Colour from SH towards the viewer: dir = normalize(mean − camera centre), + 0.5, clamp at 0.
+    let d = mean - v.center;
+    let dir_len = d.length();
+    let dir = d / dir_len;
+    let color_raw = sh::eval(v.degree, dir, coeffs) + 0.5;
+    let color = color_raw.max(Vec3::ZERO);
+    if !finite3(color) {
+        return Err(Cull::NonFinite);
+    }
+    Ok(Intermediates {
+        out: Projected {
+            xy,
+            conic,
+            opacity,
+            color: color.into(),
+            depth: z,
+        },
+        rect,
+        radius: radius_f as u32,
+        quat,
+        quat_norm,
+        quat_zero,
+        scale,
+        rot,
+        mc,
+        p_cam,
+        u: Vec2::new(ux, uy),
+        clamped,
+        t_rows,
+        cov2: [a, b, c],
+        det,
+        comp,
+        det0,
+        sigmoid_o,
+        dir,
+        dir_len,
+        color_raw,
+    })
+}
+
+/// Gradients of the loss with respect to one splat's projected quantities, summed over pixels.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct ProjectedGrad {
+    pub xy: [f32; 2],
+    pub conic: [f32; 3],
+    pub opacity: f32,
+    pub color: [f32; 3],
+    pub depth: f32,
+}
+
+impl ProjectedGrad {
+    pub fn add(&mut self, o: &Self) {
+        for k in 0..2 {
+            self.xy[k] += o.xy[k];
+        }
+        for k in 0..3 {
+            self.conic[k] += o.conic[k];
+            self.color[k] += o.color[k];
+        }
+        self.opacity += o.opacity;
+        self.depth += o.depth;
+    }
+}
+
+/// The parameter gradients of one splat.
+pub(crate) struct ParamGrad {
+    pub mean: Vec3,
+    pub log_scale: Vec3,
+    pub rotation: [f32; 4],
+    pub opacity_logit: f32,
+    pub screen_norm: f32,
+}
+
+/// Inverse of a symmetric 2×2 matrix (a, b, c) with determinant `det`, as (a, b, c).
+fn inv2(m: [f32; 3], det: f32) -> [f32; 3] {
+    [m[2] / det, -m[1] / det, m[0] / det]
+}
+
+/// Product P·G·P of symmetric 2×2 matrices stored as (a, b, c).
+fn sandwich(p: [f32; 3], g: [f32; 3]) -> [f32; 3] {
+    // P·G
+    let pg00 = p[0] * g[0] + p[1] * g[1];
+    let pg01 = p[0] * g[1] + p[1] * g[2];
+    let pg10 = p[1] * g[0] + p[2] * g[1];
+    let pg11 = p[1] * g[1] + p[2] * g[2];
+    [
+        pg00 * p[0] + pg01 * p[1],
+        pg00 * p[1] + pg01 * p[2],
+        pg10 * p[1] + pg11 * p[2],
+    ]
+}
+
+/// Backward of [`project`]: chains `g` (summed over pixels) to the splat's parameters; SH
+/// coefficient gradients are added into `d_sh`.
+pub(crate) fn project_backward(
+    splats: &Splats,
+    i: usize,
+    v: &ViewConsts,
+    it: &Intermediates,
+    g: &ProjectedGrad,
+    image_size: (u32, u32),
+    d_sh: &mut [[f32; 3]],
+) -> ParamGrad {
+    let k = splats.coeffs_per_splat();
+    let coeffs = &splats.sh[i * k..(i + 1) * k];
+    let mut d_mean = Vec3::ZERO;
+
+    // Colour: clamped channels pass no gradient (Inria's `clamped` flags).
+    let mut d_raw = Vec3::from(g.color);
+    for ch in 0..3 {
+        if it.color_raw[ch] < 0.0 {
+            d_raw[ch] = 0.0;
+        }
+    }
+    let d_dir = sh::eval_backward(v.degree, it.dir, coeffs, d_raw, d_sh);
+    // dir = d/|d| with d = mean − centre.
+    d_mean += (d_dir - it.dir * it.dir.dot(d_dir)) / it.dir_len;
+
+    // Opacity: o_eff = sigmoid(l)·comp.
+    let d_logit = g.opacity * it.comp * it.sigmoid_o * (1.0 - it.sigmoid_o);
+    let d_comp = g.opacity * it.sigmoid_o;
+
+    // Conic = Σ₂⁻¹ → dL/dΣ₂ = −Q·G_Q·Q with G_Q the symmetric matrix gradient (b appears twice).
+    let q = it.out.conic;
+    let gq = [g.conic[0], 0.5 * g.conic[1], g.conic[2]];
+    let qgq = sandwich(q, gq);
+    let mut gs = [-qgq[0], -qgq[1], -qgq[2]];
+    if v.antialiased && it.det0 > 0.0 && it.comp > 0.0 {
+        // comp = √(det₀/det₁): d comp = comp/2·tr((Σ₀⁻¹ − Σ₁⁻¹)·dΣ), Σ₀ = Σ₁ − 0.3·I.
+        let s0 = [it.cov2[0] - DILATION, it.cov2[1], it.cov2[2] - DILATION];
+        let i0 = inv2(s0, it.det0);
+        let i1 = inv2(it.cov2, it.det);
+        let f = d_comp * it.comp * 0.5;
+        for kk in 0..3 {
+            gs[kk] += f * (i0[kk] - i1[kk]);
+        }
+    }
+
+    // Σ₂ = T·Tᵀ with T = J·M_c: G_T = 2·G_Σ·T (rows of T are t_rows).
+    let [t0, t1] = it.t_rows;
+    let gt0 = 2.0 * (gs[0] * t0 + gs[1] * t1);
+    let gt1 = 2.0 * (gs[1] * t0 + gs[2] * t1);
+    // T rows = M_cᵀ·j_r → G_j_r = M_c·G_t_r; G_M_c = Σ_r j_r·G_t_rᵀ.
+    let z = it.p_cam.z;
+    let j0 = Vec3::new(v.fx / z, 0.0, -v.fx * it.u.x / z);
+    let j1 = Vec3::new(0.0, v.fy / z, -v.fy * it.u.y / z);
+    let gj0 = it.mc * gt0;
+    let gj1 = it.mc * gt1;
+    // G_M_c (column c = Σ_r j_r·gt_r[c]).
+    let gmc = Mat3::from_cols(
+        j0 * gt0.x + j1 * gt1.x,
+        j0 * gt0.y + j1 * gt1.y,
+        j0 * gt0.z + j1 * gt1.z,
+    );
+
+    // J → camera-space point. J00 = fx/z, J02 = −fx·u/z with u = x/z unless clamped (then fixed).
+    let mut d_p = Vec3::ZERO;
+    d_p.z += -v.fx / (z * z) * gj0.x - v.fy / (z * z) * gj1.y;
+    let (fx, fy) = (v.fx, v.fy);
+    // J02 = −fx·u_x/z.
+    d_p.z += fx * it.u.x / (z * z) * gj0.z;
+    if !it.clamped[0] {
+        // u_x = x/z: ∂J02/∂x = −fx/z², ∂J02/∂z (via u) = fx·x/z³.
+        d_p.x += -fx / (z * z) * gj0.z;
+        d_p.z += fx * it.p_cam.x / (z * z * z) * gj0.z;
+    }
+    d_p.z += fy * it.u.y / (z * z) * gj1.z;
+    if !it.clamped[1] {
+        d_p.y += -fy / (z * z) * gj1.z;
+        d_p.z += fy * it.p_cam.y / (z * z * z) * gj1.z;
+    }
+    // Projected centre: x_pix = fx·x/z + cx (unclamped).
+    d_p.x += g.xy[0] * fx / z;
+    d_p.y += g.xy[1] * fy / z;
+    d_p.z += -g.xy[0] * fx * it.p_cam.x / (z * z) - g.xy[1] * fy * it.p_cam.y / (z * z);
+    d_p.z += g.depth;
+    d_mean += v.rot.transpose() * d_p;
+
+    // M_c = W·R·S.
+    let gm = v.rot.transpose() * gmc;
+    let r = it.rot;
+    let d_scale = Vec3::new(
+        gm.x_axis.dot(r.x_axis),
+        gm.y_axis.dot(r.y_axis),
+        gm.z_axis.dot(r.z_axis),
+    );
+    let d_log_scale = d_scale * it.scale;
+    let g_r = Mat3::from_cols(
+        gm.x_axis * it.scale.x,
+        gm.y_axis * it.scale.y,
+        gm.z_axis * it.scale.z,
+    );
+    let rotation = if it.quat_zero {
+        [0.0; 4]
+    } else {
+        quat_backward(it.quat, it.quat_norm, &g_r)
+    };
+
+    let (w, h) = image_size;
+    let ndc = Vec2::new(g.xy[0] * 0.5 * w as f32, g.xy[1] * 0.5 * h as f32);
+    ParamGrad {
+        mean: d_mean,
+        log_scale: d_log_scale,
+        rotation,
+        opacity_logit: d_logit,
+        screen_norm: ndc.length(),
+    }
+}
+
+/// Gradient of R(q/|q|) with respect to the stored quaternion (w, x, y, z), given G_R.
+fn quat_backward(q: Quat, norm: f32, g: &Mat3) -> [f32; 4] {
+    let (w, x, y, z) = (q.w, q.x, q.y, q.z);
+    // g(row, col) with glam's column-major storage.
+    let e = |r: usize, c: usize| g.col(c)[r];
+    let gw =
+        2.0 * (-z * e(0, 1) + y * e(0, 2) + z * e(1, 0) - x * e(1, 2) - y * e(2, 0) + x * e(2, 1));
+    let gx = 2.0
+        * (y * e(0, 1) + z * e(0, 2) + y * e(1, 0) - 2.0 * x * e(1, 1) - w * e(1, 2)
+            + z * e(2, 0)
+            + w * e(2, 1)
+            - 2.0 * x * e(2, 2));
+    let gy = 2.0
+        * (-2.0 * y * e(0, 0) + x * e(0, 1) + w * e(0, 2) + x * e(1, 0) + z * e(1, 2)
+            - w * e(2, 0)
+            + z * e(2, 1)
+            - 2.0 * y * e(2, 2));
+    let gz = 2.0
+        * (-2.0 * z * e(0, 0) - w * e(0, 1) + x * e(0, 2) + w * e(1, 0) - 2.0 * z * e(1, 1)
+            + y * e(1, 2)
+            + x * e(2, 0)
+            + y * e(2, 1));
+    // Through the normalisation q/|q|.
+    let gn = [gw, gx, gy, gz];
+    let qn = [w, x, y, z];
+    let dot: f32 = (0..4).map(|k| gn[k] * qn[k]).sum();
+    std::array::from_fn(|k| (gn[k] - qn[k] * dot) / norm)
+}

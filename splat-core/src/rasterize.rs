@@ -1,0 +1,287 @@
+//! The forward pass: project, bin into tiles, composite each tile front to back in parallel.
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+use crate::constants::{MAX_ALPHA, MIN_ALPHA, MIN_TRANSMITTANCE};
+use crate::project::{Cull, Projected, ProjectedGrad, ViewConsts, project};
+use crate::tiles::{Bins, TILE_PIXELS, TILE_SIZE, quad_bound, row_range, row_span};
+use crate::{RenderCamera, RenderOptions, RenderOutput, Splats};
+
+/// Counts from the last forward pass.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RenderStats {
+    /// Splats drawn in at least one tile.
+    pub visible: usize,
+    /// Splats culled because an input or intermediate was NaN or infinite.
+    pub culled_non_finite: usize,
+    /// (tile, splat) pairs composited.
+    pub pairs: usize,
+}
+
+/// A reusable CPU rasteriser: buffers grow to the largest view seen and are then reused, so the
+/// per-view loop does not allocate once warm.
+#[derive(Debug, Default)]
+pub struct Rasterizer {
+    pub(crate) proj: Vec<Projected>,
+    pub(crate) rects: Vec<[u32; 4]>,
+    pub(crate) radii: Vec<u32>,
+    pub(crate) visible: Vec<bool>,
+    non_finite: Vec<bool>,
+    pub(crate) bins: Bins,
+    /// Final transmittance per pixel, tile-major (tile · 256 + row · 16 + column).
+    pub(crate) px_t: Vec<f32>,
+    /// Accumulated Σ wᵢ zᵢ per pixel, tile-major.
+    pub(crate) px_d: Vec<f32>,
+    px_rgb: Vec<[f32; 3]>,
+    /// One past the index (in the tile's list) of the last splat that contributed, tile-major.
+    pub(crate) px_last: Vec<u32>,
+    pub(crate) output: RenderOutput,
+    pub(crate) stats: RenderStats,
+    /// (splat count, width, height) of the last forward pass.
+    pub(crate) last_view: Option<(usize, u32, u32)>,
+    pub(crate) pair_grads: Vec<ProjectedGrad>,
+    pub(crate) splat_grads: Vec<ProjectedGrad>,
+}
+
+/// Per-pixel compositing state of one tile in the forward pass.
+struct TileOut<'a> {
+    t: &'a mut [f32],
+    d: &'a mut [f32],
+    rgb: &'a mut [[f32; 3]],
+    last: &'a mut [u32],
+}
+
+/// The pixel extent of tile `tile`: origin and size (partial at the right and bottom edges).
+pub(crate) fn tile_extent(
+    tile: usize,
+    tiles_x: u32,
+    width: u32,
+    height: u32,
+) -> (i32, i32, i32, i32) {
+    let tx = tile as u32 % tiles_x;
+    let ty = tile as u32 / tiles_x;
+    let x0 = tx * TILE_SIZE;
+    let y0 = ty * TILE_SIZE;
+    (
+        x0 as i32,
+        y0 as i32,
+        (width - x0).min(TILE_SIZE) as i32,
+        (height - y0).min(TILE_SIZE) as i32,
+    )
+}
+
+impl Rasterizer {
+    /// Returns a rasteriser with empty buffers.
+    #[must_use]
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Returns the counts of the last forward pass.
+    #[must_use]
+    pub fn stats(&self) -> RenderStats {
+        self.stats
+    }
+
+    /// Returns each splat's screen radius in pixels from the last forward pass (0 when culled).
+    #[must_use]
+    pub fn radii(&self) -> &[u32] {
+        &self.radii
+    }
+
+    /// Returns the last rendered view.
+    #[must_use]
+    pub fn output(&self) -> &RenderOutput {
+        &self.output
+    }
+
+    /// Renders `splats` from `cam`: RGB over the background, alpha = 1 − T, expected depth.
+    ///
+    /// # Panics
+    /// If `splats` is inconsistent (see [`Splats::validate`]).
+    pub fn forward(
+        &mut self,
+        splats: &Splats,
+        cam: &RenderCamera,
+        opts: &RenderOptions,
+    ) -> &RenderOutput {
+        if let Err(e) = splats.validate() {
+            panic!("Rasterizer::forward: {e}");
+        }
+        let n = splats.len();
+        let v = ViewConsts::new(cam, opts, splats);
+        self.project_all(splats, &v);
+        self.bins
+            .build(&self.proj, &self.rects, &self.visible, v.tiles_x, v.tiles_y);
+        self.stats = RenderStats {
+            visible: self.visible.iter().filter(|&&b| b).count(),
+            culled_non_finite: self.non_finite.iter().filter(|&&b| b).count(),
+            pairs: self.bins.pairs(),
+        };
+        self.composite(cam, v.tiles_x, v.tiles_y);
+        self.resolve(cam, v.tiles_x, opts.background);
+        self.last_view = Some((n, cam.width, cam.height));
+        &self.output
+    }
+
+    fn project_all(&mut self, splats: &Splats, v: &ViewConsts) {
+        let n = splats.len();
+        self.proj.resize(n, Projected::default());
+        self.rects.resize(n, [0; 4]);
+        self.radii.resize(n, 0);
+        self.visible.resize(n, false);
+        self.non_finite.resize(n, false);
+        self.proj
+            .par_iter_mut()
+            .zip(self.rects.par_iter_mut())
+            .zip(self.radii.par_iter_mut())
+            .zip(self.visible.par_iter_mut())
+            .zip(self.non_finite.par_iter_mut())
+            .enumerate()
+            .for_each(
+                |(i, ((((p, r), rad), vis), nf))| match project(splats, i, v) {
+                    Ok(it) => {
+                        *p = it.out;
+                        *r = it.rect;
+                        *rad = it.radius;
+                        *vis = true;
+                        *nf = false;
+                    }
+                    Err(c) => {
+                        *rad = 0;
+                        *vis = false;
+                        *nf = c == Cull::NonFinite;
+                    }
+                },
+            );
+    }
+
+    fn composite(&mut self, cam: &RenderCamera, tiles_x: u32, tiles_y: u32) {
+        let n_px = (tiles_x * tiles_y) as usize * TILE_PIXELS;
+        self.px_t.resize(n_px, 1.0);
+        self.px_d.resize(n_px, 0.0);
+        self.px_rgb.resize(n_px, [0.0; 3]);
+        self.px_last.resize(n_px, 0);
+        let bins = &self.bins;
+        let proj = &self.proj;
+        let (w, h) = (cam.width, cam.height);
+        self.px_t
+            .par_chunks_mut(TILE_PIXELS)
+            .zip(self.px_d.par_chunks_mut(TILE_PIXELS))
+            .zip(self.px_rgb.par_chunks_mut(TILE_PIXELS))
+            .zip(self.px_last.par_chunks_mut(TILE_PIXELS))
+            .enumerate()
+            .for_each(|(tile, (((t, d), rgb), last))| {
+                let list = &bins.list[bins.offsets[tile]..bins.offsets[tile + 1]];
+                let ext = tile_extent(tile, tiles_x, w, h);
+                composite_tile(list, proj, ext, TileOut { t, d, rgb, last });
+            });
+    }
+
+    /// Converts the tile-major buffers into the row-major output images.
+    fn resolve(&mut self, cam: &RenderCamera, tiles_x: u32, bg: Vec3) {
+        let (w, h) = (cam.width as usize, cam.height as usize);
+        let out = &mut self.output;
+        out.width = cam.width;
+        out.height = cam.height;
+        out.rgb.resize(3 * w * h, 0.0);
+        out.alpha.resize(w * h, 0.0);
+        out.depth.resize(w * h, 0.0);
+        let (px_t, px_d, px_rgb) = (&self.px_t, &self.px_d, &self.px_rgb);
+        out.rgb
+            .par_chunks_mut(3 * w.max(1))
+            .zip(out.alpha.par_chunks_mut(w.max(1)))
+            .zip(out.depth.par_chunks_mut(w.max(1)))
+            .enumerate()
+            .for_each(|(y, ((rgb, alpha), depth))| {
+                for x in 0..w {
+                    let k = tile_major_index(x, y, tiles_x);
+                    let t = px_t[k];
+                    let c = px_rgb[k];
+                    for ch in 0..3 {
+                        rgb[3 * x + ch] = c[ch] + t * bg[ch];
+                    }
+                    let a = 1.0 - t;
+                    alpha[x] = a;
+                    depth[x] = if a > DEPTH_MIN_ALPHA {
+                        px_d[k] / a
+                    } else {
+                        0.0
+                    };
+                }
+            });
+    }
+}
+
+/// Below this coverage the expected depth is reported as 0 (and passes no gradient).
+pub(crate) const DEPTH_MIN_ALPHA: f32 = 1e-6;
+
+/// Index of pixel (x, y) in the tile-major buffers.
+#[inline]
+pub(crate) fn tile_major_index(x: usize, y: usize, tiles_x: u32) -> usize {
+    let ts = TILE_SIZE as usize;
+    let tile = (y / ts) * tiles_x as usize + x / ts;
+    tile * TILE_PIXELS + (y % ts) * ts + x % ts
+}
+
+/// Composites one tile front to back (Inria `renderCUDA`), splat by splat over the pixels each
+/// can reach, stopping once every pixel's transmittance is spent.
+fn composite_tile(list: &[u32], proj: &[Projected], ext: (i32, i32, i32, i32), o: TileOut<'_>) {
+    let (x0, y0, tw, th) = ext;
+    o.t.fill(1.0);
+    o.d.fill(0.0);
+    o.rgb.fill([0.0; 3]);
+    o.last.fill(0);
+    let mut done = [false; TILE_PIXELS];
+    let n_px = (tw * th) as usize;
+    let mut n_done = 0;
+    let ts = TILE_SIZE as usize;
+    for (k, &sid) in list.iter().enumerate() {
+        let p = &proj[sid as usize];
+        let [a, b, c] = p.conic;
+        let q_max = quad_bound(p.opacity);
+        let Some((r0, r1)) = row_range(p, q_max, y0, th) else {
+            continue;
+        };
+        for ly in r0..=r1 {
+            let dy = p.xy[1] - (y0 + ly as i32) as f32;
+            let Some((c0, c1)) = row_span(p, q_max, dy, x0, tw) else {
+                continue;
+            };
+            for lx in c0..=c1 {
+                let idx = ly * ts + lx;
+                if done[idx] {
+                    continue;
+                }
+                let dx = p.xy[0] - (x0 + lx as i32) as f32;
+                let power = -0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy;
+                if power > 0.0 {
+                    continue;
+                }
+                let alpha = (p.opacity * power.exp()).min(MAX_ALPHA);
+                if alpha < MIN_ALPHA {
+                    continue;
+                }
+                let t = o.t[idx];
+                let next_t = t * (1.0 - alpha);
+                if next_t < MIN_TRANSMITTANCE {
+                    done[idx] = true;
+                    n_done += 1;
+                    continue;
+                }
+                let w = alpha * t;
+                let rgb = &mut o.rgb[idx];
+                rgb[0] += w * p.color[0];
+                rgb[1] += w * p.color[1];
+                rgb[2] += w * p.color[2];
+                o.d[idx] += w * p.depth;
+                o.t[idx] = next_t;
+                o.last[idx] = k as u32 + 1;
+            }
+        }
+        if n_done == n_px {
+            break;
+        }
+    }
+}

@@ -1,0 +1,258 @@
+//! The backward pass (Inria `backward.cu`): each tile walks its list back to front recovering
+//! Tᵢ = Tᵢ₊₁/(1 − αᵢ), writes one gradient record per (tile, splat) pair, the records are summed
+//! per splat in a fixed order, and each splat's sum is chained through projection, covariance
+//! and SH to its parameters.
+//!
+//! Reproducibility: every pair owns its own gradient slot (so tiles running on different threads
+//! never share an accumulator), and the per-splat sums run over the tile lists in tile order.
+//! Every floating-point sum therefore happens in an order that does not depend on the thread
+//! count or scheduling: gradients are bit-for-bit identical for any number of threads.
+
+use rayon::prelude::*;
+
+use crate::constants::{MAX_ALPHA, MIN_ALPHA};
+use crate::project::{ProjectedGrad, ViewConsts, project, project_backward};
+use crate::rasterize::{DEPTH_MIN_ALPHA, tile_extent, tile_major_index};
+use crate::tiles::{TILE_PIXELS, TILE_SIZE, quad_bound, row_range, row_span};
+use crate::{Rasterizer, RenderCamera, RenderOptions, SplatGrads, Splats};
+
+/// A pointer that may be shared across the tile tasks, each writing a disjoint range.
+#[derive(Clone, Copy)]
+struct SharedSlots(*mut ProjectedGrad);
+// SAFETY: each tile task writes only the slots of its own list range
+// `offsets[tile]..offsets[tile + 1]`; these ranges are disjoint.
+unsafe impl Send for SharedSlots {}
+unsafe impl Sync for SharedSlots {}
+
+impl SharedSlots {
+    /// Returns the pointer (a method, so closures capture the whole `Sync` wrapper).
+    fn get(self) -> *mut ProjectedGrad {
+        self.0
+    }
+}
+
+/// Per-pixel loss gradients the tile walk needs, gathered from the row-major inputs.
+struct PixelGrads<'a> {
+    d_rgb: &'a [f32],
+    d_alpha: Option<&'a [f32]>,
+    d_depth: Option<&'a [f32]>,
+    bg: glam::Vec3,
+    width: usize,
+    tiles_x: u32,
+}
+
+impl Rasterizer {
+    /// Adds into `grads` the gradients of a loss whose derivatives with respect to this view's
+    /// outputs are `d_rgb` (3·W·H), `d_alpha` (W·H) and `d_depth` (W·H). Call after
+    /// [`Rasterizer::forward`] on the same inputs (it is re-run if the last forward pass was of
+    /// another size). `grads` is resized to `splats` (and zeroed) only if its shape differs.
+    ///
+    /// Gradients of α are zero where o·G is clamped at 0.99 (the exact derivative, as gsplat),
+    /// and of the Jacobian's x/z, y/z where the 1.3·tan(fov/2) clamp acts (as Inria).
+    ///
+    /// # Panics
+    /// If the gradient images do not have the view's size.
+    #[allow(clippy::too_many_arguments)]
+    pub fn backward(
+        &mut self,
+        splats: &Splats,
+        cam: &RenderCamera,
+        opts: &RenderOptions,
+        d_rgb: &[f32],
+        d_alpha: Option<&[f32]>,
+        d_depth: Option<&[f32]>,
+        grads: &mut SplatGrads,
+    ) {
+        let (w, h) = (cam.width as usize, cam.height as usize);
+        assert_eq!(d_rgb.len(), 3 * w * h, "d_rgb must hold 3·W·H values");
+        assert!(
+            d_alpha.is_none_or(|a| a.len() == w * h),
+            "d_alpha must hold W·H values"
+        );
+        assert!(
+            d_depth.is_none_or(|a| a.len() == w * h),
+            "d_depth must hold W·H values"
+        );
+        if self.last_view != Some((splats.len(), cam.width, cam.height)) {
+            self.forward(splats, cam, opts);
+        }
+        if grads.means.len() != splats.len() || grads.sh.len() != splats.sh.len() {
+            grads.reset(splats);
+        }
+        let v = ViewConsts::new(cam, opts, splats);
+        let pg = PixelGrads {
+            d_rgb,
+            d_alpha,
+            d_depth,
+            bg: opts.background,
+            width: w,
+            tiles_x: v.tiles_x,
+        };
+        self.pair_grads.clear();
+        self.pair_grads
+            .resize(self.bins.pairs(), ProjectedGrad::default());
+        let slots = SharedSlots(self.pair_grads.as_mut_ptr());
+        let n_tiles = (v.tiles_x * v.tiles_y) as usize;
+        let this = &*self;
+        (0..n_tiles).into_par_iter().for_each(|tile| {
+            let (s, e) = (this.bins.offsets[tile], this.bins.offsets[tile + 1]);
+            // SAFETY: [s, e) is this tile's own range of `pair_grads` (see `SharedSlots`), in
+            // bounds because offsets end at `pairs()`, the vector's length.
+            let out = unsafe { std::slice::from_raw_parts_mut(slots.get().add(s), e - s) };
+            this.backward_tile(tile, &this.bins.list[s..e], cam, &pg, out);
+        });
+
+        // Sum the pair records per splat in tile order (deterministic).
+        self.splat_grads.clear();
+        self.splat_grads
+            .resize(splats.len(), ProjectedGrad::default());
+        for (&sid, g) in self.bins.list.iter().zip(&self.pair_grads) {
+            self.splat_grads[sid as usize].add(g);
+        }
+
+        let k = splats.coeffs_per_splat();
+        let size = (cam.width, cam.height);
+        let this = &*self;
+        grads
+            .means
+            .par_iter_mut()
+            .zip(grads.log_scales.par_iter_mut())
+            .zip(grads.rotations.par_iter_mut())
+            .zip(grads.opacity_logits.par_iter_mut())
+            .zip(grads.sh.par_chunks_mut(k))
+            .zip(grads.screen_grad_norm.par_iter_mut())
+            .enumerate()
+            .for_each(|(i, (((((gm, gs), gr), go), gsh), gn))| {
+                if !this.visible[i] {
+                    return;
+                }
+                let Ok(it) = project(splats, i, &v) else {
+                    return;
+                };
+                let p = project_backward(splats, i, &v, &it, &this.splat_grads[i], size, gsh);
+                *gm += p.mean;
+                *gs += p.log_scale;
+                for (r, d) in gr.iter_mut().zip(p.rotation) {
+                    *r += d;
+                }
+                *go += p.opacity_logit;
+                *gn += p.screen_norm;
+            });
+    }
+
+    fn backward_tile(
+        &self,
+        tile: usize,
+        list: &[u32],
+        cam: &RenderCamera,
+        pg: &PixelGrads<'_>,
+        out: &mut [ProjectedGrad],
+    ) {
+        let (x0, y0, tw, th) = tile_extent(tile, pg.tiles_x, cam.width, cam.height);
+        let ts = TILE_SIZE as usize;
+        let base = tile * TILE_PIXELS;
+        // Per-pixel state: loss gradients, the background/alpha coefficient, running T and the
+        // back-to-front accumulated colour and depth of the splats behind.
+        let mut g_rgb = [[0.0_f32; 3]; TILE_PIXELS];
+        let mut g_d = [0.0_f32; TILE_PIXELS];
+        let mut k_bg = [0.0_f32; TILE_PIXELS];
+        let mut t_cur = [0.0_f32; TILE_PIXELS];
+        let mut acc = [[0.0_f32; 4]; TILE_PIXELS];
+        let mut last = [0_u32; TILE_PIXELS];
+        let mut max_last = 0;
+        for ly in 0..th as usize {
+            for lx in 0..tw as usize {
+                let (x, y) = (x0 as usize + lx, y0 as usize + ly);
+                let idx = ly * ts + lx;
+                let k = tile_major_index(x, y, pg.tiles_x);
+                debug_assert_eq!(k, base + idx);
+                let p = y * pg.width + x;
+                let g = [pg.d_rgb[3 * p], pg.d_rgb[3 * p + 1], pg.d_rgb[3 * p + 2]];
+                let t_n = self.px_t[k];
+                let a = 1.0 - t_n;
+                let mut g_a = pg.d_alpha.map_or(0.0, |d| d[p]);
+                let mut gd = 0.0;
+                if let Some(dd) = pg.d_depth
+                    && a > DEPTH_MIN_ALPHA
+                {
+                    // depth = D/A: ∂/∂D = 1/A, ∂/∂A = −D/A².
+                    gd = dd[p] / a;
+                    g_a -= dd[p] * self.px_d[k] / (a * a);
+                }
+                let bg_dot = g[0] * pg.bg.x + g[1] * pg.bg.y + g[2] * pg.bg.z;
+                g_rgb[idx] = g;
+                g_d[idx] = gd;
+                // ∂C/∂αᵢ has −T_N·bg/(1 − αᵢ); ∂A/∂αᵢ = T_N/(1 − αᵢ).
+                k_bg[idx] = (g_a - bg_dot) * t_n;
+                t_cur[idx] = t_n;
+                last[idx] = self.px_last[k];
+                max_last = max_last.max(last[idx]);
+            }
+        }
+        for slot in out.iter_mut().skip(max_last as usize) {
+            *slot = ProjectedGrad::default();
+        }
+        for kk in (0..max_last as usize).rev() {
+            let p = &self.proj[list[kk] as usize];
+            let mut g = ProjectedGrad::default();
+            let [a, b, c] = p.conic;
+            let q_max = quad_bound(p.opacity);
+            if let Some((r0, r1)) = row_range(p, q_max, y0, th) {
+                for ly in r0..=r1 {
+                    let dy = p.xy[1] - (y0 + ly as i32) as f32;
+                    let Some((c0, c1)) = row_span(p, q_max, dy, x0, tw) else {
+                        continue;
+                    };
+                    for lx in c0..=c1 {
+                        let idx = ly * ts + lx;
+                        if kk as u32 >= last[idx] {
+                            continue;
+                        }
+                        let dx = p.xy[0] - (x0 + lx as i32) as f32;
+                        let power = -0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy;
+                        if power > 0.0 {
+                            continue;
+                        }
+                        let gauss = power.exp();
+                        let raw = p.opacity * gauss;
+                        let alpha = raw.min(MAX_ALPHA);
+                        if alpha < MIN_ALPHA {
+                            continue;
+                        }
+                        let one_m = 1.0 - alpha;
+                        let t_i = t_cur[idx] / one_m;
+                        let w = alpha * t_i;
+                        let gr = g_rgb[idx];
+                        let gdp = g_d[idx];
+                        g.color[0] += w * gr[0];
+                        g.color[1] += w * gr[1];
+                        g.color[2] += w * gr[2];
+                        g.depth += w * gdp;
+                        let ac = &mut acc[idx];
+                        let d_alpha = t_i
+                            * ((p.color[0] - ac[0]) * gr[0]
+                                + (p.color[1] - ac[1]) * gr[1]
+                                + (p.color[2] - ac[2]) * gr[2]
+                                + (p.depth - ac[3]) * gdp)
+                            + k_bg[idx] / one_m;
+                        ac[0] = alpha * p.color[0] + one_m * ac[0];
+                        ac[1] = alpha * p.color[1] + one_m * ac[1];
+                        ac[2] = alpha * p.color[2] + one_m * ac[2];
+                        ac[3] = alpha * p.depth + one_m * ac[3];
+                        t_cur[idx] = t_i;
+                        if raw < MAX_ALPHA {
+                            g.opacity += gauss * d_alpha;
+                            let d_pow = raw * d_alpha;
+                            g.xy[0] -= d_pow * (a * dx + b * dy);
+                            g.xy[1] -= d_pow * (b * dx + c * dy);
+                            g.conic[0] -= 0.5 * d_pow * dx * dx;
+                            g.conic[1] -= d_pow * dx * dy;
+                            g.conic[2] -= 0.5 * d_pow * dy * dy;
+                        }
+                    }
+                }
+            }
+            out[kk] = g;
+        }
+    }
+}

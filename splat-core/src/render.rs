@@ -1,0 +1,88 @@
+//! Rasteriser options, outputs and gradients.
+
+use glam::Vec3;
+
+use crate::Splats;
+
+/// How to render.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RenderOptions {
+    /// Colour behind the splats (seen where transmittance remains).
+    pub background: Vec3,
+    /// SH degree to evaluate (clamped to the model's degree); lower bands are used as stored.
+    pub active_sh_degree: u32,
+    /// gsplat's antialiased mode: opacity multiplied by √(det Σ₂ / det(Σ₂ + 0.3·I)).
+    pub antialiased: bool,
+}
+
+impl Default for RenderOptions {
+    fn default() -> Self {
+        Self {
+            background: Vec3::ZERO,
+            active_sh_degree: 3,
+            antialiased: false,
+        }
+    }
+}
+
+/// One rendered view.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RenderOutput {
+    /// Image width in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+    /// Colour, interleaved RGB, row-major, top row first (3·W·H).
+    pub rgb: Vec<f32>,
+    /// Coverage 1 − T per pixel (W·H).
+    pub alpha: Vec<f32>,
+    /// Expected camera-space depth Σ wᵢ zᵢ / Σ wᵢ per pixel, 0 where alpha is below 1e-6 (W·H).
+    pub depth: Vec<f32>,
+}
+
+/// Gradients of a loss with respect to every splat parameter (same layout as [`Splats`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SplatGrads {
+    /// dL/d mean.
+    pub means: Vec<Vec3>,
+    /// dL/d log-scale.
+    pub log_scales: Vec<Vec3>,
+    /// dL/d stored (unnormalised) quaternion (w, x, y, z).
+    pub rotations: Vec<[f32; 4]>,
+    /// dL/d opacity logit.
+    pub opacity_logits: Vec<f32>,
+    /// dL/d SH coefficient, splat-major like [`Splats::sh`].
+    pub sh: Vec<[f32; 3]>,
+    /// Σ over backward calls of |dL/d mean2d| in NDC units (pixels × (W/2, H/2)), the quantity
+    /// Inria's densification thresholds at 2e-4.
+    pub screen_grad_norm: Vec<f32>,
+}
+
+impl SplatGrads {
+    /// Returns zero gradients shaped like `splats`.
+    #[must_use]
+    pub fn zeros_like(splats: &Splats) -> Self {
+        let mut g = Self::default();
+        g.reset(splats);
+        g
+    }
+
+    /// Resizes to `splats` and sets every gradient to zero, reusing the allocations.
+    pub fn reset(&mut self, splats: &Splats) {
+        let n = splats.len();
+        let fill = |v: &mut Vec<_>, len, zero| {
+            v.clear();
+            v.resize(len, zero);
+        };
+        fill(&mut self.means, n, Vec3::ZERO);
+        fill(&mut self.log_scales, n, Vec3::ZERO);
+        self.rotations.clear();
+        self.rotations.resize(n, [0.0; 4]);
+        self.opacity_logits.clear();
+        self.opacity_logits.resize(n, 0.0);
+        self.sh.clear();
+        self.sh.resize(splats.sh.len(), [0.0; 3]);
+        self.screen_grad_norm.clear();
+        self.screen_grad_norm.resize(n, 0.0);
+    }
+}

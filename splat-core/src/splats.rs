@@ -1,0 +1,241 @@
+//! The splat model in structure-of-arrays form, with Inria's activations and their inverses.
+
+use glam::{Quat, Vec3};
+
+use crate::Error;
+use crate::sh::C0;
+
+/// Gaussian splats with Inria's parameterisation.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Splats {
+    /// Centres, in world units.
+    pub means: Vec<Vec3>,
+    /// Natural logarithms of the per-axis standard deviations.
+    pub log_scales: Vec<Vec3>,
+    /// Rotations as quaternions (w, x, y, z), unnormalised in storage, normalised on use.
+    pub rotations: Vec<[f32; 4]>,
+    /// Opacities before the sigmoid.
+    pub opacity_logits: Vec<f32>,
+    /// Spherical-harmonics degree of the coefficients stored (0..=3).
+    pub sh_degree: u32,
+    /// SH coefficients, splat-major: `sh[i * num_sh_coeffs(sh_degree) + k]`, k = 0 is DC.
+    pub sh: Vec<[f32; 3]>,
+}
+
+/// Returns the number of SH coefficients per colour channel for a degree: 1, 4, 9, 16.
+#[must_use]
+pub const fn num_sh_coeffs(degree: u32) -> usize {
+    ((degree + 1) * (degree + 1)) as usize
+}
+
+/// Returns the logistic function 1 / (1 + e^(−x)) (Inria's opacity activation).
+#[must_use]
+pub fn sigmoid(x: f32) -> f32 {
+    1.0 / (1.0 + (-x).exp())
+}
+
+/// Returns the inverse of [`sigmoid`], ln(p / (1 − p)), with p clamped into (1e-6, 1 − 1e-6).
+#[must_use]
+pub fn logit(p: f32) -> f32 {
+    let p = p.clamp(1e-6, 1.0 - 1e-6);
+    (p / (1.0 - p)).ln()
+}
+
+/// Returns the DC coefficient that renders as colour `rgb` (Inria's `RGB2SH`: (c − 0.5)/C0).
+#[must_use]
+pub fn rgb_to_sh_dc(rgb: [f32; 3]) -> [f32; 3] {
+    rgb.map(|c| (c - 0.5) / C0)
+}
+
+/// Returns the colour a DC coefficient renders as (Inria's `SH2RGB`: dc·C0 + 0.5, unclamped).
+#[must_use]
+pub fn sh_dc_to_rgb(dc: [f32; 3]) -> [f32; 3] {
+    dc.map(|c| c * C0 + 0.5)
+}
+
+impl Splats {
+    /// Returns an empty model of the given SH degree (clamped to 3).
+    #[must_use]
+    pub fn new(sh_degree: u32) -> Self {
+        Self {
+            sh_degree: sh_degree.min(3),
+            ..Self::default()
+        }
+    }
+
+    /// Returns the number of splats.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.means.len()
+    }
+
+    /// Returns true when there are no splats.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.means.is_empty()
+    }
+
+    /// Returns the number of SH coefficients per channel of this model.
+    #[must_use]
+    pub fn coeffs_per_splat(&self) -> usize {
+        num_sh_coeffs(self.sh_degree)
+    }
+
+    /// Returns the SH coefficients of splat `i`.
+    #[must_use]
+    pub fn sh_of(&self, i: usize) -> &[[f32; 3]] {
+        let k = self.coeffs_per_splat();
+        &self.sh[i * k..(i + 1) * k]
+    }
+
+    /// Returns the activated opacity of splat `i`.
+    #[must_use]
+    pub fn opacity(&self, i: usize) -> f32 {
+        sigmoid(self.opacity_logits[i])
+    }
+
+    /// Returns the per-axis standard deviations of splat `i`.
+    #[must_use]
+    pub fn scale(&self, i: usize) -> Vec3 {
+        self.log_scales[i].exp()
+    }
+
+    /// Returns the normalised rotation of splat `i` (identity for a zero quaternion).
+    #[must_use]
+    pub fn rotation(&self, i: usize) -> Quat {
+        let [w, x, y, z] = self.rotations[i];
+        let q = Quat::from_xyzw(x, y, z, w);
+        let n = q.length();
+        if n > 0.0 && n.is_finite() {
+            q / n
+        } else {
+            Quat::IDENTITY
+        }
+    }
+
+    /// Appends one splat; `sh` must hold `coeffs_per_splat()` coefficients (missing ones are zero,
+    /// extra ones are dropped).
+    pub fn push(
+        &mut self,
+        mean: Vec3,
+        log_scale: Vec3,
+        rotation: [f32; 4],
+        opacity_logit: f32,
+        sh: &[[f32; 3]],
+    ) {
+        let k = self.coeffs_per_splat();
+        self.means.push(mean);
+        self.log_scales.push(log_scale);
+        self.rotations.push(rotation);
+        self.opacity_logits.push(opacity_logit);
+        self.sh
+            .extend((0..k).map(|j| sh.get(j).copied().unwrap_or([0.0; 3])));
+    }
+
+    /// Builds splats at `points` with colours `colors` (rendered as such from every direction),
+    /// per-axis standard deviations `scales` in each splat's own frame, and opacity `opacity`.
+    /// With `normals`, each splat's local z axis is turned onto its normal, so a scale with a small
+    /// z is a flat disc on the surface; without, rotations are the identity.
+    pub fn from_points(
+        points: &[Vec3],
+        colors: &[[f32; 3]],
+        scales: &[Vec3],
+        normals: Option<&[Vec3]>,
+        opacity: f32,
+        sh_degree: u32,
+    ) -> Result<Self, Error> {
+        let n = points.len();
+        if colors.len() != n || scales.len() != n || normals.is_some_and(|v| v.len() != n) {
+            return Err(Error::Inconsistent(format!(
+                "from_points: {n} points but {} colours, {} scales, {} normals",
+                colors.len(),
+                scales.len(),
+                normals.map_or(n, <[Vec3]>::len)
+            )));
+        }
+        let mut s = Self::new(sh_degree);
+        let o = logit(opacity);
+        for i in 0..n {
+            let q = match normals {
+                Some(nv) if nv[i].length_squared() > 0.0 && nv[i].is_finite() => {
+                    Quat::from_rotation_arc(Vec3::Z, nv[i].normalize())
+                }
+                _ => Quat::IDENTITY,
+            };
+            let ls = scales[i].max(Vec3::splat(f32::MIN_POSITIVE)).ln();
+            s.push(
+                points[i],
+                ls,
+                [q.w, q.x, q.y, q.z],
+                o,
+                &[rgb_to_sh_dc(colors[i])],
+            );
+        }
+        Ok(s)
+    }
+
+    /// Checks that all arrays agree with `len()` and the degree is at most 3.
+    pub fn validate(&self) -> Result<(), Error> {
+        let n = self.len();
+        if self.sh_degree > 3 {
+            return Err(Error::Inconsistent(format!(
+                "SH degree {} (at most 3 is supported)",
+                self.sh_degree
+            )));
+        }
+        if self.log_scales.len() != n
+            || self.rotations.len() != n
+            || self.opacity_logits.len() != n
+            || self.sh.len() != n * self.coeffs_per_splat()
+        {
+            return Err(Error::Inconsistent(format!(
+                "{n} means but {} log-scales, {} rotations, {} opacities, {} SH coefficients \
+                 (expected {} per splat)",
+                self.log_scales.len(),
+                self.rotations.len(),
+                self.opacity_logits.len(),
+                self.sh.len(),
+                self.coeffs_per_splat()
+            )));
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn activations_invert() {
+        for p in [0.01_f32, 0.1, 0.5, 0.9, 0.99] {
+            assert!((sigmoid(logit(p)) - p).abs() < 1e-6);
+        }
+        let c = [0.2, 0.5, 0.9];
+        let back = sh_dc_to_rgb(rgb_to_sh_dc(c));
+        for k in 0..3 {
+            assert!((back[k] - c[k]).abs() < 1e-6);
+        }
+        assert_eq!(num_sh_coeffs(0), 1);
+        assert_eq!(num_sh_coeffs(3), 16);
+    }
+
+    #[test]
+    fn from_points_orients_discs_along_normals() {
+        let n = Vec3::new(1.0, 2.0, -0.5).normalize();
+        let s = Splats::from_points(
+            &[Vec3::ZERO],
+            &[[0.3, 0.6, 0.9]],
+            &[Vec3::new(0.1, 0.1, 0.001)],
+            Some(&[n]),
+            0.5,
+            1,
+        )
+        .unwrap();
+        s.validate().unwrap();
+        assert!((s.rotation(0) * Vec3::Z - n).length() < 1e-5);
+        assert!((s.opacity(0) - 0.5).abs() < 1e-6);
+        assert_eq!(s.sh.len(), 4);
+        assert!(Splats::from_points(&[Vec3::ZERO], &[], &[], None, 0.5, 0).is_err());
+    }
+}
