@@ -1,1 +1,546 @@
 //! The configuration shared by every subcommand: defaults, TOML files and command-line overrides.
+//!
+//! One [`Config`] holds every knob of the pipeline, grouped by stage. `transcode config
+//! --defaults` prints [`Config::default`] as TOML; `--config FILE` loads a file in which every
+//! key is optional (missing keys keep their defaults, unknown keys are errors so that typos are
+//! caught); command-line flags are applied last.
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+/// Errors from loading or checking a configuration.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// The file could not be read.
+    #[error("cannot read config file {path}: {source}")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// The file is not valid TOML or does not match the configuration's keys and types.
+    #[error("bad config file {path}: {message}")]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// What the TOML parser said, with the key, line and column.
+        message: String,
+    },
+    /// A value is out of its range.
+    #[error("invalid configuration{}: `{key}` {problem}", source_suffix(.path))]
+    Invalid {
+        /// The file the value came from, if any.
+        path: Option<PathBuf>,
+        /// The dotted key, e.g. `rig.cameras`.
+        key: String,
+        /// What is wrong with it.
+        problem: String,
+    },
+}
+
+fn source_suffix(path: &Option<PathBuf>) -> String {
+    path.as_ref()
+        .map(|p| format!(" in {}", p.display()))
+        .unwrap_or_default()
+}
+
+/// Every setting of the pipeline, grouped by stage.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(default, deny_unknown_fields)]
+pub struct Config {
+    /// Virtual cameras for training and for the held-out evaluation.
+    pub rig: RigConfig,
+    /// The reference renderer of the input (background is always black: references are
+    /// composited on other backgrounds with their alpha).
+    pub renderer: crate::views::ViewOptions,
+    /// Initial splats.
+    pub init: InitConfig,
+    /// The trainer.
+    pub training: TrainingConfig,
+    /// Evaluation on the held-out views.
+    pub eval: EvalConfig,
+    /// What is written besides the model.
+    pub output: OutputConfig,
+}
+
+/// Training and held-out camera rigs.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RigConfig {
+    /// Training cameras on a Fibonacci sphere around the object.
+    pub cameras: usize,
+    /// Image width in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+    /// Vertical field of view in degrees (PccAppRenderer's default is 20°).
+    pub fov_y_deg: f64,
+    /// Share of the half image left free around the object's bounding sphere.
+    pub margin: f64,
+    /// Held-out cameras (evaluation only), on directions between the training ones.
+    pub heldout_cameras: usize,
+    /// Distances of the held-out cameras as multiples of the training distance, used in turn.
+    pub heldout_distances: Vec<f64>,
+}
+
+impl Default for RigConfig {
+    fn default() -> Self {
+        Self {
+            cameras: 44,
+            width: 512,
+            height: 512,
+            fov_y_deg: camera_model::DEFAULT_FOV_Y_DEG,
+            margin: 0.05,
+            heldout_cameras: 8,
+            heldout_distances: vec![0.8, 1.25],
+        }
+    }
+}
+
+/// Where initial splats come from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum InitMode {
+    /// On the input's surface, SH fitted to its colours, positions frozen.
+    Surface,
+    /// From sparse points (COLMAP points3D or random in the bounds), with densification.
+    Sparse,
+}
+
+impl fmt::Display for InitMode {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Self::Surface => "surface",
+            Self::Sparse => "sparse",
+        })
+    }
+}
+
+/// How a subset of K points is chosen from the input.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Sampling {
+    /// One point per cell of a voxel grid sized to give about K cells.
+    Voxel,
+    /// Farthest-point sampling (O(N·K): for moderate inputs).
+    Farthest,
+}
+
+/// Which points of a mesh carry the surface splats.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum MeshPoints {
+    /// The vertices.
+    Vertices,
+    /// The face centres.
+    Faces,
+    /// Area-uniform samples on the faces (`init.splats` of them, or `init.mesh_samples`).
+    Samples,
+}
+
+/// SH degree: fixed, or chosen from the fit errors.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ShDegree {
+    /// A fixed degree 0..=3.
+    Fixed(u32),
+    /// The lowest degree whose fit error is within `init.sh_tolerance` of degree 3's.
+    Auto,
+}
+
+impl fmt::Display for ShDegree {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Fixed(d) => write!(f, "{d}"),
+            Self::Auto => f.write_str("auto"),
+        }
+    }
+}
+
+impl std::str::FromStr for ShDegree {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        if s.eq_ignore_ascii_case("auto") {
+            return Ok(Self::Auto);
+        }
+        match s.parse::<u32>() {
+            Ok(d) if d <= 3 => Ok(Self::Fixed(d)),
+            _ => Err(format!("SH degree must be 0, 1, 2, 3 or auto, got {s:?}")),
+        }
+    }
+}
+
+impl Serialize for ShDegree {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        match self {
+            Self::Fixed(d) => s.serialize_u32(*d),
+            Self::Auto => s.serialize_str("auto"),
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for ShDegree {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        #[derive(Deserialize)]
+        #[serde(untagged)]
+        enum Raw {
+            Int(i64),
+            Str(String),
+        }
+        match Raw::deserialize(d)? {
+            Raw::Int(i) if (0..=3).contains(&i) => Ok(Self::Fixed(i as u32)),
+            Raw::Int(i) => Err(serde::de::Error::custom(format!(
+                "SH degree must be 0..=3 or \"auto\", got {i}"
+            ))),
+            Raw::Str(s) => s.parse().map_err(serde::de::Error::custom),
+        }
+    }
+}
+
+/// Initialisation settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct InitConfig {
+    /// Surface or sparse initialisation.
+    pub mode: InitMode,
+    /// Number of splats K (a subset of the input points); all points when absent.
+    pub splats: Option<usize>,
+    /// How the subset of K points is chosen.
+    pub sampling: Sampling,
+    /// Which mesh points carry splats.
+    pub mesh_points: MeshPoints,
+    /// Surface samples on a mesh when `splats` is absent and `mesh_points` is `samples`.
+    pub mesh_samples: usize,
+    /// SH degree of the model.
+    pub sh_degree: ShDegree,
+    /// For `sh_degree = "auto"`: accepted excess RMS fit error over degree 3 (colour units).
+    pub sh_tolerance: f64,
+    /// View directions on the sphere used by the SH fit.
+    pub fit_directions: usize,
+    /// Ridge weight on the non-constant SH coefficients (per mean squared residual).
+    pub ridge: f64,
+    /// Neighbours for normals by PCA when the input has none.
+    pub normal_neighbours: usize,
+    /// Thickness of a surface splat along its normal, as a share of its in-plane scale.
+    pub thin_ratio: f32,
+    /// Initial opacity of surface splats.
+    pub surface_opacity: f32,
+    /// Initial opacity of sparse splats (Inria: 0.1).
+    pub sparse_opacity: f32,
+    /// Sparse init: a COLMAP model folder whose points3D seed the splats.
+    pub points3d: Option<PathBuf>,
+    /// Sparse init without `points3d`: random points in the input's bounding box.
+    pub random_points: usize,
+    /// Let surface splats move (they are frozen by default).
+    pub free_positions: bool,
+    /// Densify surface splats too (sparse init always densifies).
+    pub densify_surface: bool,
+}
+
+impl Default for InitConfig {
+    fn default() -> Self {
+        Self {
+            mode: InitMode::Surface,
+            splats: None,
+            sampling: Sampling::Voxel,
+            mesh_points: MeshPoints::Samples,
+            mesh_samples: 20_000,
+            sh_degree: ShDegree::Auto,
+            sh_tolerance: 0.01,
+            fit_directions: 128,
+            ridge: 1e-3,
+            normal_neighbours: 12,
+            thin_ratio: 0.1,
+            surface_opacity: 0.8,
+            sparse_opacity: 0.1,
+            points3d: None,
+            random_points: 5_000,
+            free_positions: false,
+            densify_surface: false,
+        }
+    }
+}
+
+/// Trainer settings; learning rates and densification are `splat_train`'s own structures.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TrainingConfig {
+    /// Optimisation steps (one view each).
+    pub iterations: u32,
+    /// Wall-clock budget in seconds for training; stops early when spent.
+    pub time_budget_s: Option<f64>,
+    /// Seed of the view order, random backgrounds and random init.
+    pub seed: u64,
+    /// Weight λ of D-SSIM in the loss (Inria: 0.2).
+    pub ssim_weight: f32,
+    /// Weight of the L1 loss of rendered alpha against the reference masks.
+    pub alpha_loss: f32,
+    /// One more SH band every this many steps (0 = all bands from the start).
+    pub sh_degree_interval: u32,
+    /// A random background colour every step, so the splats cannot bake the background in.
+    pub random_background: bool,
+    /// Record the training PSNR every this many steps (for the report's plot).
+    pub history_every: u32,
+    /// Learning rates per parameter group.
+    pub lr: splat_train::LearningRates,
+    /// Adaptive density control, used by sparse init (and surface init when asked).
+    pub densify: splat_train::DensifyConfig,
+}
+
+impl Default for TrainingConfig {
+    fn default() -> Self {
+        let t = splat_train::TrainConfig::default();
+        Self {
+            iterations: 2_000,
+            time_budget_s: None,
+            seed: t.seed,
+            ssim_weight: t.ssim_weight,
+            alpha_loss: 0.1,
+            sh_degree_interval: 250,
+            random_background: true,
+            history_every: 25,
+            lr: t.lr,
+            densify: t.densify.unwrap_or_default(),
+        }
+    }
+}
+
+/// Evaluation settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct EvalConfig {
+    /// A splat is a floater beyond this many point spacings from the input surface.
+    pub floater_spacings: f64,
+    /// Rendered alpha above this counts as covered for the IoU.
+    pub alpha_threshold: f32,
+    /// Held-out views shown side by side in the report.
+    pub report_views: usize,
+}
+
+impl Default for EvalConfig {
+    fn default() -> Self {
+        Self {
+            floater_spacings: 2.0,
+            alpha_threshold: 0.5,
+            report_views: 4,
+        }
+    }
+}
+
+/// Output settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(default, deny_unknown_fields)]
+pub struct OutputConfig {
+    /// Write the dataset's PNGs with 16 bits per channel instead of 8.
+    pub png16: bool,
+    /// Also write the model as an antimatter15 `.splat` file.
+    pub splat_file: bool,
+    /// Also train from the other init mode and compare both in the report.
+    pub compare_init: bool,
+}
+
+impl Config {
+    /// Reads a TOML file; missing keys keep their defaults.
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let config = Self::from_toml(&text).map_err(|message| ConfigError::Parse {
+            path: path.to_path_buf(),
+            message,
+        })?;
+        config.validate().map_err(|e| match e {
+            ConfigError::Invalid { key, problem, .. } => ConfigError::Invalid {
+                path: Some(path.to_path_buf()),
+                key,
+                problem,
+            },
+            other => other,
+        })?;
+        Ok(config)
+    }
+
+    /// Parses TOML text; the error message names the key and the line.
+    pub fn from_toml(text: &str) -> Result<Self, String> {
+        toml::from_str(text).map_err(|e| e.to_string().trim_end().to_string())
+    }
+
+    /// The configuration as TOML text.
+    #[must_use]
+    pub fn to_toml(&self) -> String {
+        // Serialising plain data with string keys cannot fail.
+        toml::to_string_pretty(self).unwrap_or_default()
+    }
+
+    /// Checks value ranges that the types do not.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let bad = |key: &str, problem: String| {
+            Err(ConfigError::Invalid {
+                path: None,
+                key: key.to_string(),
+                problem,
+            })
+        };
+        let r = &self.rig;
+        if r.cameras == 0 {
+            return bad("rig.cameras", "must be at least 1".into());
+        }
+        if r.width == 0 || r.height == 0 || r.width > 16_384 || r.height > 16_384 {
+            return bad(
+                "rig.width/rig.height",
+                format!("must be in 1..=16384, got {}×{}", r.width, r.height),
+            );
+        }
+        if !(r.fov_y_deg > 0.0 && r.fov_y_deg < 170.0) {
+            return bad(
+                "rig.fov_y_deg",
+                format!("must be in (0, 170), got {}", r.fov_y_deg),
+            );
+        }
+        if !(0.0..0.9).contains(&r.margin) {
+            return bad("rig.margin", format!("must be in [0, 0.9), got {}", r.margin));
+        }
+        if r.heldout_cameras > 0
+            && (r.heldout_distances.is_empty()
+                || r.heldout_distances.iter().any(|d| !(*d > 0.3 && *d < 100.0)))
+        {
+            return bad(
+                "rig.heldout_distances",
+                format!(
+                    "must be a non-empty list of factors in (0.3, 100), got {:?}",
+                    r.heldout_distances
+                ),
+            );
+        }
+        if let Err(e) = self.renderer.validate() {
+            return bad("renderer", e.to_string());
+        }
+        let i = &self.init;
+        if i.splats == Some(0) {
+            return bad("init.splats", "must be at least 1".into());
+        }
+        if i.fit_directions < 16 {
+            return bad(
+                "init.fit_directions",
+                format!("must be at least 16 (degree 3 has 16 coefficients), got {}", i.fit_directions),
+            );
+        }
+        if !(i.ridge >= 0.0 && i.ridge.is_finite()) {
+            return bad("init.ridge", format!("must be ≥ 0, got {}", i.ridge));
+        }
+        if !(i.sh_tolerance >= 0.0 && i.sh_tolerance.is_finite()) {
+            return bad(
+                "init.sh_tolerance",
+                format!("must be ≥ 0, got {}", i.sh_tolerance),
+            );
+        }
+        if i.normal_neighbours < 3 {
+            return bad(
+                "init.normal_neighbours",
+                format!("must be at least 3, got {}", i.normal_neighbours),
+            );
+        }
+        if !(i.thin_ratio > 0.0 && i.thin_ratio <= 1.0) {
+            return bad(
+                "init.thin_ratio",
+                format!("must be in (0, 1], got {}", i.thin_ratio),
+            );
+        }
+        for (key, o) in [
+            ("init.surface_opacity", i.surface_opacity),
+            ("init.sparse_opacity", i.sparse_opacity),
+        ] {
+            if !(o > 0.0 && o < 1.0) {
+                return bad(key, format!("must be in (0, 1), got {o}"));
+            }
+        }
+        if i.mode == InitMode::Sparse && i.points3d.is_none() && i.random_points == 0 {
+            return bad("init.random_points", "must be at least 1".into());
+        }
+        let t = &self.training;
+        if t.iterations == 0 {
+            return bad("training.iterations", "must be at least 1".into());
+        }
+        if let Some(b) = t.time_budget_s
+            && !(b > 0.0 && b.is_finite())
+        {
+            return bad(
+                "training.time_budget_s",
+                format!("must be positive, got {b}"),
+            );
+        }
+        if t.history_every == 0 {
+            return bad("training.history_every", "must be at least 1".into());
+        }
+        Ok(())
+    }
+}
+
+/// Loads `path` if given, else the defaults.
+pub fn load_or_default(path: Option<&Path>) -> Result<Config, ConfigError> {
+    match path {
+        Some(p) => Config::load(p),
+        None => Ok(Config::default()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_round_trip_through_toml() {
+        let c = Config::default();
+        let text = c.to_toml();
+        assert!(text.contains("[rig]"));
+        assert!(text.contains("cameras = 44"));
+        assert!(text.contains("exponent = 10"));
+        assert!(text.contains("sh_degree = \"auto\""));
+        assert_eq!(Config::from_toml(&text).unwrap(), c);
+        c.validate().unwrap();
+    }
+
+    #[test]
+    fn partial_file_keeps_other_defaults() {
+        let c = Config::from_toml("[rig]\ncameras = 12\n[init]\nsh_degree = 2\nmode = \"sparse\"\n")
+            .unwrap();
+        assert_eq!(c.rig.cameras, 12);
+        assert_eq!(c.rig.width, RigConfig::default().width);
+        assert_eq!(c.init.sh_degree, ShDegree::Fixed(2));
+        assert_eq!(c.init.mode, InitMode::Sparse);
+    }
+
+    #[test]
+    fn bad_files_name_the_key_and_line() {
+        let e = Config::from_toml("[rig]\ncamras = 12\n").unwrap_err();
+        assert!(e.contains("camras") && e.contains("line 2"), "{e}");
+        let e = Config::from_toml("[init]\nsh_degree = 5\n").unwrap_err();
+        assert!(e.contains("SH degree"), "{e}");
+        let e = Config::from_toml("[rig]\ncameras = \"many\"\n").unwrap_err();
+        assert!(e.contains("cameras"), "{e}");
+    }
+
+    #[test]
+    fn load_names_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("c.toml");
+        std::fs::write(&p, "[training]\niterations = 0\n").unwrap();
+        let e = Config::load(&p).unwrap_err().to_string();
+        assert!(e.contains("c.toml") && e.contains("training.iterations"), "{e}");
+        std::fs::write(&p, "[rig\n").unwrap();
+        let e = Config::load(&p).unwrap_err().to_string();
+        assert!(e.contains("c.toml"), "{e}");
+        let e = Config::load(&dir.path().join("missing.toml")).unwrap_err().to_string();
+        assert!(e.contains("missing.toml"), "{e}");
+    }
+
+    #[test]
+    fn sh_degree_parses_from_flags() {
+        assert_eq!("auto".parse::<ShDegree>().unwrap(), ShDegree::Auto);
+        assert_eq!("3".parse::<ShDegree>().unwrap(), ShDegree::Fixed(3));
+        assert!("4".parse::<ShDegree>().is_err());
+    }
+}

@@ -1,1 +1,591 @@
 //! The whole pipeline, input model to 3DGS model with a report, stage by stage.
+//!
+//! `load → rig → render training and held-out views → COLMAP dataset → initialise → train →
+//! model PLY → evaluate → report`. Every file is written atomically, and the files that mark a
+//! run as finished (the model and the report) are removed before a run starts, so an interrupted
+//! or failed run never leaves output that looks complete.
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use camera_model::rig::{WORLD_UP, fibonacci_sphere, framing_distance, look_at_rig};
+use camera_model::{Camera, Intrinsics};
+use glam::{DVec3, Vec3};
+use indicatif::{ProgressBar, ProgressStyle};
+use plenoptic_io::Model;
+use splat_core::Splats;
+use splat_train::{Background, TrainConfig, Trainer, View};
+
+use crate::config::{Config, InitMode};
+use crate::eval::{EvalOptions, Metrics, ReferenceView, RenderedView, evaluate};
+use crate::init::{self, InitSummary, SurfacePoints};
+use crate::report::{
+    CurvePoint, InputInfo, Report, RunReport, StageTiming, ViewPictures, write_report,
+};
+use crate::views::{self, ViewImage};
+
+/// Errors of the pipeline, each naming the stage and the file.
+#[derive(Debug, thiserror::Error)]
+pub enum PipelineError {
+    /// The input could not be read.
+    #[error("cannot load the input: {0}")]
+    Load(#[from] plenoptic_io::Error),
+    /// The input holds nothing to render.
+    #[error("the input {0} holds no points or triangles")]
+    EmptyInput(PathBuf),
+    /// The configuration is invalid.
+    #[error(transparent)]
+    Config(#[from] crate::config::ConfigError),
+    /// The cameras could not be placed.
+    #[error("cannot place the cameras: {0}")]
+    Rig(#[from] camera_model::Error),
+    /// The reference views could not be rendered or written.
+    #[error("reference views: {0}")]
+    Views(#[from] views::Error),
+    /// The dataset could not be written.
+    #[error("cannot write the COLMAP dataset in {path}: {message}")]
+    Dataset {
+        /// The dataset folder.
+        path: PathBuf,
+        /// The cause.
+        message: String,
+    },
+    /// Initialisation failed.
+    #[error("initialisation: {0}")]
+    Init(#[from] init::InitError),
+    /// The trainer refused its inputs.
+    #[error("training: {0}")]
+    Train(#[from] splat_train::Error),
+    /// The model could not be written.
+    #[error("cannot write the model {path}: {source}")]
+    Model {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: splat_core::Error,
+    },
+    /// A file or folder could not be written or removed.
+    #[error("cannot write {path}: {source}")]
+    Io {
+        /// The file or folder.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+}
+
+fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> PipelineError + '_ {
+    move |source| PipelineError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+/// The virtual cameras of a run.
+#[derive(Debug, Clone)]
+pub struct Rig {
+    /// Training cameras.
+    pub train: Vec<Camera>,
+    /// Held-out cameras (evaluation only).
+    pub heldout: Vec<Camera>,
+    /// Centre of the object's bounding sphere.
+    pub center: DVec3,
+    /// Radius of the object's bounding sphere.
+    pub radius: f64,
+}
+
+/// The input's points (cloud points or mesh vertices), for framing.
+fn model_points(model: &Model) -> &[Vec3] {
+    match model {
+        Model::Cloud(c) => &c.positions,
+        Model::Mesh(m) => &m.positions,
+    }
+}
+
+/// Training cameras on a Fibonacci sphere framing the object, and held-out cameras on the
+/// directions of a second lattice turned by half the golden angle about the up axis (so they fall
+/// between the training ones), at the configured multiples of the training distance.
+pub fn build_rig(model: &Model, cfg: &crate::config::RigConfig) -> Result<Rig, PipelineError> {
+    let points = model_points(model);
+    let (lo, hi) = init::bounds(points);
+    let center = ((lo + hi) * 0.5).as_dvec3();
+    let radius = points
+        .iter()
+        .map(|p| p.as_dvec3().distance(center))
+        .fold(0.0, f64::max)
+        .max(1e-6);
+    let intrinsics = Intrinsics::from_fov_y(cfg.width, cfg.height, cfg.fov_y_deg);
+    let distance = framing_distance(radius, &intrinsics, cfg.margin)?;
+    let train = look_at_rig(
+        &fibonacci_sphere(cfg.cameras),
+        center,
+        distance,
+        intrinsics,
+        WORLD_UP,
+    );
+    // Half the golden angle (≈ 68.75°) about +y moves every lattice point off the training ones.
+    let turn = glam::DQuat::from_rotation_y(1.199_981_614_864_326_5);
+    let heldout = fibonacci_sphere(cfg.heldout_cameras)
+        .into_iter()
+        .enumerate()
+        .map(|(i, d)| {
+            let factor = cfg.heldout_distances[i % cfg.heldout_distances.len().max(1)];
+            let d = turn * d;
+            look_at_rig(&[d], center, distance * factor, intrinsics, WORLD_UP)
+        })
+        .flatten()
+        .collect();
+    Ok(Rig {
+        train,
+        heldout,
+        center,
+        radius,
+    })
+}
+
+/// A reference view as the trainer wants it: straight (un-premultiplied) colour and its mask.
+#[must_use]
+pub fn training_view(name: String, camera: Camera, image: &ViewImage) -> View {
+    let straight = image
+        .rgb
+        .chunks_exact(3)
+        .zip(&image.alpha)
+        .flat_map(|(px, &a)| {
+            if a > 1e-6 {
+                [0, 1, 2].map(|c| (px[c] / a).clamp(0.0, 1.0))
+            } else {
+                [0.0; 3]
+            }
+        })
+        .collect();
+    View {
+        name,
+        camera,
+        image: straight,
+        mask: Some(image.alpha.clone()),
+    }
+}
+
+/// The trainer's configuration for one init mode.
+#[must_use]
+pub fn train_config(cfg: &Config, mode: InitMode, sh_degree: u32) -> TrainConfig {
+    let t = &cfg.training;
+    let surface = mode == InitMode::Surface;
+    let mut tc = TrainConfig {
+        iterations: t.iterations,
+        seed: t.seed,
+        lr: t.lr,
+        ssim_weight: t.ssim_weight,
+        sh_degree: Some(sh_degree),
+        sh_degree_interval: t.sh_degree_interval,
+        densify: if !surface || cfg.init.densify_surface {
+            Some(t.densify)
+        } else {
+            None
+        },
+        background: if t.random_background {
+            Background::Random
+        } else {
+            Background::Fixed([0.0; 3])
+        },
+        time_budget: t.time_budget_s.map(Duration::from_secs_f64),
+        alpha_loss_weight: t.alpha_loss,
+        history_every: t.history_every,
+        ..TrainConfig::default()
+    };
+    // Surface splats sit on the input's points: keep them there unless asked (or densifying).
+    tc.frozen.positions = surface && !cfg.init.free_positions && tc.densify.is_none();
+    tc
+}
+
+/// What a finished run produced.
+#[derive(Debug, Clone)]
+pub struct Outcome {
+    /// The report (also written as JSON).
+    pub report: Report,
+    /// `DIR/report/report.html`.
+    pub html: PathBuf,
+    /// `DIR/model/splats.ply`.
+    pub model: PathBuf,
+}
+
+/// Runs the whole pipeline on `input`, writing into `out`. Progress goes to stderr unless `quiet`.
+pub fn run(input: &Path, out: &Path, cfg: &Config, quiet: bool) -> Result<Outcome, PipelineError> {
+    cfg.validate()?;
+    let started = Instant::now();
+    let say = |msg: String| {
+        if !quiet {
+            eprintln!("{msg}");
+        }
+    };
+    let model_dir = out.join("model");
+    let report_dir = out.join("report");
+    let dataset_dir = out.join("dataset");
+    // Markers of a finished run go first, so a failure below cannot leave an old, complete-looking
+    // model or report beside new, partial data.
+    for marker in [
+        model_dir.join("splats.ply"),
+        model_dir.join("splats.splat"),
+        model_dir.join("splats-sparse.ply"),
+        model_dir.join("splats-surface.ply"),
+        report_dir.join("report.json"),
+        report_dir.join("report.html"),
+    ] {
+        match std::fs::remove_file(&marker) {
+            Ok(()) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => return Err(io_err(&marker)(e)),
+        }
+    }
+    for d in [&model_dir, &report_dir, &dataset_dir] {
+        std::fs::create_dir_all(d).map_err(io_err(d))?;
+    }
+    let mut timings = Vec::new();
+    let mut stage = Instant::now();
+    let mut lap = |name: &str, timings: &mut Vec<StageTiming>| {
+        let s = stage.elapsed().as_secs_f64();
+        timings.push(StageTiming {
+            stage: name.to_string(),
+            seconds: s,
+        });
+        stage = Instant::now();
+        s
+    };
+
+    say(format!("[1/7] loading {}", input.display()));
+    let model = plenoptic_io::load(input)?;
+    let info = input_info(input, &model);
+    if info.points == 0 {
+        return Err(PipelineError::EmptyInput(input.to_path_buf()));
+    }
+    lap("load", &mut timings);
+
+    let rig = build_rig(&model, &cfg.rig)?;
+    lap("rig", &mut timings);
+
+    say(format!(
+        "[2/7] rendering {} training and {} held-out views at {}×{}",
+        rig.train.len(),
+        rig.heldout.len(),
+        cfg.rig.width,
+        cfg.rig.height
+    ));
+    let mut opts = cfg.renderer.clone();
+    opts.background = [0.0; 3];
+    let train_images = views::render_views(&model, &rig.train, &opts)?;
+    let heldout_images = views::render_views(&model, &rig.heldout, &opts)?;
+    lap("render views", &mut timings);
+
+    say(format!("[3/7] writing the COLMAP dataset to {}", dataset_dir.display()));
+    let surface = SurfacePoints::from_model(
+        &model,
+        init::mesh_points(&cfg.init).0,
+        init::mesh_points(&cfg.init).1,
+        cfg.training.seed,
+    );
+    write_dataset(&dataset_dir, &rig.train, &train_images, &surface, cfg)?;
+    lap("write dataset", &mut timings);
+
+    let train_views: Vec<View> = rig
+        .train
+        .iter()
+        .zip(&train_images)
+        .enumerate()
+        .map(|(i, (c, img))| training_view(view_name(i), c.clone(), img))
+        .collect();
+    drop(train_images);
+    let heldout: Vec<ReferenceView> = rig
+        .heldout
+        .iter()
+        .zip(heldout_images)
+        .enumerate()
+        .map(|(i, (c, img))| ReferenceView {
+            name: format!("heldout_{i:03}"),
+            camera: c.clone(),
+            rgb: img.rgb,
+            alpha: img.alpha,
+        })
+        .collect();
+
+    // The surface for the distance metric: the cloud itself, or dense samples of the mesh.
+    let distance_surface = match &model {
+        Model::Cloud(_) => surface.positions.clone(),
+        Model::Mesh(m) => init::sample_mesh(m, 200_000, cfg.training.seed ^ 0x5eed).positions,
+    };
+    let spacing = init::point_spacing(&distance_surface);
+
+    let mut modes = vec![cfg.init.mode];
+    if cfg.output.compare_init {
+        modes.push(match cfg.init.mode {
+            InitMode::Surface => InitMode::Sparse,
+            InitMode::Sparse => InitMode::Surface,
+        });
+    }
+    let mut runs = Vec::new();
+    let mut renders_per_run: Vec<Vec<RenderedView>> = Vec::new();
+    let mut main_model = PathBuf::new();
+    for (k, &mode) in modes.iter().enumerate() {
+        let model_path = if k == 0 {
+            model_dir.join("splats.ply")
+        } else {
+            model_dir.join(format!("splats-{mode}.ply"))
+        };
+        let (run, renders) = init_train_eval(
+            &surface,
+            &train_views,
+            &heldout,
+            (&distance_surface, spacing),
+            cfg,
+            mode,
+            &model_path,
+            k == 0 && cfg.output.splat_file,
+            quiet,
+        )?;
+        if k == 0 {
+            main_model = model_path;
+        }
+        say(format!(
+            "      {mode} init: held-out PSNR {:.2} dB on black, {:.2} dB on white, {} splats",
+            run.metrics.psnr_black, run.metrics.psnr_white, run.metrics.splats
+        ));
+        runs.push(run);
+        renders_per_run.push(renders);
+    }
+
+    say("[7/7] writing the report".to_string());
+    let pictures = pick_pictures(&heldout, &renders_per_run, cfg.eval.report_views);
+    let mut report = Report {
+        version: env!("CARGO_PKG_VERSION").to_string(),
+        input: info,
+        config: cfg.clone(),
+        train_views: train_views.len(),
+        heldout_views: heldout.len(),
+        timings,
+        runs,
+        total_seconds: 0.0,
+    };
+    report.total_seconds = started.elapsed().as_secs_f64();
+    let html = write_report(&report_dir, &report, &pictures).map_err(io_err(&report_dir))?;
+    Ok(Outcome {
+        report,
+        html,
+        model: main_model,
+    })
+}
+
+/// Initialises, trains, writes and evaluates one model.
+#[allow(clippy::too_many_arguments)]
+fn init_train_eval(
+    surface: &SurfacePoints,
+    train_views: &[View],
+    heldout: &[ReferenceView],
+    distance_surface: (&[Vec3], f32),
+    cfg: &Config,
+    mode: InitMode,
+    model_path: &Path,
+    splat_file: bool,
+    quiet: bool,
+) -> Result<(RunReport, Vec<RenderedView>), PipelineError> {
+    let mut timings = Vec::new();
+    let mut stage = Instant::now();
+    let mut lap = |name: &str, timings: &mut Vec<StageTiming>| {
+        timings.push(StageTiming {
+            stage: name.to_string(),
+            seconds: stage.elapsed().as_secs_f64(),
+        });
+        stage = Instant::now();
+    };
+    let say = |msg: String| {
+        if !quiet {
+            eprintln!("{msg}");
+        }
+    };
+    say(format!("[4/7] {mode} init"));
+    let mut init_cfg = cfg.init.clone();
+    init_cfg.mode = mode;
+    let (splats, summary) =
+        init::initialise(surface, &init_cfg, cfg.renderer.exponent, cfg.training.seed)?;
+    say(format!(
+        "      {} splats, SH degree {}{}",
+        summary.splats,
+        summary.sh_degree,
+        summary
+            .sh_fit_rms
+            .map(|e| format!(
+                " (SH fit RMS by degree: {:.4} {:.4} {:.4} {:.4})",
+                e[0], e[1], e[2], e[3]
+            ))
+            .unwrap_or_default()
+    ));
+    lap("init", &mut timings);
+
+    say(format!(
+        "[5/7] training {} iterations{}",
+        cfg.training.iterations,
+        cfg.training
+            .time_budget_s
+            .map(|b| format!(" (budget {b:.0} s)"))
+            .unwrap_or_default()
+    ));
+    let tc = train_config(cfg, mode, summary.sh_degree);
+    let (trained, train_report) = train(splats, train_views.to_vec(), tc, quiet)?;
+    lap("train", &mut timings);
+
+    say(format!("[6/7] writing {} and evaluating", model_path.display()));
+    splat_core::ply::write_splats(model_path, &trained).map_err(|source| {
+        PipelineError::Model {
+            path: model_path.to_path_buf(),
+            source,
+        }
+    })?;
+    if splat_file {
+        let p = model_path.with_extension("splat");
+        splat_core::export::write_splat(&p, &trained)
+            .map_err(|source| PipelineError::Model { path: p, source })?;
+    }
+    lap("write model", &mut timings);
+    let (metrics, renders): (Metrics, Vec<RenderedView>) = evaluate(
+        &trained,
+        heldout,
+        Some(distance_surface),
+        &EvalOptions::from(&cfg.eval),
+    );
+    lap("evaluate", &mut timings);
+    let run = RunReport {
+        init: summary,
+        iterations: train_report.iterations,
+        train_seconds: train_report.elapsed_s,
+        stopped_by_budget: train_report.stopped_by_budget,
+        curve: train_report
+            .history
+            .iter()
+            .map(|h| CurvePoint {
+                iteration: h.iteration,
+                elapsed_s: h.elapsed_s,
+                psnr: h.psnr,
+                splats: h.splats,
+            })
+            .collect(),
+        metrics,
+        model_path: model_path.to_path_buf(),
+        model_bytes: std::fs::metadata(model_path).map_or(0, |m| m.len()),
+        timings,
+    };
+    Ok((run, renders))
+}
+
+/// Trains with a progress bar; returns the splats and the trainer's report.
+fn train(
+    splats: Splats,
+    views: Vec<View>,
+    tc: TrainConfig,
+    quiet: bool,
+) -> Result<(Splats, splat_train::TrainReport), PipelineError> {
+    let total = u64::from(tc.iterations);
+    let mut trainer = Trainer::new(splats, views, tc)?;
+    let bar = if quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(total)
+    };
+    bar.set_style(
+        ProgressStyle::with_template(
+            "      {bar:30} {pos}/{len} steps, {elapsed_precise} elapsed, ETA {eta} {msg}",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let report = trainer.run(|p| {
+        bar.set_position(u64::from(p.step.iteration));
+        if p.step.iteration % 25 == 0 {
+            bar.set_message(format!(
+                "PSNR {:.2} dB, {} splats",
+                p.step.psnr, p.step.splats
+            ));
+        }
+    });
+    bar.finish_and_clear();
+    Ok((trainer.splats().clone(), report))
+}
+
+/// Writes the COLMAP dataset: images, cameras and the surface points as points3D.
+fn write_dataset(
+    dir: &Path,
+    cameras: &[Camera],
+    images: &[ViewImage],
+    surface: &SurfacePoints,
+    cfg: &Config,
+) -> Result<(), PipelineError> {
+    let names: Vec<String> = (0..cameras.len()).map(|i| format!("{}.png", view_name(i))).collect();
+    views::write_dataset(
+        dir,
+        cameras,
+        images,
+        &names,
+        &surface.positions,
+        &surface.colors,
+        if cfg.output.png16 {
+            views::BitDepth::Sixteen
+        } else {
+            views::BitDepth::Eight
+        },
+    )
+    .map_err(|e| PipelineError::Dataset {
+        path: dir.to_path_buf(),
+        message: e.to_string(),
+    })
+}
+
+/// The name of training view `i`.
+fn view_name(i: usize) -> String {
+    format!("view_{i:03}")
+}
+
+/// Pictures of up to `n` held-out views spread over the set.
+fn pick_pictures(
+    heldout: &[ReferenceView],
+    renders: &[Vec<RenderedView>],
+    n: usize,
+) -> Vec<ViewPictures> {
+    let n = n.min(heldout.len());
+    (0..n)
+        .map(|k| k * heldout.len() / n.max(1))
+        .map(|i| {
+            let v = &heldout[i];
+            ViewPictures {
+                name: v.name.clone(),
+                width: v.camera.intrinsics.width,
+                height: v.camera.intrinsics.height,
+                reference: v.rgb.iter().map(|x| x.clamp(0.0, 1.0)).collect(),
+                renders: renders.iter().map(|r| r[i].rgb.clone()).collect(),
+            }
+        })
+        .collect()
+}
+
+/// What the input file holds.
+#[must_use]
+pub fn input_info(path: &Path, model: &Model) -> InputInfo {
+    let bytes = std::fs::metadata(path).map_or(0, |m| m.len());
+    match model {
+        Model::Cloud(c) => InputInfo {
+            path: path.to_path_buf(),
+            kind: if c.num_cameras > 0 {
+                "plenoptic cloud".into()
+            } else {
+                "point cloud".into()
+            },
+            points: c.len(),
+            triangles: 0,
+            capture_cameras: c.num_cameras,
+            bytes,
+        },
+        Model::Mesh(m) => InputInfo {
+            path: path.to_path_buf(),
+            kind: "mesh".into(),
+            points: m.positions.len(),
+            triangles: m.triangles.len(),
+            capture_cameras: m.num_cameras,
+            bytes,
+        },
+    }
+}

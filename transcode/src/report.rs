@@ -1,1 +1,457 @@
 //! The run report: report.json and a self-contained report.html.
+//!
+//! The HTML page needs nothing beside it: pictures are PNG data URIs, the training curve is inline
+//! SVG, there is no script. It shows, for several held-out views, the reference, each run's splats
+//! and an error heat map side by side; the metrics of every run (surface and sparse init when both
+//! ran); the time of each stage; and held-out-independent training PSNR against wall time.
+
+use std::fmt::Write as _;
+use std::io;
+use std::path::{Path, PathBuf};
+
+use serde::Serialize;
+
+use crate::atomic::write_atomic;
+use crate::config::Config;
+use crate::eval::Metrics;
+use crate::init::InitSummary;
+
+/// What the input was.
+#[derive(Debug, Clone, Serialize)]
+pub struct InputInfo {
+    /// The file.
+    pub path: PathBuf,
+    /// "plenoptic cloud", "point cloud" or "mesh".
+    pub kind: String,
+    /// Points (clouds) or vertices (meshes).
+    pub points: usize,
+    /// Triangles (0 for clouds).
+    pub triangles: usize,
+    /// Capture cameras of a plenoptic input (0 otherwise).
+    pub capture_cameras: usize,
+    /// Size of the file in bytes.
+    pub bytes: u64,
+}
+
+/// Wall time of one stage.
+#[derive(Debug, Clone, Serialize)]
+pub struct StageTiming {
+    /// Stage name.
+    pub stage: String,
+    /// Seconds.
+    pub seconds: f64,
+}
+
+/// One point of the training curve.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct CurvePoint {
+    /// Iteration.
+    pub iteration: u32,
+    /// Seconds since training started.
+    pub elapsed_s: f64,
+    /// Training-view PSNR (dB) of that step's view.
+    pub psnr: f64,
+    /// Splats at that step.
+    pub splats: usize,
+}
+
+/// One initialise-train-evaluate run.
+#[derive(Debug, Clone, Serialize)]
+pub struct RunReport {
+    /// What initialisation did.
+    pub init: InitSummary,
+    /// Steps run.
+    pub iterations: u32,
+    /// Training wall time in seconds.
+    pub train_seconds: f64,
+    /// True when the time budget stopped training.
+    pub stopped_by_budget: bool,
+    /// Training curve.
+    pub curve: Vec<CurvePoint>,
+    /// Held-out metrics.
+    pub metrics: Metrics,
+    /// The model file written.
+    pub model_path: PathBuf,
+    /// Its size in bytes.
+    pub model_bytes: u64,
+    /// Times of this run's stages (init, train, write, eval).
+    pub timings: Vec<StageTiming>,
+}
+
+/// Everything report.json holds.
+#[derive(Debug, Clone, Serialize)]
+pub struct Report {
+    /// Version of the transcoder.
+    pub version: String,
+    /// The input.
+    pub input: InputInfo,
+    /// The configuration used.
+    pub config: Config,
+    /// Training views and held-out views.
+    pub train_views: usize,
+    /// Held-out views.
+    pub heldout_views: usize,
+    /// Shared stages (load, rig, render, dataset).
+    pub timings: Vec<StageTiming>,
+    /// Runs, the main one first.
+    pub runs: Vec<RunReport>,
+    /// Total wall time in seconds.
+    pub total_seconds: f64,
+}
+
+/// Pictures of one held-out view for the HTML page (images on black, clamped, 3·W·H).
+#[derive(Debug, Clone)]
+pub struct ViewPictures {
+    /// View name.
+    pub name: String,
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// The reference.
+    pub reference: Vec<f32>,
+    /// Each run's render, in the order of `Report::runs`.
+    pub renders: Vec<Vec<f32>>,
+}
+
+/// Absolute error (mean over channels) at which the heat map saturates.
+pub const HEAT_MAX_ERROR: f32 = 0.25;
+
+/// Writes `dir/report.json` and `dir/report.html` atomically; returns the HTML path.
+pub fn write_report(dir: &Path, report: &Report, pictures: &[ViewPictures]) -> io::Result<PathBuf> {
+    std::fs::create_dir_all(dir)?;
+    let json = serde_json::to_vec_pretty(report).map_err(io::Error::other)?;
+    write_atomic(&dir.join("report.json"), &json)?;
+    let html = render_html(report, pictures)?;
+    let path = dir.join("report.html");
+    write_atomic(&path, html.as_bytes())?;
+    Ok(path)
+}
+
+/// The HTML page.
+pub fn render_html(report: &Report, pictures: &[ViewPictures]) -> io::Result<String> {
+    let mut h = String::new();
+    let names: Vec<String> = report.runs.iter().map(|r| format!("{} init", r.init.mode)).collect();
+    let _ = write!(
+        h,
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\
+         <title>transcode report: {}</title><style>{STYLE}</style></head><body>\n",
+        esc(&report.input.path.display().to_string())
+    );
+    let _ = write!(
+        h,
+        "<h1>transcode report</h1>\n<p>Input <code>{}</code>: {} with {} {} {}, {} capture cameras, {}. \
+         {} training views, {} held-out views. Total {:.1} s. transcode {}.</p>\n",
+        esc(&report.input.path.display().to_string()),
+        esc(&report.input.kind),
+        report.input.points,
+        if report.input.triangles > 0 { "vertices" } else { "points" },
+        if report.input.triangles > 0 {
+            format!("and {} triangles", report.input.triangles)
+        } else {
+            String::new()
+        },
+        report.input.capture_cameras,
+        human_bytes(report.input.bytes),
+        report.train_views,
+        report.heldout_views,
+        report.total_seconds,
+        esc(&report.version),
+    );
+    metrics_table(&mut h, report, &names);
+    timings_table(&mut h, report, &names);
+    h.push_str("<h2>Training PSNR against wall time</h2>\n");
+    h.push_str(&curve_svg(report, &names));
+    h.push_str(&format!(
+        "<h2>Held-out views</h2>\n<p>Reference | splats | error heat map (mean absolute error over \
+         channels, black = 0, white = {HEAT_MAX_ERROR} or more), on a black background.</p>\n"
+    ));
+    for p in pictures {
+        let _ = write!(h, "<h3>{}</h3>\n<div class=\"row\">", esc(&p.name));
+        figure(&mut h, "reference", &png_data_uri(&p.reference, p.width, p.height)?);
+        for (render, name) in p.renders.iter().zip(&names) {
+            figure(&mut h, &format!("splats ({name})"), &png_data_uri(render, p.width, p.height)?);
+            let heat = heat_map(&p.reference, render);
+            figure(&mut h, &format!("error ({name})"), &png_data_uri(&heat, p.width, p.height)?);
+        }
+        h.push_str("</div>\n");
+    }
+    h.push_str("</body></html>\n");
+    Ok(h)
+}
+
+const STYLE: &str = "body{font-family:sans-serif;margin:2em;max-width:1400px}\
+table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #bbb;padding:4px 10px;text-align:right}\
+th:first-child,td:first-child{text-align:left}.row{display:flex;flex-wrap:wrap;gap:8px}\
+figure{margin:0}figcaption{text-align:center;font-size:90%}img{image-rendering:pixelated;max-width:320px}";
+
+fn figure(h: &mut String, caption: &str, uri: &str) {
+    let _ = write!(
+        h,
+        "<figure><img src=\"{uri}\" alt=\"{c}\"><figcaption>{c}</figcaption></figure>",
+        c = esc(caption)
+    );
+}
+
+fn metrics_table(h: &mut String, report: &Report, names: &[String]) {
+    h.push_str("<h2>Metrics on held-out views</h2>\n<table><tr><th>metric</th>");
+    for n in names {
+        let _ = write!(h, "<th>{}</th>", esc(n));
+    }
+    h.push_str("</tr>\n");
+    type Row = (&'static str, fn(&RunReport) -> String);
+    let rows: [Row; 15] = [
+        ("PSNR, black background (dB)", |r| format!("{:.2}", r.metrics.psnr_black)),
+        ("PSNR, white background (dB)", |r| format!("{:.2}", r.metrics.psnr_white)),
+        ("SSIM, black", |r| format!("{:.4}", r.metrics.ssim_black)),
+        ("SSIM, white", |r| format!("{:.4}", r.metrics.ssim_white)),
+        ("alpha IoU", |r| format!("{:.4}", r.metrics.alpha_iou)),
+        ("splats", |r| r.metrics.splats.to_string()),
+        ("SH degree", |r| r.init.sh_degree.to_string()),
+        ("distance to surface, mean (spacings)", |r| {
+            surface(r, |s| s.mean / s.spacing.max(f64::MIN_POSITIVE))
+        }),
+        ("distance to surface, 95th pct (spacings)", |r| {
+            surface(r, |s| s.p95 / s.spacing.max(f64::MIN_POSITIVE))
+        }),
+        ("floaters (beyond threshold)", |r| {
+            r.metrics
+                .surface
+                .as_ref()
+                .map_or("–".into(), |s| s.floaters.to_string())
+        }),
+        ("floater opacity share", |r| surface(r, |s| s.floater_share)),
+        ("iterations", |r| r.iterations.to_string()),
+        ("training time (s)", |r| format!("{:.1}", r.train_seconds)),
+        ("model file", |r| human_bytes(r.model_bytes)),
+        ("SH fit RMS, degree 0/1/2/3", |r| {
+            r.init.sh_fit_rms.map_or("–".into(), |e| {
+                format!("{:.4} / {:.4} / {:.4} / {:.4}", e[0], e[1], e[2], e[3])
+            })
+        }),
+    ];
+    for (label, f) in rows {
+        let _ = write!(h, "<tr><td>{label}</td>");
+        for r in &report.runs {
+            let _ = write!(h, "<td>{}</td>", esc(&f(r)));
+        }
+        h.push_str("</tr>\n");
+    }
+    h.push_str("</table>\n");
+}
+
+fn surface(r: &RunReport, f: fn(&crate::eval::SurfaceDistance) -> f64) -> String {
+    r.metrics
+        .surface
+        .as_ref()
+        .map_or("–".into(), |s| format!("{:.3}", f(s)))
+}
+
+fn timings_table(h: &mut String, report: &Report, names: &[String]) {
+    h.push_str("<h2>Time per stage</h2>\n<table><tr><th>stage</th><th>seconds</th></tr>\n");
+    for t in &report.timings {
+        let _ = write!(h, "<tr><td>{}</td><td>{:.2}</td></tr>\n", esc(&t.stage), t.seconds);
+    }
+    for (r, n) in report.runs.iter().zip(names) {
+        for t in &r.timings {
+            let _ = write!(
+                h,
+                "<tr><td>{} ({})</td><td>{:.2}</td></tr>\n",
+                esc(&t.stage),
+                esc(n),
+                t.seconds
+            );
+        }
+    }
+    let _ = write!(
+        h,
+        "<tr><th>total</th><th>{:.2}</th></tr></table>\n",
+        report.total_seconds
+    );
+}
+
+/// Line colours of the runs in the plot.
+const RUN_COLOURS: [&str; 4] = ["#1f77b4", "#d62728", "#2ca02c", "#9467bd"];
+
+/// The training curves as an inline SVG line plot.
+fn curve_svg(report: &Report, names: &[String]) -> String {
+    let (w, h, left, bottom, top, right) = (720.0, 360.0, 60.0, 40.0, 15.0, 20.0);
+    let points: Vec<&CurvePoint> = report
+        .runs
+        .iter()
+        .flat_map(|r| &r.curve)
+        .filter(|p| p.psnr.is_finite())
+        .collect();
+    if points.is_empty() {
+        return "<p>(no training history)</p>\n".into();
+    }
+    let t_max = points.iter().map(|p| p.elapsed_s).fold(0.0, f64::max).max(1e-3);
+    let p_min = points.iter().map(|p| p.psnr).fold(f64::INFINITY, f64::min).floor();
+    let p_max = points.iter().map(|p| p.psnr).fold(f64::NEG_INFINITY, f64::max).ceil();
+    let p_max = if p_max <= p_min { p_min + 1.0 } else { p_max };
+    let x = |t: f64| left + (w - left - right) * t / t_max;
+    let y = |p: f64| top + (h - top - bottom) * (1.0 - (p - p_min) / (p_max - p_min));
+    let mut s = format!(
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" viewBox=\"0 0 {w} {h}\" \
+         font-size=\"12\"><rect width=\"{w}\" height=\"{h}\" fill=\"white\"/>\
+         <line x1=\"{left}\" y1=\"{yb}\" x2=\"{xr}\" y2=\"{yb}\" stroke=\"black\"/>\
+         <line x1=\"{left}\" y1=\"{top}\" x2=\"{left}\" y2=\"{yb}\" stroke=\"black\"/>",
+        yb = h - bottom,
+        xr = w - right
+    );
+    for k in 0..=5 {
+        let t = t_max * f64::from(k) / 5.0;
+        let _ = write!(
+            s,
+            "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{t:.0}</text>",
+            x(t),
+            h - bottom + 16.0
+        );
+        let p = p_min + (p_max - p_min) * f64::from(k) / 5.0;
+        let _ = write!(
+            s,
+            "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"end\">{p:.1}</text>\
+             <line x1=\"{left}\" y1=\"{yy:.1}\" x2=\"{xr}\" y2=\"{yy:.1}\" stroke=\"#eee\"/>",
+            left - 6.0,
+            y(p) + 4.0,
+            yy = y(p),
+            xr = w - right
+        );
+    }
+    let _ = write!(
+        s,
+        "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"middle\">wall time of training (s)</text>\
+         <text x=\"14\" y=\"{:.1}\" text-anchor=\"middle\" transform=\"rotate(-90 14 {:.1})\">PSNR (dB)</text>",
+        left + (w - left - right) / 2.0,
+        h - 4.0,
+        h / 2.0,
+        h / 2.0
+    );
+    for (i, (r, name)) in report.runs.iter().zip(names).enumerate() {
+        let colour = RUN_COLOURS[i % RUN_COLOURS.len()];
+        let pts: Vec<String> = r
+            .curve
+            .iter()
+            .filter(|p| p.psnr.is_finite())
+            .map(|p| format!("{:.1},{:.1}", x(p.elapsed_s), y(p.psnr)))
+            .collect();
+        let _ = write!(
+            s,
+            "<polyline fill=\"none\" stroke=\"{colour}\" stroke-width=\"1.5\" points=\"{}\"/>\
+             <text x=\"{:.1}\" y=\"{:.1}\" fill=\"{colour}\">{}</text>",
+            pts.join(" "),
+            left + 10.0,
+            top + 14.0 + 16.0 * i as f64,
+            esc(name)
+        );
+    }
+    s.push_str("</svg>\n");
+    s
+}
+
+/// Per-pixel error heat map (RGB): mean absolute error over channels through a black–red–yellow–white ramp.
+#[must_use]
+pub fn heat_map(reference: &[f32], render: &[f32]) -> Vec<f32> {
+    reference
+        .chunks_exact(3)
+        .zip(render.chunks_exact(3))
+        .flat_map(|(a, b)| {
+            let e = ((a[0] - b[0]).abs() + (a[1] - b[1]).abs() + (a[2] - b[2]).abs()) / 3.0;
+            let t = (e / HEAT_MAX_ERROR).clamp(0.0, 1.0) * 3.0;
+            [t.min(1.0), (t - 1.0).clamp(0.0, 1.0), (t - 2.0).clamp(0.0, 1.0)]
+        })
+        .collect()
+}
+
+/// An RGB image in [0, 1] as an 8-bit PNG data URI.
+pub fn png_data_uri(rgb: &[f32], width: u32, height: u32) -> io::Result<String> {
+    let bytes: Vec<u8> = rgb
+        .iter()
+        .map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
+        .collect();
+    let img = image::RgbImage::from_raw(width, height, bytes)
+        .ok_or_else(|| io::Error::other("image buffer does not match its size"))?;
+    let mut png = io::Cursor::new(Vec::new());
+    img.write_to(&mut png, image::ImageFormat::Png)
+        .map_err(io::Error::other)?;
+    Ok(format!("data:image/png;base64,{}", base64(png.get_ref())))
+}
+
+/// Standard base64 (RFC 4648 §4) with padding.
+#[must_use]
+pub fn base64(data: &[u8]) -> String {
+    const ALPHABET: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut out = String::with_capacity(data.len().div_ceil(3) * 4);
+    for chunk in data.chunks(3) {
+        let b = [
+            chunk[0],
+            chunk.get(1).copied().unwrap_or(0),
+            chunk.get(2).copied().unwrap_or(0),
+        ];
+        let n = (u32::from(b[0]) << 16) | (u32::from(b[1]) << 8) | u32::from(b[2]);
+        for k in 0..4 {
+            if k <= chunk.len() {
+                out.push(ALPHABET[((n >> (18 - 6 * k)) & 63) as usize] as char);
+            } else {
+                out.push('=');
+            }
+        }
+    }
+    out
+}
+
+/// Escapes text for HTML.
+fn esc(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+/// Bytes in B, KiB, MiB or GiB.
+fn human_bytes(b: u64) -> String {
+    let b = b as f64;
+    if b < 1024.0 {
+        format!("{b} B")
+    } else if b < 1024.0 * 1024.0 {
+        format!("{:.1} KiB", b / 1024.0)
+    } else if b < 1024.0 * 1024.0 * 1024.0 {
+        format!("{:.1} MiB", b / (1024.0 * 1024.0))
+    } else {
+        format!("{:.2} GiB", b / (1024.0 * 1024.0 * 1024.0))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn base64_matches_rfc4648_vectors() {
+        for (input, want) in [
+            ("", ""),
+            ("f", "Zg=="),
+            ("fo", "Zm8="),
+            ("foo", "Zm9v"),
+            ("foob", "Zm9vYg=="),
+            ("fooba", "Zm9vYmE="),
+            ("foobar", "Zm9vYmFy"),
+        ] {
+            assert_eq!(base64(input.as_bytes()), want);
+        }
+    }
+
+    #[test]
+    fn png_data_uri_decodes_back() {
+        let rgb = vec![0.0, 0.5, 1.0, 1.0, 0.0, 0.25];
+        let uri = png_data_uri(&rgb, 2, 1).unwrap();
+        assert!(uri.starts_with("data:image/png;base64,iVBORw0KGgo"));
+    }
+
+    #[test]
+    fn heat_map_ramp() {
+        let h = heat_map(&[0.0, 0.0, 0.0, 1.0, 1.0, 1.0], &[0.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+        assert_eq!(&h[..3], &[0.0, 0.0, 0.0]);
+        assert_eq!(&h[3..], &[1.0, 1.0, 1.0]);
+    }
+}

@@ -1,10 +1,178 @@
-//! PLACEHOLDER: owned by the helper implementing this subcommand; replace this whole file.
+//! `transcode config`: print the default configuration or check a file; and the command-line
+//! overrides every pipeline subcommand shares.
 
-/// Arguments (to be defined by the subcommand's owner).
+use std::path::{Path, PathBuf};
+
+use anyhow::Context as _;
+use transcode::config::{Config, InitMode, Sampling, ShDegree};
+
+/// Arguments of `transcode config`.
 #[derive(Debug, clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// Print the default configuration as TOML.
+    #[arg(long, conflicts_with = "check")]
+    defaults: bool,
+    /// Check a TOML configuration file and print it with every default filled in.
+    #[arg(long, value_name = "FILE")]
+    check: Option<PathBuf>,
+}
 
-/// Runs the subcommand.
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("this subcommand is not built yet")
+/// Runs `transcode config`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let config = match &args.check {
+        Some(path) => Config::load(path)?,
+        None if args.defaults => Config::default(),
+        None => anyhow::bail!("say --defaults to print the defaults or --check FILE to check a file"),
+    };
+    print!("{}", config.to_toml());
+    Ok(())
+}
+
+/// The configuration file and the flags that override it, shared by run, demo, views and eval.
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct Overrides {
+    /// TOML configuration file (see `transcode config --defaults`); flags override it.
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Training cameras on the Fibonacci sphere.
+    #[arg(long)]
+    pub cameras: Option<usize>,
+    /// Image size of every view, e.g. 512 or 640x480.
+    #[arg(long, value_name = "W[xH]", value_parser = parse_resolution)]
+    pub resolution: Option<(u32, u32)>,
+    /// Vertical field of view in degrees.
+    #[arg(long, value_name = "DEG")]
+    pub fov: Option<f64>,
+    /// Held-out cameras for evaluation.
+    #[arg(long)]
+    pub heldout: Option<usize>,
+    /// Initialisation: surface or sparse.
+    #[arg(long, value_parser = parse_init)]
+    pub init: Option<InitMode>,
+    /// Number of splats K (a subset of the input points).
+    #[arg(long, value_name = "K")]
+    pub splats: Option<usize>,
+    /// How the K points are chosen: voxel or farthest.
+    #[arg(long, value_parser = parse_sampling)]
+    pub sampling: Option<Sampling>,
+    /// Sparse init from this COLMAP model folder's points3D.
+    #[arg(long, value_name = "DIR")]
+    pub points3d: Option<PathBuf>,
+    /// SH degree 0..3 or auto.
+    #[arg(long, value_name = "0..3|auto")]
+    pub sh_degree: Option<ShDegree>,
+    /// Training iterations.
+    #[arg(long)]
+    pub iterations: Option<u32>,
+    /// Training time budget in seconds.
+    #[arg(long, value_name = "SECONDS")]
+    pub time_budget: Option<f64>,
+    /// Random seed.
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Let surface splats move.
+    #[arg(long)]
+    pub free_positions: bool,
+    /// Densify surface splats too.
+    #[arg(long)]
+    pub densify: bool,
+    /// Also write the model as a .splat file.
+    #[arg(long)]
+    pub splat_file: bool,
+    /// Also train from the other init mode and compare both in the report.
+    #[arg(long)]
+    pub compare_init: bool,
+}
+
+impl Overrides {
+    /// The configuration: `base` (or the `--config` file) with the flags applied, validated.
+    pub fn resolve(&self, base: Config) -> anyhow::Result<Config> {
+        let mut c = match &self.config {
+            Some(path) => Config::load(path)?,
+            None => base,
+        };
+        let o = self;
+        if let Some(v) = o.cameras {
+            c.rig.cameras = v;
+        }
+        if let Some((w, h)) = o.resolution {
+            c.rig.width = w;
+            c.rig.height = h;
+        }
+        if let Some(v) = o.fov {
+            c.rig.fov_y_deg = v;
+        }
+        if let Some(v) = o.heldout {
+            c.rig.heldout_cameras = v;
+        }
+        if let Some(v) = o.init {
+            c.init.mode = v;
+        }
+        if o.splats.is_some() {
+            c.init.splats = o.splats;
+        }
+        if let Some(v) = o.sampling {
+            c.init.sampling = v;
+        }
+        if o.points3d.is_some() {
+            c.init.points3d.clone_from(&o.points3d);
+        }
+        if let Some(v) = o.sh_degree {
+            c.init.sh_degree = v;
+        }
+        if let Some(v) = o.iterations {
+            c.training.iterations = v;
+        }
+        if o.time_budget.is_some() {
+            c.training.time_budget_s = o.time_budget;
+        }
+        if let Some(v) = o.seed {
+            c.training.seed = v;
+        }
+        c.init.free_positions |= o.free_positions;
+        c.init.densify_surface |= o.densify;
+        c.output.splat_file |= o.splat_file;
+        c.output.compare_init |= o.compare_init;
+        c.validate().context("after applying the command-line flags")?;
+        Ok(c)
+    }
+}
+
+/// Fails with a clear message when `path` does not exist.
+pub fn require_file(path: &Path, what: &str) -> anyhow::Result<()> {
+    if !path.exists() {
+        anyhow::bail!("{what} {} does not exist", path.display());
+    }
+    Ok(())
+}
+
+fn parse_resolution(s: &str) -> Result<(u32, u32), String> {
+    let bad = || format!("resolution must be W or WxH with positive integers, got {s:?}");
+    let (w, h) = match s.split_once(['x', 'X']) {
+        Some((w, h)) => (w.parse().map_err(|_| bad())?, h.parse().map_err(|_| bad())?),
+        None => {
+            let w = s.parse().map_err(|_| bad())?;
+            (w, w)
+        }
+    };
+    if w == 0 || h == 0 {
+        return Err(bad());
+    }
+    Ok((w, h))
+}
+
+fn parse_init(s: &str) -> Result<InitMode, String> {
+    match s {
+        "surface" => Ok(InitMode::Surface),
+        "sparse" => Ok(InitMode::Sparse),
+        _ => Err(format!("init must be surface or sparse, got {s:?}")),
+    }
+}
+
+fn parse_sampling(s: &str) -> Result<Sampling, String> {
+    match s {
+        "voxel" => Ok(Sampling::Voxel),
+        "farthest" => Ok(Sampling::Farthest),
+        _ => Err(format!("sampling must be voxel or farthest, got {s:?}")),
+    }
 }

@@ -1,0 +1,115 @@
+//! End to end: the whole `transcode` pipeline on a small plenoptic input, its outputs and metrics,
+//! and its behaviour on bad input.
+
+use std::path::{Path, PathBuf};
+
+use transcode::config::{Config, InitMode};
+use transcode::scene::{DemoConfig, demo_scene};
+
+fn data() -> PathBuf {
+    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data"))
+}
+
+/// A small, quick configuration: 16 training views and 4 held-out views at 96×96.
+fn small_config() -> Config {
+    let mut c = Config::default();
+    c.rig.cameras = 16;
+    c.rig.width = 96;
+    c.rig.height = 96;
+    c.rig.heldout_cameras = 4;
+    c.training.iterations = 300;
+    c.eval.report_views = 2;
+    c
+}
+
+/// The demo scene at a coarse grid, written as an 8iVSLF-layout PLY.
+fn small_demo(dir: &Path) -> PathBuf {
+    let cloud = demo_scene(&DemoConfig {
+        grid: 40,
+        ..DemoConfig::default()
+    })
+    .unwrap();
+    let path = dir.join("demo.ply");
+    plenoptic_io::write_cloud(&path, &cloud).unwrap();
+    path
+}
+
+#[test]
+fn pipeline_on_a_small_plenoptic_cloud() {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = small_demo(tmp.path());
+    let out = tmp.path().join("out");
+    let mut cfg = small_config();
+    cfg.output.compare_init = true;
+    let outcome = transcode::pipeline::run(&input, &out, &cfg, true).unwrap();
+
+    // Dataset: 16 images and a COLMAP model in both encodings, with the input points.
+    let images = std::fs::read_dir(out.join("dataset/images")).unwrap().count();
+    assert_eq!(images, 16);
+    for f in ["cameras", "images", "points3D"] {
+        assert!(out.join(format!("dataset/sparse/0/{f}.txt")).is_file(), "{f}.txt");
+        assert!(out.join(format!("dataset/sparse/0/{f}.bin")).is_file(), "{f}.bin");
+    }
+    assert!(out.join("dataset/sparse/0/points3D.ply").is_file());
+
+    // Model: the main (surface) run's PLY reads back with the reported splat count.
+    let main = &outcome.report.runs[0];
+    assert_eq!(main.init.mode, InitMode::Surface);
+    let splats = splat_core::ply::read_splats(&out.join("model/splats.ply")).unwrap();
+    assert_eq!(splats.len(), main.metrics.splats);
+    assert!(out.join("model/splats-sparse.ply").is_file());
+
+    // Metrics against thresholds (measured on this input: see docs/benchmarks/pipeline.md).
+    let m = &main.metrics;
+    eprintln!(
+        "surface: PSNR {:.2}/{:.2} dB, SSIM {:.4}/{:.4}, IoU {:.4}; sparse: PSNR {:.2}/{:.2} dB",
+        m.psnr_black,
+        m.psnr_white,
+        m.ssim_black,
+        m.ssim_white,
+        m.alpha_iou,
+        outcome.report.runs[1].metrics.psnr_black,
+        outcome.report.runs[1].metrics.psnr_white
+    );
+    assert!(m.psnr_black > 24.0, "PSNR on black {}", m.psnr_black);
+    assert!(m.psnr_white > 24.0, "PSNR on white {}", m.psnr_white);
+    assert!(m.ssim_black > 0.85, "SSIM {}", m.ssim_black);
+    assert!(m.alpha_iou > 0.9, "alpha IoU {}", m.alpha_iou);
+    // Frozen surface splats sit on the input points.
+    let d = m.surface.as_ref().unwrap();
+    assert!(d.mean < 1e-3 && d.floater_share == 0.0, "{d:?}");
+    assert_eq!(main.init.sh_degree, outcome.report.runs[1].init.sh_degree);
+
+    // Report: JSON with both runs, self-contained HTML with pictures and the plot.
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("report/report.json")).unwrap()).unwrap();
+    assert_eq!(json["runs"].as_array().unwrap().len(), 2);
+    assert!(json["runs"][0]["metrics"]["psnr_white"].as_f64().unwrap() > 0.0);
+    let html = std::fs::read_to_string(&outcome.html).unwrap();
+    assert!(html.matches("data:image/png;base64,").count() >= 2 * 5);
+    assert!(html.contains("<svg") && html.contains("<polyline"));
+    assert!(!html.contains("src=\"http"));
+}
+
+#[test]
+fn bad_input_fails_clearly_and_leaves_no_complete_looking_output() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    // A model and report from an earlier run must not survive a failed run.
+    std::fs::create_dir_all(out.join("model")).unwrap();
+    std::fs::create_dir_all(out.join("report")).unwrap();
+    std::fs::write(out.join("model/splats.ply"), b"old").unwrap();
+    std::fs::write(out.join("report/report.html"), b"old").unwrap();
+    let bad = data().join("bad/pond.0.ply");
+    let err = transcode::pipeline::run(&bad, &out, &small_config(), true).unwrap_err();
+    let msg = err.to_string();
+    assert!(msg.contains("pond.0.ply"), "{msg}");
+    assert!(!out.join("model/splats.ply").exists());
+    assert!(!out.join("report/report.html").exists());
+
+    let missing = tmp.path().join("nope.ply");
+    let msg = transcode::pipeline::run(&missing, &out, &small_config(), true)
+        .unwrap_err()
+        .to_string();
+    assert!(msg.contains("nope.ply"), "{msg}");
+}

@@ -1,1 +1,0 @@
-//! Splat initialisation: from the input's surface (with a closed-form SH fit) or from sparse points.
