@@ -150,3 +150,21 @@ impl Error {
         }
     }
 }
+
+/// Reports the first non-finite position (in parallel) as [`Error::NonFinite`].
+pub(crate) fn check_finite(
+    path: &std::path::Path,
+    what: &str,
+    positions: &[glam::Vec3],
+) -> Result<(), Error> {
+    use rayon::prelude::*;
+    match positions.par_iter().position_first(|p| !p.is_finite()) {
+        Some(index) => Err(Error::NonFinite {
+            path: path.to_path_buf(),
+            what: what.to_string(),
+            index: index as u64,
+            value: positions[index].to_array(),
+        }),
+        None => Ok(()),
+    }
+}

@@ -1,13 +1,258 @@
-//! glTF 2.0 / GLB meshes through gltf.
+//! glTF 2.0 / GLB meshes through gltf: every TRIANGLES primitive of the default scene, node
+//! transforms applied, base-colour factor and texture, COLOR_0.
 
+use std::collections::HashMap;
 use std::path::Path;
 
-use crate::{Error, Mesh};
+use glam::{Mat3, Mat4, Vec2, Vec3};
 
-/// Reads a glTF or GLB mesh.
+use crate::Error;
+use crate::mesh::{Material, Mesh, Texture};
+
+/// Reads a glTF or GLB mesh. Colours and factors are taken as stored (no linearisation, see the crate docs).
 pub(crate) fn read_gltf(path: &Path) -> Result<Mesh, Error> {
-    Err(Error::Gltf {
+    let err = |message: String| Error::Gltf {
         path: path.to_path_buf(),
-        message: "not built yet".into(),
-    })
+        message,
+    };
+    if !path.is_file() {
+        return Err(Error::io(
+            path,
+            std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"),
+        ));
+    }
+    // gltf has had panics on malformed input (gltf-rs/gltf#359); turn any into an error.
+    let imported = std::panic::catch_unwind(|| gltf::import(path))
+        .map_err(|_| err("the glTF importer failed on malformed input".into()))?;
+    let (document, buffers, images) = imported.map_err(|e| err(e.to_string()))?;
+    let scene = document
+        .default_scene()
+        .or_else(|| document.scenes().next())
+        .ok_or_else(|| err("the file has no scene".into()))?;
+    let mut builder = Builder {
+        path,
+        buffers: &buffers,
+        images: &images,
+        mesh: Mesh::default(),
+        material_index: HashMap::new(),
+        texture_index: HashMap::new(),
+        normals: Some(Vec::new()),
+        uvs: Some(Vec::new()),
+        colors: Some(Vec::new()),
+    };
+    let mut stack: Vec<(gltf::Node<'_>, Mat4)> =
+        scene.nodes().map(|n| (n, Mat4::IDENTITY)).collect();
+    while let Some((node, parent)) = stack.pop() {
+        let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
+        if let Some(mesh) = node.mesh() {
+            for primitive in mesh.primitives() {
+                builder.primitive(&mesh, &primitive, world)?;
+            }
+        }
+        stack.extend(node.children().map(|c| (c, world)));
+    }
+    let mut mesh = builder.mesh;
+    if mesh.triangles.is_empty() {
+        return Err(err(format!(
+            "the default scene ({}) has no triangles",
+            scene.index()
+        )));
+    }
+    mesh.normals = builder.normals;
+    mesh.uvs = builder.uvs;
+    mesh.colors = builder.colors;
+    Ok(mesh)
+}
+
+/// Accumulates primitives into one mesh.
+struct Builder<'a> {
+    path: &'a Path,
+    buffers: &'a [gltf::buffer::Data],
+    images: &'a [gltf::image::Data],
+    mesh: Mesh,
+    /// glTF material index (None = default material) → our index.
+    material_index: HashMap<Option<usize>, u32>,
+    /// glTF image index → our texture index.
+    texture_index: HashMap<usize, usize>,
+    /// Kept only while every primitive so far has the attribute.
+    normals: Option<Vec<Vec3>>,
+    uvs: Option<Vec<Vec2>>,
+    colors: Option<Vec<[f32; 3]>>,
+}
+
+impl Builder<'_> {
+    fn err(&self, message: String) -> Error {
+        Error::Gltf {
+            path: self.path.to_path_buf(),
+            message,
+        }
+    }
+
+    fn primitive(
+        &mut self,
+        mesh: &gltf::Mesh<'_>,
+        primitive: &gltf::Primitive<'_>,
+        world: Mat4,
+    ) -> Result<(), Error> {
+        let what = format!("mesh {} primitive {}", mesh.index(), primitive.index());
+        if primitive.mode() != gltf::mesh::Mode::Triangles {
+            return Err(self.err(format!(
+                "{what} has mode {:?}; only TRIANGLES is supported",
+                primitive.mode()
+            )));
+        }
+        let reader = primitive.reader(|b| self.buffers.get(b.index()).map(|d| &d.0[..]));
+        let positions: Vec<Vec3> = reader
+            .read_positions()
+            .ok_or_else(|| self.err(format!("{what} has no POSITION attribute")))?
+            .map(Vec3::from)
+            .collect();
+        crate::error::check_finite(
+            self.path,
+            &format!("glTF POSITION of {what}, vertex"),
+            &positions,
+        )?;
+        let count = positions.len();
+        let base = self.mesh.positions.len();
+        self.mesh
+            .positions
+            .extend(positions.iter().map(|&p| world.transform_point3(p)));
+        let normal_matrix = Mat3::from_mat4(world).inverse().transpose();
+        let normals = reader.read_normals().map(|n| {
+            n.map(|n| (normal_matrix * Vec3::from(n)).normalize_or_zero())
+                .collect::<Vec<_>>()
+        });
+        let uvs = reader
+            .read_tex_coords(0)
+            .map(|t| t.into_f32().map(Vec2::from).collect::<Vec<_>>());
+        let colors = reader
+            .read_colors(0)
+            .map(|c| c.into_rgb_f32().collect::<Vec<_>>());
+        append(&mut self.normals, normals, count);
+        append(&mut self.uvs, uvs, count);
+        append(&mut self.colors, colors, count);
+        let indices: Vec<u32> = match reader.read_indices() {
+            Some(i) => i.into_u32().collect(),
+            None => (0..count as u32).collect(),
+        };
+        if indices.len() % 3 != 0 {
+            return Err(self.err(format!(
+                "{what} has {} indices, not a multiple of 3",
+                indices.len()
+            )));
+        }
+        let material = self.material(primitive.material())?;
+        for (t, tri) in indices.chunks_exact(3).enumerate() {
+            if let Some(&bad) = tri.iter().find(|&&v| v as usize >= count) {
+                return Err(Error::IndexOutOfRange {
+                    path: self.path.to_path_buf(),
+                    what: format!("glTF {what} triangle"),
+                    index: t as u64,
+                    vertex: i64::from(bad),
+                    count: count as u64,
+                });
+            }
+            self.mesh
+                .triangles
+                .push([0, 1, 2].map(|c| (base + tri[c] as usize) as u32));
+            self.mesh.triangle_materials.push(material);
+        }
+        Ok(())
+    }
+
+    /// Our index of a glTF material, added on first use with its base-colour texture.
+    fn material(&mut self, material: gltf::Material<'_>) -> Result<u32, Error> {
+        if let Some(&i) = self.material_index.get(&material.index()) {
+            return Ok(i);
+        }
+        let pbr = material.pbr_metallic_roughness();
+        let texture = match pbr.base_color_texture() {
+            Some(info) => {
+                if info.tex_coord() != 0 {
+                    return Err(self.err(format!(
+                        "material {:?} samples its base-colour texture with TEXCOORD_{}; only TEXCOORD_0 is read",
+                        material.name(),
+                        info.tex_coord()
+                    )));
+                }
+                let image = info.texture().source().index();
+                Some(match self.texture_index.get(&image) {
+                    Some(&t) => t,
+                    None => {
+                        let data = self
+                            .images
+                            .get(image)
+                            .ok_or_else(|| self.err(format!("image {image} was not loaded")))?;
+                        self.mesh.textures.push(texture_from_gltf(data));
+                        self.texture_index
+                            .insert(image, self.mesh.textures.len() - 1);
+                        self.mesh.textures.len() - 1
+                    }
+                })
+            }
+            None => None,
+        };
+        self.mesh.materials.push(Material {
+            name: material.name().unwrap_or_default().to_string(),
+            base_color: pbr.base_color_factor(),
+            texture,
+        });
+        let index = (self.mesh.materials.len() - 1) as u32;
+        self.material_index.insert(material.index(), index);
+        Ok(index)
+    }
+}
+
+/// Appends a primitive's attribute, or drops the attribute for the whole mesh when a primitive lacks it.
+fn append<T>(all: &mut Option<Vec<T>>, part: Option<Vec<T>>, count: usize) {
+    match (all.as_mut(), part) {
+        (Some(v), Some(p)) if p.len() == count => v.extend(p),
+        _ => *all = None,
+    }
+}
+
+/// Converts gltf's decoded image to RGBA floats (grey formats replicate, missing alpha is 1).
+fn texture_from_gltf(data: &gltf::image::Data) -> Texture {
+    use gltf::image::Format;
+    let u8s = |b: &[u8]| {
+        b.iter()
+            .map(|&v| f32::from(v) / 255.0)
+            .collect::<Vec<f32>>()
+    };
+    let u16s = |b: &[u8]| {
+        b.chunks_exact(2)
+            .map(|c| f32::from(u16::from_ne_bytes([c[0], c[1]])) / 65535.0)
+            .collect::<Vec<f32>>()
+    };
+    let f32s = |b: &[u8]| {
+        b.chunks_exact(4)
+            .map(|c| f32::from_ne_bytes([c[0], c[1], c[2], c[3]]))
+            .collect::<Vec<f32>>()
+    };
+    let (values, channels) = match data.format {
+        Format::R8 => (u8s(&data.pixels), 1),
+        Format::R8G8 => (u8s(&data.pixels), 2),
+        Format::R8G8B8 => (u8s(&data.pixels), 3),
+        Format::R8G8B8A8 => (u8s(&data.pixels), 4),
+        Format::R16 => (u16s(&data.pixels), 1),
+        Format::R16G16 => (u16s(&data.pixels), 2),
+        Format::R16G16B16 => (u16s(&data.pixels), 3),
+        Format::R16G16B16A16 => (u16s(&data.pixels), 4),
+        Format::R32G32B32FLOAT => (f32s(&data.pixels), 3),
+        Format::R32G32B32A32FLOAT => (f32s(&data.pixels), 4),
+    };
+    let pixels = values
+        .chunks_exact(channels)
+        .map(|p| match channels {
+            1 => [p[0], p[0], p[0], 1.0],
+            2 => [p[0], p[0], p[0], p[1]],
+            3 => [p[0], p[1], p[2], 1.0],
+            _ => [p[0], p[1], p[2], p[3]],
+        })
+        .collect();
+    Texture {
+        width: data.width,
+        height: data.height,
+        pixels,
+    }
 }

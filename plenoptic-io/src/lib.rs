@@ -6,6 +6,7 @@
 //! - [`load`]: either of the above, chosen from the file.
 //! - [`view_color`]: the PccAppRenderer view-dependent colour interpolation.
 
+mod atomic;
 mod cloud;
 mod error;
 mod gltf_mesh;

@@ -66,3 +66,50 @@ impl Mesh {
         &self.camera_colors[v * self.num_cameras..(v + 1) * self.num_cameras]
     }
 }
+
+/// Resolves a texture name from a model file: Windows separators (`.\SpiderTex.jpg`, as written by
+/// some exporters) become `/`, relative names are taken from the model's folder, and when that
+/// file does not exist the bare file name next to the model is tried.
+#[must_use]
+pub fn resolve_relative(model: &std::path::Path, name: &str) -> std::path::PathBuf {
+    let cleaned = name.trim().replace('\\', "/");
+    let dir = model.parent().unwrap_or_else(|| std::path::Path::new(""));
+    let candidate = dir.join(cleaned.trim_start_matches("./"));
+    if candidate.exists() {
+        return candidate;
+    }
+    match std::path::Path::new(&cleaned).file_name() {
+        Some(file) => dir.join(file),
+        None => candidate,
+    }
+}
+
+/// Decodes a texture file into RGBA floats in [0, 1].
+pub(crate) fn load_texture(
+    model: &std::path::Path,
+    texture: &std::path::Path,
+) -> Result<Texture, crate::Error> {
+    let err = |message: String| crate::Error::Texture {
+        path: model.to_path_buf(),
+        texture: texture.to_path_buf(),
+        message,
+    };
+    let image = image::ImageReader::open(texture)
+        .map_err(|e| err(e.to_string()))?
+        .with_guessed_format()
+        .map_err(|e| err(e.to_string()))?
+        .decode()
+        .map_err(|e| err(e.to_string()))?;
+    Ok(texture_from_image(image))
+}
+
+/// Converts a decoded image to a [`Texture`].
+pub(crate) fn texture_from_image(image: image::DynamicImage) -> Texture {
+    let rgba = image.into_rgba32f();
+    let (width, height) = rgba.dimensions();
+    Texture {
+        width,
+        height,
+        pixels: rgba.pixels().map(|p| p.0).collect(),
+    }
+}

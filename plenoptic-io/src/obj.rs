@@ -1,13 +1,131 @@
-//! OBJ meshes through tobj.
+//! OBJ meshes through tobj: every object merged into one mesh, materials from the MTL file.
 
-use std::path::Path;
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
 
-use crate::{Error, Mesh};
+use glam::{Vec2, Vec3};
 
-/// Reads an OBJ mesh.
+use crate::mesh::{Material, Mesh, load_texture, resolve_relative};
+use crate::{Error, Texture};
+
+/// Reads an OBJ mesh (triangulated; positions, normals, UVs with v flipped, vertex colours, materials).
 pub(crate) fn read_obj(path: &Path) -> Result<Mesh, Error> {
-    Err(Error::Obj {
+    let err = |message: String| Error::Obj {
         path: path.to_path_buf(),
-        message: "not built yet".into(),
-    })
+        message,
+    };
+    if !path.is_file() {
+        return Err(Error::io(
+            path,
+            std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"),
+        ));
+    }
+    let (models, materials) =
+        tobj::load_obj(path, &tobj::GPU_LOAD_OPTIONS).map_err(|e| err(e.to_string()))?;
+    let obj_materials = match materials {
+        Ok(m) => m,
+        Err(e) => {
+            // tobj reports a missing `mtllib` as an error too; only a referenced material makes it fatal.
+            if models.iter().any(|m| m.mesh.material_id.is_some()) {
+                return Err(err(format!("material library: {e}")));
+            }
+            Vec::new()
+        }
+    };
+    let mut mesh = Mesh::default();
+    let (mut textures, mut texture_index) =
+        (Vec::<Texture>::new(), HashMap::<PathBuf, usize>::new());
+    for m in &obj_materials {
+        let texture = match &m.diffuse_texture {
+            Some(name) if !name.trim().is_empty() => {
+                let file = resolve_relative(path, name);
+                Some(match texture_index.get(&file) {
+                    Some(&i) => i,
+                    None => {
+                        textures.push(load_texture(path, &file)?);
+                        texture_index.insert(file, textures.len() - 1);
+                        textures.len() - 1
+                    }
+                })
+            }
+            _ => None,
+        };
+        let kd = m.diffuse.unwrap_or([1.0; 3]);
+        mesh.materials.push(Material {
+            name: m.name.clone(),
+            base_color: [kd[0], kd[1], kd[2], m.dissolve.unwrap_or(1.0)],
+            texture,
+        });
+    }
+    mesh.textures = textures;
+    let all = |f: fn(&tobj::Mesh) -> bool| models.iter().all(|m| f(&m.mesh));
+    let has_normals = all(|m| !m.normals.is_empty());
+    let has_uvs = all(|m| !m.texcoords.is_empty());
+    let has_colors = all(|m| !m.vertex_color.is_empty());
+    let mut default_material = None;
+    let (mut normals, mut uvs, mut colors) = (Vec::new(), Vec::new(), Vec::new());
+    for (object, model) in models.iter().enumerate() {
+        let m = &model.mesh;
+        let base = mesh.positions.len();
+        let count = m.positions.len() / 3;
+        mesh.positions.extend(
+            m.positions
+                .chunks_exact(3)
+                .map(|p| Vec3::new(p[0], p[1], p[2])),
+        );
+        if has_normals {
+            normals.extend(
+                m.normals
+                    .chunks_exact(3)
+                    .map(|n| Vec3::new(n[0], n[1], n[2])),
+            );
+        }
+        if has_uvs {
+            // OBJ's v grows upwards; the Mesh convention has (0, 0) at the top-left of the image.
+            uvs.extend(
+                m.texcoords
+                    .chunks_exact(2)
+                    .map(|t| Vec2::new(t[0], 1.0 - t[1])),
+            );
+        }
+        if has_colors {
+            colors.extend(m.vertex_color.chunks_exact(3).map(|c| [c[0], c[1], c[2]]));
+        }
+        for (t, tri) in m.indices.chunks_exact(3).enumerate() {
+            if let Some(&bad) = tri.iter().find(|&&v| v as usize >= count) {
+                return Err(Error::IndexOutOfRange {
+                    path: path.to_path_buf(),
+                    what: format!("OBJ object {object} ('{}') triangle", model.name),
+                    index: t as u64,
+                    vertex: i64::from(bad),
+                    count: count as u64,
+                });
+            }
+            mesh.triangles
+                .push([0, 1, 2].map(|c| (base + tri[c] as usize) as u32));
+        }
+        if !mesh.materials.is_empty() {
+            let id = match m.material_id.filter(|&id| id < obj_materials.len()) {
+                Some(id) => id,
+                None => *default_material.get_or_insert_with(|| {
+                    mesh.materials.push(Material {
+                        name: String::new(),
+                        base_color: [1.0; 4],
+                        texture: None,
+                    });
+                    mesh.materials.len() - 1
+                }),
+            };
+            mesh.triangle_materials
+                .extend(std::iter::repeat_n(id as u32, m.indices.len() / 3));
+        }
+    }
+    if mesh.triangles.is_empty() {
+        return Err(err("the file has no faces".into()));
+    }
+    crate::error::check_finite(path, "OBJ vertex", &mesh.positions)?;
+    mesh.normals = has_normals.then_some(normals);
+    mesh.uvs = has_uvs.then_some(uvs);
+    mesh.colors = has_colors.then_some(colors);
+    Ok(mesh)
 }

@@ -1,0 +1,557 @@
+//! The PLY body reader: a zero-copy parallel path for fixed-size binary vertex records and a
+//! general row-by-row path (ASCII, lists, faces) sharing one conversion of values to roles.
+
+use std::path::Path;
+
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+
+use super::header::{Element, Header, PlyFormat, PropertyKind, ScalarType};
+use super::schema::{VertexPlan, color_from_stored};
+use crate::Error;
+
+/// Points decoded per parallel task: large enough to amortise scheduling, small enough to balance 2+ cores.
+const CHUNK_POINTS: usize = 16 * 1024;
+
+/// Decoded vertex columns.
+#[derive(Debug, Default)]
+pub(crate) struct VertexData {
+    /// Positions.
+    pub positions: Vec<Vec3>,
+    /// Normals when the plan has them.
+    pub normals: Option<Vec<Vec3>>,
+    /// Main colours when the plan has them.
+    pub colors: Option<Vec<[f32; 3]>>,
+    /// Per-camera colours, point-major.
+    pub camera_colors: Vec<[f32; 3]>,
+    /// Texture coordinates (v flipped to the image convention).
+    pub uvs: Option<Vec<Vec2>>,
+    /// Extra columns, in plan order.
+    pub extras: Vec<Vec<f64>>,
+}
+
+/// Mutable views of a run of points in every output column.
+struct Out<'a> {
+    positions: &'a mut [Vec3],
+    normals: Option<&'a mut [Vec3]>,
+    colors: Option<&'a mut [[f32; 3]]>,
+    cameras: &'a mut [[f32; 3]],
+    uvs: Option<&'a mut [Vec2]>,
+    extras: Vec<&'a mut [f64]>,
+}
+
+impl VertexData {
+    /// Zero-initialised columns for `n` points (calloc'd, so untouched pages cost nothing).
+    fn zeroed(plan: &VertexPlan, n: usize) -> Self {
+        VertexData {
+            positions: bytemuck::zeroed_vec(n),
+            normals: plan.normal.map(|_| bytemuck::zeroed_vec(n)),
+            colors: plan.main.map(|_| bytemuck::zeroed_vec(n)),
+            camera_colors: bytemuck::zeroed_vec(n * plan.cameras.len()),
+            uvs: plan.uv.map(|_| bytemuck::zeroed_vec(n)),
+            extras: plan.extras.iter().map(|_| vec![0.0; n]).collect(),
+        }
+    }
+
+    /// Splits every column into runs of `chunk` points.
+    fn split(&mut self, chunk: usize, num_cameras: usize) -> Vec<Out<'_>> {
+        let mut positions = self.positions.chunks_mut(chunk);
+        let mut normals = self.normals.as_mut().map(|v| v.chunks_mut(chunk));
+        let mut colors = self.colors.as_mut().map(|v| v.chunks_mut(chunk));
+        let mut cameras = self.camera_colors.chunks_mut((chunk * num_cameras).max(1));
+        let mut uvs = self.uvs.as_mut().map(|v| v.chunks_mut(chunk));
+        let mut extras: Vec<_> = self
+            .extras
+            .iter_mut()
+            .map(|v| v.chunks_mut(chunk))
+            .collect();
+        let mut outs = Vec::new();
+        while let Some(p) = positions.next() {
+            outs.push(Out {
+                positions: p,
+                normals: normals.as_mut().and_then(Iterator::next),
+                colors: colors.as_mut().and_then(Iterator::next),
+                cameras: cameras.next().unwrap_or_default(),
+                uvs: uvs.as_mut().and_then(Iterator::next),
+                extras: extras
+                    .iter_mut()
+                    .map(|e| e.next().unwrap_or_default())
+                    .collect(),
+            });
+        }
+        outs
+    }
+}
+
+/// Stores point `j` of `out` from the property values given by `value(property index)`.
+/// The one place where file values become positions, colours, UVs (both paths call it).
+#[inline(always)]
+fn store_row(plan: &VertexPlan, out: &mut Out<'_>, j: usize, value: impl Fn(usize) -> f64) {
+    let p = plan.position;
+    out.positions[j] = Vec3::new(value(p[0]) as f32, value(p[1]) as f32, value(p[2]) as f32);
+    if let (Some(normals), Some(n)) = (out.normals.as_deref_mut(), plan.normal) {
+        normals[j] = Vec3::new(value(n[0]) as f32, value(n[1]) as f32, value(n[2]) as f32);
+    }
+    let color = |ix: &[usize; 3]| ix.map(|i| color_from_stored(value(i), plan.types[i]));
+    if let (Some(colors), Some(m)) = (out.colors.as_deref_mut(), plan.main.as_ref()) {
+        colors[j] = color(m);
+    }
+    let k = plan.cameras.len();
+    for (c, ix) in plan.cameras.iter().enumerate() {
+        out.cameras[j * k + c] = color(ix);
+    }
+    if let (Some(uvs), Some(uv)) = (out.uvs.as_deref_mut(), plan.uv) {
+        // PLY s/t follow OpenGL (origin bottom-left); the Mesh convention is top-left.
+        uvs[j] = Vec2::new(value(uv[0]) as f32, 1.0 - value(uv[1]) as f32);
+    }
+    for (e, (_, i)) in plan.extras.iter().enumerate() {
+        out.extras[e][j] = value(*i);
+    }
+}
+
+/// Reads one binary scalar from the start of `b` (which holds at least `ty.size()` bytes).
+#[inline(always)]
+fn read_binary(b: &[u8], ty: ScalarType, big_endian: bool) -> f64 {
+    macro_rules! get {
+        ($t:ty, $n:literal) => {{
+            let mut a = [0u8; $n];
+            a.copy_from_slice(&b[..$n]);
+            f64::from(if big_endian {
+                <$t>::from_be_bytes(a)
+            } else {
+                <$t>::from_le_bytes(a)
+            })
+        }};
+    }
+    match ty {
+        ScalarType::I8 => f64::from(b[0] as i8),
+        ScalarType::U8 => f64::from(b[0]),
+        ScalarType::I16 => get!(i16, 2),
+        ScalarType::U16 => get!(u16, 2),
+        ScalarType::I32 => get!(i32, 4),
+        ScalarType::U32 => get!(u32, 4),
+        ScalarType::F32 => get!(f32, 4),
+        ScalarType::F64 => get!(f64, 8),
+    }
+}
+
+/// Parses one ASCII token as the given type, exactly (f32 parsed as f32, not via f64).
+fn parse_ascii(token: &str, ty: ScalarType) -> Option<f64> {
+    let int = |lo: i64, hi: i64| {
+        token
+            .parse::<i64>()
+            .ok()
+            .filter(|v| (lo..=hi).contains(v))
+            .map(|v| v as f64)
+    };
+    match ty {
+        ScalarType::I8 => int(i8::MIN.into(), i8::MAX.into()),
+        ScalarType::U8 => int(0, u8::MAX.into()),
+        ScalarType::I16 => int(i16::MIN.into(), i16::MAX.into()),
+        ScalarType::U16 => int(0, u16::MAX.into()),
+        ScalarType::I32 => int(i32::MIN.into(), i32::MAX.into()),
+        ScalarType::U32 => int(0, u32::MAX.into()),
+        ScalarType::F32 => token.parse::<f32>().ok().map(f64::from),
+        ScalarType::F64 => token.parse::<f64>().ok(),
+    }
+}
+
+/// What the body reader should collect besides vertices.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Want {
+    /// Vertices only (faces are skipped).
+    Points,
+    /// Vertices and the triangles of the face element.
+    Triangles,
+}
+
+/// The decoded content of a PLY body.
+#[derive(Debug)]
+pub(crate) struct Body {
+    /// The vertex element's plan.
+    pub plan: VertexPlan,
+    /// The vertices.
+    pub vertices: VertexData,
+    /// Fan-triangulated faces (empty unless asked for).
+    pub triangles: Vec<[u32; 3]>,
+}
+
+/// Refuses a header whose elements cannot fit in the bytes after it, before anything is allocated.
+pub(crate) fn check_sizes(path: &Path, header: &Header, available: u64) -> Result<(), Error> {
+    let mut needed = 0u64;
+    for e in &header.elements {
+        let row = match header.format {
+            // At least a newline per row even when an element has no properties.
+            PlyFormat::Ascii => e.min_row_bytes(header.format).max(1),
+            _ => e.min_row_bytes(header.format),
+        };
+        needed = needed.saturating_add(e.count.saturating_mul(row));
+        if needed > available {
+            return Err(Error::Truncated {
+                path: path.to_path_buf(),
+                element: e.name.clone(),
+                count: e.count,
+                needed,
+                available,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// A position in the body, for error messages and the row reader.
+struct Cursor<'a> {
+    path: &'a Path,
+    bytes: &'a [u8],
+    pos: usize,
+    /// 1-based line of the next ASCII line.
+    line: usize,
+    format: PlyFormat,
+}
+
+impl Cursor<'_> {
+    fn error(&self, element: &Element, index: u64, message: String) -> Error {
+        let location = match self.format {
+            PlyFormat::Ascii => format!("line {}", self.line.saturating_sub(1)),
+            _ => format!("byte {}", self.pos),
+        };
+        Error::Body {
+            path: self.path.to_path_buf(),
+            element: element.name.clone(),
+            index,
+            location,
+            message,
+        }
+    }
+
+    /// Reads the next row of `element` into `scalars` (one value per property, NaN for lists);
+    /// the items of the list property `keep_list`, if any, go to `list`.
+    fn row(
+        &mut self,
+        element: &Element,
+        index: u64,
+        scalars: &mut [f64],
+        keep_list: Option<usize>,
+        list: &mut Vec<f64>,
+    ) -> Result<(), Error> {
+        list.clear();
+        match self.format {
+            PlyFormat::Ascii => self.ascii_row(element, index, scalars, keep_list, list),
+            f => self.binary_row(
+                element,
+                index,
+                scalars,
+                keep_list,
+                list,
+                f == PlyFormat::BinaryBigEndian,
+            ),
+        }
+    }
+
+    fn binary_row(
+        &mut self,
+        element: &Element,
+        index: u64,
+        scalars: &mut [f64],
+        keep_list: Option<usize>,
+        list: &mut Vec<f64>,
+        big: bool,
+    ) -> Result<(), Error> {
+        for (i, p) in element.properties.iter().enumerate() {
+            let runs_out = |c: &Self, what: String| {
+                c.error(
+                    element,
+                    index,
+                    format!("the data runs out in property '{}' ({what})", p.name),
+                )
+            };
+            match p.kind {
+                PropertyKind::Scalar(t) => {
+                    let Some(b) = self.bytes.get(self.pos..self.pos + t.size()) else {
+                        return Err(runs_out(self, format!("needs {} bytes", t.size())));
+                    };
+                    scalars[i] = read_binary(b, t, big);
+                    self.pos += t.size();
+                }
+                PropertyKind::List { count, item } => {
+                    let Some(b) = self.bytes.get(self.pos..self.pos + count.size()) else {
+                        return Err(runs_out(self, "list count".into()));
+                    };
+                    let n = read_binary(b, count, big);
+                    if n < 0.0 {
+                        return Err(self.error(
+                            element,
+                            index,
+                            format!("list '{}' has negative length {n}", p.name),
+                        ));
+                    }
+                    self.pos += count.size();
+                    let len = (n as usize).saturating_mul(item.size());
+                    let Some(items) = self.bytes.get(self.pos..self.pos.saturating_add(len)) else {
+                        return Err(runs_out(self, format!("list of {n} items")));
+                    };
+                    if keep_list == Some(i) {
+                        list.extend(
+                            items
+                                .chunks_exact(item.size())
+                                .map(|b| read_binary(b, item, big)),
+                        );
+                    }
+                    self.pos += len;
+                    scalars[i] = f64::NAN;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn ascii_row(
+        &mut self,
+        element: &Element,
+        index: u64,
+        scalars: &mut [f64],
+        keep_list: Option<usize>,
+        list: &mut Vec<f64>,
+    ) -> Result<(), Error> {
+        // One element per line (PLY spec); blank lines between rows are tolerated.
+        let text = loop {
+            if self.pos >= self.bytes.len() {
+                self.line += 1;
+                return Err(self.error(element, index, "the data runs out (end of file)".into()));
+            }
+            let end = self.bytes[self.pos..]
+                .iter()
+                .position(|&b| b == b'\n')
+                .map_or(self.bytes.len(), |i| self.pos + i);
+            let raw = &self.bytes[self.pos..end];
+            self.pos = (end + 1).min(self.bytes.len()).max(end);
+            self.line += 1;
+            let text = std::str::from_utf8(raw)
+                .map_err(|_| self.error(element, index, "the line is not valid UTF-8".into()))?;
+            if !text.trim().is_empty() {
+                break text;
+            }
+        };
+        let mut tokens = text.split_ascii_whitespace();
+        let mut next = |c: &Self, what: &str, ty: ScalarType| -> Result<f64, Error> {
+            let token = tokens
+                .next()
+                .ok_or_else(|| c.error(element, index, format!("the line ends before {what}")))?;
+            parse_ascii(token, ty).ok_or_else(|| {
+                c.error(
+                    element,
+                    index,
+                    format!("{what}: {token:?} is not a valid {}", ty.name()),
+                )
+            })
+        };
+        for (i, p) in element.properties.iter().enumerate() {
+            match p.kind {
+                PropertyKind::Scalar(t) => {
+                    scalars[i] = next(self, &format!("property '{}'", p.name), t)?
+                }
+                PropertyKind::List { count, item } => {
+                    let n = next(self, &format!("the length of list '{}'", p.name), count)?;
+                    if n < 0.0 {
+                        return Err(self.error(
+                            element,
+                            index,
+                            format!("list '{}' has negative length {n}", p.name),
+                        ));
+                    }
+                    for _ in 0..n as u64 {
+                        let v = next(self, &format!("an item of list '{}'", p.name), item)?;
+                        if keep_list == Some(i) {
+                            list.push(v);
+                        }
+                    }
+                    scalars[i] = f64::NAN;
+                }
+            }
+        }
+        if let Some(extra) = tokens.next() {
+            return Err(self.error(
+                element,
+                index,
+                format!("unexpected value {extra:?} after the last property"),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Decodes the whole body: vertices (fast path when possible), faces when wanted, other elements skipped.
+pub(crate) fn read_body(
+    path: &Path,
+    bytes: &[u8],
+    header: &Header,
+    with_uv: bool,
+    want: Want,
+) -> Result<Body, Error> {
+    let available = (bytes.len() - header.body_offset) as u64;
+    check_sizes(path, header, available)?;
+    let Some((vertex_index, vertex_element)) = header.element("vertex") else {
+        return Err(Error::Content {
+            path: path.to_path_buf(),
+            message: "the file has no 'vertex' element".into(),
+        });
+    };
+    let plan = VertexPlan::new(path, vertex_element, with_uv)?;
+    let header_lines = bytes[..header.body_offset]
+        .iter()
+        .filter(|&&b| b == b'\n')
+        .count();
+    let mut cursor = Cursor {
+        path,
+        bytes,
+        pos: header.body_offset,
+        line: header_lines + 1,
+        format: header.format,
+    };
+    let mut vertices = None;
+    let mut triangles = Vec::new();
+    let big = header.format == PlyFormat::BinaryBigEndian;
+    for (ei, element) in header.elements.iter().enumerate() {
+        let stride = element
+            .fixed_stride()
+            .filter(|_| header.format != PlyFormat::Ascii);
+        if ei == vertex_index {
+            let n = usize::try_from(element.count).map_err(|_| Error::Content {
+                path: path.to_path_buf(),
+                message: format!("{} vertices do not fit in memory", element.count),
+            })?;
+            let mut data = VertexData::zeroed(&plan, n);
+            if let Some(stride) = stride {
+                // check_sizes guarantees the records are present.
+                let records = &bytes[cursor.pos..cursor.pos + n * stride];
+                decode_fixed(&plan, element, records, stride, big, &mut data);
+                cursor.pos += n * stride;
+            } else {
+                decode_rows(&plan, element, &mut cursor, &mut data)?;
+            }
+            vertices = Some(data);
+        } else if want == Want::Triangles && element.name == "face" {
+            read_faces(path, element, &mut cursor, &mut triangles)?;
+        } else if let Some(stride) = stride {
+            cursor.pos += element.count as usize * stride;
+        } else {
+            let mut scalars = vec![0.0; element.properties.len()];
+            let mut list = Vec::new();
+            for i in 0..element.count {
+                cursor.row(element, i, &mut scalars, None, &mut list)?;
+            }
+        }
+    }
+    let vertices = vertices.unwrap_or_default();
+    crate::error::check_finite(path, "vertex", &vertices.positions)?;
+    let count = vertices.positions.len() as u64;
+    if let Some((t, &bad)) = triangles
+        .iter()
+        .enumerate()
+        .find_map(|(t, tri)| tri.iter().find(|&&v| u64::from(v) >= count).map(|v| (t, v)))
+    {
+        return Err(Error::IndexOutOfRange {
+            path: path.to_path_buf(),
+            what: "face triangle".into(),
+            index: t as u64,
+            vertex: i64::from(bad),
+            count,
+        });
+    }
+    Ok(Body {
+        plan,
+        vertices,
+        triangles,
+    })
+}
+
+/// The zero-copy fast path: every record has the same size, so records decode independently in parallel.
+fn decode_fixed(
+    plan: &VertexPlan,
+    element: &Element,
+    records: &[u8],
+    stride: usize,
+    big: bool,
+    data: &mut VertexData,
+) {
+    let mut offsets = Vec::with_capacity(element.properties.len());
+    let mut at = 0;
+    for p in &element.properties {
+        offsets.push(at);
+        if let PropertyKind::Scalar(t) = p.kind {
+            at += t.size();
+        }
+    }
+    let k = plan.cameras.len();
+    let outs = data.split(CHUNK_POINTS, k);
+    outs.into_par_iter()
+        .zip(records.par_chunks(CHUNK_POINTS * stride))
+        .for_each(|(mut out, chunk)| {
+            for (j, rec) in chunk.chunks_exact(stride).enumerate() {
+                store_row(plan, &mut out, j, |p| {
+                    read_binary(&rec[offsets[p]..], plan.types[p], big)
+                });
+            }
+        });
+}
+
+/// The general path for vertices: row by row (ASCII, or binary with list properties).
+fn decode_rows(
+    plan: &VertexPlan,
+    element: &Element,
+    cursor: &mut Cursor<'_>,
+    data: &mut VertexData,
+) -> Result<(), Error> {
+    let n = data.positions.len();
+    let mut outs = data.split(n.max(1), plan.cameras.len());
+    let Some(out) = outs.first_mut() else {
+        return Ok(());
+    };
+    let mut scalars = vec![0.0; element.properties.len()];
+    let mut list = Vec::new();
+    for j in 0..n {
+        cursor.row(element, j as u64, &mut scalars, None, &mut list)?;
+        store_row(plan, out, j, |p| scalars[p]);
+    }
+    Ok(())
+}
+
+/// Reads the face element's `vertex_indices` (or `vertex_index`) lists and fan-triangulates them.
+fn read_faces(
+    path: &Path,
+    element: &Element,
+    cursor: &mut Cursor<'_>,
+    triangles: &mut Vec<[u32; 3]>,
+) -> Result<(), Error> {
+    let list_index = element
+        .property_index("vertex_indices")
+        .or_else(|| element.property_index("vertex_index"))
+        .filter(|&i| matches!(element.properties[i].kind, PropertyKind::List { item, .. } if !item.is_float()))
+        .ok_or_else(|| Error::Content {
+            path: path.to_path_buf(),
+            message: "the face element has no integer list property 'vertex_indices' or 'vertex_index'".into(),
+        })?;
+    let mut scalars = vec![0.0; element.properties.len()];
+    let mut list = Vec::new();
+    for f in 0..element.count {
+        cursor.row(element, f, &mut scalars, Some(list_index), &mut list)?;
+        if list.len() < 3 {
+            return Err(cursor.error(
+                element,
+                f,
+                format!(
+                    "the face has {} vertex index(es); a polygon needs at least 3",
+                    list.len()
+                ),
+            ));
+        }
+        if let Some(bad) = list.iter().find(|&&v| v < 0.0 || v > f64::from(u32::MAX)) {
+            return Err(cursor.error(element, f, format!("vertex index {bad} is out of range")));
+        }
+        let v = |i: usize| list[i] as u32;
+        for i in 1..list.len() - 1 {
+            triangles.push([v(0), v(i), v(i + 1)]);
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,269 @@
+//! The PLY cloud writer: the cloud's own layout (bit-exact round trip) or the default layout.
+
+use std::fmt::Write as _;
+use std::io::Write as _;
+use std::path::Path;
+
+use rayon::prelude::*;
+
+use super::header::{PlyFormat, ScalarType};
+use super::schema::{Role, color_to_stored, role_of_name};
+use crate::{Error, PlenopticCloud, PlyLayout};
+
+/// Points encoded per parallel task.
+const CHUNK_POINTS: usize = 16 * 1024;
+
+/// The layout used when a cloud has none: binary little endian, float positions and normals,
+/// uchar colours (the 8iVSLF layout), extra columns as double.
+#[must_use]
+pub fn default_layout(cloud: &PlenopticCloud) -> PlyLayout {
+    let mut properties: Vec<(String, ScalarType)> = ["x", "y", "z"]
+        .iter()
+        .map(|n| (n.to_string(), ScalarType::F32))
+        .collect();
+    if cloud.normals.is_some() {
+        properties.extend(
+            ["nx", "ny", "nz"]
+                .iter()
+                .map(|n| (n.to_string(), ScalarType::F32)),
+        );
+    }
+    properties.extend(
+        ["red", "green", "blue"]
+            .iter()
+            .map(|n| (n.to_string(), ScalarType::U8)),
+    );
+    for k in 0..cloud.num_cameras {
+        properties.extend(
+            ["red", "green", "blue"]
+                .iter()
+                .map(|n| (format!("{n}{k}"), ScalarType::U8)),
+        );
+    }
+    properties.extend(
+        cloud
+            .extra
+            .iter()
+            .map(|e| (e.name.clone(), ScalarType::F64)),
+    );
+    PlyLayout {
+        format: PlyFormat::BinaryLittleEndian,
+        properties,
+        comments: Vec::new(),
+    }
+}
+
+/// Where each written property takes its value from.
+#[derive(Clone, Copy)]
+enum Source {
+    Position(usize),
+    Normal(usize),
+    Main(usize),
+    Camera(usize, usize),
+    Extra(usize),
+}
+
+/// Writes `cloud` to `path` atomically in its layout (or [`default_layout`]).
+pub(crate) fn write_cloud(path: &Path, cloud: &PlenopticCloud) -> Result<(), Error> {
+    let err = |message: String| Error::Write {
+        path: path.to_path_buf(),
+        message,
+    };
+    let n = cloud.len();
+    let k = cloud.num_cameras;
+    if cloud.colors.len() != n
+        || cloud.camera_colors.len() != n * k
+        || cloud.normals.as_ref().is_some_and(|v| v.len() != n)
+        || cloud.extra.iter().any(|e| e.values.len() != n)
+    {
+        return Err(err(format!(
+            "column lengths disagree with {n} points and {k} cameras (colours {}, camera colours {}, normals {:?})",
+            cloud.colors.len(),
+            cloud.camera_colors.len(),
+            cloud.normals.as_ref().map(Vec::len)
+        )));
+    }
+    if !cloud.cameras.is_empty() && cloud.cameras.len() != k {
+        return Err(err(format!(
+            "the rig has {} cameras but the points have colours for {k}",
+            cloud.cameras.len()
+        )));
+    }
+    let layout = cloud
+        .layout
+        .clone()
+        .unwrap_or_else(|| default_layout(cloud));
+    let mut sources = Vec::with_capacity(layout.properties.len());
+    let mut seen_position = [false; 3];
+    let mut seen_cameras = vec![[false; 3]; k];
+    for (name, ty) in &layout.properties {
+        let source = match role_of_name(name, false) {
+            Some(Role::Position(c)) => {
+                seen_position[c] = true;
+                Source::Position(c)
+            }
+            Some(Role::Normal(c)) if cloud.normals.is_some() => Source::Normal(c),
+            Some(Role::Main(c)) => Source::Main(c),
+            Some(Role::Camera(cam, c)) if cam < k => {
+                seen_cameras[cam][c] = true;
+                Source::Camera(cam, c)
+            }
+            _ => match cloud.extra.iter().position(|e| &e.name == name) {
+                Some(e) => Source::Extra(e),
+                None => {
+                    return Err(err(format!(
+                        "the layout has property '{name}' but the cloud has no data for it"
+                    )));
+                }
+            },
+        };
+        if matches!(source, Source::Main(_) | Source::Camera(..))
+            && !super::schema::is_color_type(*ty)
+        {
+            return Err(err(format!(
+                "colour property '{name}' cannot be written as {}",
+                ty.name()
+            )));
+        }
+        sources.push((source, *ty));
+    }
+    if seen_position.contains(&false) {
+        return Err(err("the layout lacks x, y or z".into()));
+    }
+    if let Some(cam) = seen_cameras.iter().position(|s| s.contains(&false)) {
+        return Err(err(format!(
+            "the layout lacks a colour property of camera {cam}"
+        )));
+    }
+    let header = header_text(cloud, &layout, n);
+    let value = |i: usize, source: Source, ty: ScalarType| -> f64 {
+        match source {
+            Source::Position(c) => f64::from(cloud.positions[i][c]),
+            Source::Normal(c) => cloud.normals.as_ref().map_or(0.0, |v| f64::from(v[i][c])),
+            Source::Main(c) => color_to_stored(cloud.colors[i][c], ty),
+            Source::Camera(cam, c) => color_to_stored(cloud.camera_colors[i * k + cam][c], ty),
+            Source::Extra(e) => cloud.extra[e].values[i],
+        }
+    };
+    let body: Vec<u8> = match layout.format {
+        PlyFormat::Ascii => (0..n)
+            .into_par_iter()
+            .chunks(CHUNK_POINTS)
+            .map(|rows| {
+                let mut text = String::new();
+                for i in rows {
+                    for (p, &(source, ty)) in sources.iter().enumerate() {
+                        if p > 0 {
+                            text.push(' ');
+                        }
+                        write_ascii(&mut text, value(i, source, ty), ty);
+                    }
+                    text.push('\n');
+                }
+                text.into_bytes()
+            })
+            .collect::<Vec<_>>()
+            .concat(),
+        format => {
+            let big = format == PlyFormat::BinaryBigEndian;
+            let stride: usize = sources.iter().map(|(_, t)| t.size()).sum();
+            let mut body = vec![0u8; n * stride];
+            body.par_chunks_mut((CHUNK_POINTS * stride).max(1))
+                .enumerate()
+                .for_each(|(c, chunk)| {
+                    for (j, rec) in chunk.chunks_exact_mut(stride).enumerate() {
+                        let i = c * CHUNK_POINTS + j;
+                        let mut at = 0;
+                        for &(source, ty) in &sources {
+                            write_binary(
+                                &mut rec[at..at + ty.size()],
+                                value(i, source, ty),
+                                ty,
+                                big,
+                            );
+                            at += ty.size();
+                        }
+                    }
+                });
+            body
+        }
+    };
+    crate::atomic::write_atomic(path, |w| {
+        w.write_all(header.as_bytes())?;
+        w.write_all(&body)
+    })
+}
+
+/// The header: format, comments, rig comments, the vertex element.
+fn header_text(cloud: &PlenopticCloud, layout: &PlyLayout, n: usize) -> String {
+    let mut h = format!("ply\nformat {} 1.0\n", layout.format.keyword());
+    for c in &layout.comments {
+        let _ = writeln!(h, "comment {c}");
+    }
+    if let Some(s) = cloud.frame_to_world_scale {
+        let _ = writeln!(h, "comment frame_to_world_scale {s}");
+    }
+    if let Some(t) = cloud.frame_to_world_translation {
+        let _ = writeln!(
+            h,
+            "comment frame_to_world_translation {} {} {}",
+            t.x, t.y, t.z
+        );
+    }
+    if let Some(w) = cloud.width {
+        let _ = writeln!(h, "comment width {w}");
+    }
+    if !cloud.cameras.is_empty() {
+        let _ = writeln!(h, "comment rig_count {}", cloud.cameras.len());
+        for (k, cam) in cloud.cameras.iter().enumerate() {
+            // Without a matrix: identity rotation, centre (in world units) at values 12..14 (formats.md §2.2).
+            let m = cam.matrix.unwrap_or_else(|| {
+                let w = cloud.voxel_to_world(cam.position);
+                [
+                    1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, w.x, w.y, w.z, 1.0,
+                ]
+            });
+            let numbers: Vec<String> = m.iter().map(f64::to_string).collect();
+            let _ = writeln!(h, "comment rig_matrix_{k} {}", numbers.join(" "));
+        }
+    }
+    let _ = writeln!(h, "element vertex {n}");
+    for (name, ty) in &layout.properties {
+        let _ = writeln!(h, "property {} {name}", ty.name());
+    }
+    h.push_str("end_header\n");
+    h
+}
+
+/// Encodes `v` as `ty` into `out` (integers rounded and saturated).
+fn write_binary(out: &mut [u8], v: f64, ty: ScalarType, big: bool) {
+    macro_rules! put {
+        ($x:expr) => {{
+            let x = $x;
+            out.copy_from_slice(&if big {
+                x.to_be_bytes()
+            } else {
+                x.to_le_bytes()
+            });
+        }};
+    }
+    match ty {
+        ScalarType::I8 => put!(v.round() as i8),
+        ScalarType::U8 => put!(v.round() as u8),
+        ScalarType::I16 => put!(v.round() as i16),
+        ScalarType::U16 => put!(v.round() as u16),
+        ScalarType::I32 => put!(v.round() as i32),
+        ScalarType::U32 => put!(v.round() as u32),
+        ScalarType::F32 => put!(v as f32),
+        ScalarType::F64 => put!(v),
+    }
+}
+
+/// Formats `v` as `ty` in ASCII; Rust's shortest round-trip float formatting keeps values exact.
+fn write_ascii(text: &mut String, v: f64, ty: ScalarType) {
+    let _ = match ty {
+        ScalarType::F32 => write!(text, "{}", v as f32),
+        ScalarType::F64 => write!(text, "{v}"),
+        _ => write!(text, "{}", v.round() as i64),
+    };
+}
