@@ -1,0 +1,179 @@
+//! Reading and writing whole models in a folder, in either encoding.
+
+use std::collections::BTreeMap;
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+
+use crate::binary::POINT2D_SIZE;
+use crate::error::{Location, Problem};
+use crate::{Error, ImageRecord, Point3D, Reconstruction, binary, text};
+
+/// Encoding of a model's files.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum Format {
+    /// `cameras.txt`, `images.txt`, `points3D.txt`.
+    Text,
+    /// `cameras.bin`, `images.bin`, `points3D.bin`.
+    Binary,
+}
+
+impl Format {
+    /// File extension of the encoding, without the dot.
+    #[must_use]
+    pub fn extension(self) -> &'static str {
+        match self {
+            Format::Text => "txt",
+            Format::Binary => "bin",
+        }
+    }
+}
+
+/// Images as read, with where each record and its POINTS2D list started (for error messages).
+#[derive(Debug, Default)]
+pub(crate) struct ImagesRead {
+    pub images: BTreeMap<u32, ImageRecord>,
+    pub record_location: BTreeMap<u32, Location>,
+    pub points2d_location: BTreeMap<u32, Location>,
+}
+
+/// Points as read, with where each record started.
+#[derive(Debug, Default)]
+pub(crate) struct PointsRead {
+    pub points: BTreeMap<u64, Point3D>,
+    pub location: BTreeMap<u64, Location>,
+}
+
+/// The encoding of the model in `dir`, if a complete one is there; binary first, as COLMAP.
+#[must_use]
+pub fn detect_format(dir: &Path) -> Option<Format> {
+    [Format::Binary, Format::Text].into_iter().find(|f| {
+        ["cameras", "images", "points3D"]
+            .iter()
+            .all(|name| dir.join(format!("{name}.{}", f.extension())).is_file())
+    })
+}
+
+/// Reads the model in `dir` (binary if all three `.bin` files are there, else text), and checks
+/// that every image's camera, every observation's 3D point and every track element exist.
+/// Files written by newer COLMAP beside the model (`rigs.bin`, `frames.bin`) are ignored.
+pub fn read_model(dir: &Path) -> Result<Reconstruction, Error> {
+    let format = detect_format(dir).ok_or_else(|| Error::NoModel {
+        dir: dir.to_path_buf(),
+    })?;
+    read_model_as(dir, format)
+}
+
+/// Reads the model in `dir` in the given encoding (see [`read_model`]).
+pub fn read_model_as(dir: &Path, format: Format) -> Result<Reconstruction, Error> {
+    let path = |name: &str| dir.join(format!("{name}.{}", format.extension()));
+    let (cameras_path, images_path, points_path) =
+        (path("cameras"), path("images"), path("points3D"));
+    let (cameras, images, points) = match format {
+        Format::Text => (
+            text::read_cameras(&cameras_path)?,
+            text::read_images(&images_path)?,
+            text::read_points3d(&points_path)?,
+        ),
+        Format::Binary => (
+            binary::read_cameras(&cameras_path)?,
+            binary::read_images(&images_path)?,
+            binary::read_points3d(&points_path)?,
+        ),
+    };
+    let rec = Reconstruction {
+        cameras,
+        images: images.images,
+        points3d: points.points,
+    };
+    if let Err(problem) = rec.validate_images() {
+        let location = match &problem {
+            Problem::MissingPoint3D {
+                image_id,
+                point2d_idx,
+                ..
+            } => match images.points2d_location.get(image_id) {
+                Some(Location::Offset(o)) => {
+                    Location::Offset(o + POINT2D_SIZE * *point2d_idx as u64)
+                }
+                Some(other) => *other,
+                None => Location::File,
+            },
+            Problem::MissingCamera { image_id, .. } => images
+                .record_location
+                .get(image_id)
+                .copied()
+                .unwrap_or(Location::File),
+            _ => Location::File,
+        };
+        return Err(Error::Format {
+            path: images_path,
+            location,
+            problem,
+        });
+    }
+    if let Err((pid, problem)) = rec.validate_points() {
+        let location = points.location.get(&pid).copied().unwrap_or(Location::File);
+        return Err(Error::Format {
+            path: points_path,
+            location,
+            problem,
+        });
+    }
+    Ok(rec)
+}
+
+/// Writes the model into `dir` (created if needed) in the given encoding, each file atomically.
+/// The reconstruction is validated first; image names must be non-empty and, for text,
+/// free of whitespace (COLMAP reads them with `>>`).
+pub fn write_model(dir: &Path, rec: &Reconstruction, format: Format) -> Result<(), Error> {
+    rec.validate()?;
+    for im in rec.images.values() {
+        let bad = match format {
+            Format::Text => im.name.is_empty() || im.name.chars().any(char::is_whitespace),
+            Format::Binary => im.name.is_empty() || im.name.contains('\0'),
+        };
+        if bad {
+            return Err(Error::Invalid(Problem::BadName(im.name.clone())));
+        }
+    }
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    let path = |name: &str| dir.join(format!("{name}.{}", format.extension()));
+    let (cameras, images, points) = match format {
+        Format::Text => (
+            text::cameras_text(&rec.cameras).into_bytes(),
+            text::images_text(&rec.images)
+                .map_err(Error::Invalid)?
+                .into_bytes(),
+            text::points3d_text(&rec.points3d).into_bytes(),
+        ),
+        Format::Binary => (
+            binary::cameras_bytes(&rec.cameras),
+            binary::images_bytes(&rec.images),
+            binary::points3d_bytes(&rec.points3d),
+        ),
+    };
+    write_atomic(&path("cameras"), &cameras)?;
+    write_atomic(&path("images"), &images)?;
+    write_atomic(&path("points3D"), &points)
+}
+
+/// Writes `bytes` to a temporary file beside `path`, then renames it over `path`, so readers
+/// never see a half-written file.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), Error> {
+    let file_name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let tmp: PathBuf = path.with_file_name(format!(".{file_name}.tmp{}", std::process::id()));
+    let result = std::fs::File::create(&tmp)
+        .and_then(|mut f| {
+            f.write_all(bytes)?;
+            f.sync_all()
+        })
+        .and_then(|()| std::fs::rename(&tmp, path));
+    result.map_err(|e| {
+        // Best effort: the temporary file is useless after a failure.
+        let _ = std::fs::remove_file(&tmp);
+        Error::io(path, e)
+    })
+}

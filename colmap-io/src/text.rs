@@ -1,0 +1,446 @@
+//! COLMAP text format (`cameras.txt`, `images.txt`, `points3D.txt`), as COLMAP's
+//! `reconstruction_io_text.cc` reads and writes it.
+//!
+//! Floats are written in Rust's shortest round-trip form, so text → value → text and
+//! text ↔ binary conversions are exact.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::Path;
+use std::str::FromStr;
+
+use glam::{DVec2, DVec3};
+
+use crate::error::{Location, Problem};
+use crate::io::{ImagesRead, PointsRead};
+use crate::{CameraModel, CameraRecord, Error, ImageRecord, Point2D, Point3D, TrackElement};
+
+/// Reads a whole text file, reporting invalid UTF-8 at its line.
+fn read_text(path: &Path) -> Result<String, Error> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    String::from_utf8(bytes).map_err(|e| {
+        let valid = e.utf8_error().valid_up_to();
+        let line = e.as_bytes()[..valid]
+            .iter()
+            .filter(|&&b| b == b'\n')
+            .count()
+            + 1;
+        format_error(
+            path,
+            line,
+            Problem::Malformed("the text is not valid UTF-8".into()),
+        )
+    })
+}
+
+fn format_error(path: &Path, line: usize, problem: Problem) -> Error {
+    Error::Format {
+        path: path.to_path_buf(),
+        location: Location::Line(line),
+        problem,
+    }
+}
+
+/// Whitespace-separated fields of one line, parsed one by one with named errors.
+struct Fields<'a>(std::str::SplitWhitespace<'a>);
+
+impl<'a> Fields<'a> {
+    fn new(line: &'a str) -> Self {
+        Self(line.split_whitespace())
+    }
+
+    fn next_str(&mut self, field: &'static str) -> Result<&'a str, Problem> {
+        self.0.next().ok_or(Problem::Missing(field))
+    }
+
+    fn next<T: FromStr>(&mut self, field: &'static str) -> Result<T, Problem> {
+        let token = self.next_str(field)?;
+        token.parse().map_err(|_| Problem::Parse {
+            field,
+            token: token.to_string(),
+        })
+    }
+
+    fn rest(self) -> Vec<&'a str> {
+        self.0.collect()
+    }
+}
+
+fn parse<T: FromStr>(token: &str, field: &'static str) -> Result<T, Problem> {
+    token.parse().map_err(|_| Problem::Parse {
+        field,
+        token: token.to_string(),
+    })
+}
+
+/// Lines that hold data: not empty and not comments, with their 1-based numbers.
+fn data_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
+    text.lines()
+        .enumerate()
+        .map(|(i, l)| (i + 1, l.trim()))
+        .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'))
+}
+
+/// Reads `cameras.txt`.
+pub(crate) fn read_cameras(path: &Path) -> Result<BTreeMap<u32, CameraRecord>, Error> {
+    let text = read_text(path)?;
+    let mut cameras = BTreeMap::new();
+    for (n, line) in data_lines(&text) {
+        let camera = parse_camera(line).map_err(|p| format_error(path, n, p))?;
+        let id = camera.id;
+        if cameras.insert(id, camera).is_some() {
+            return Err(format_error(
+                path,
+                n,
+                Problem::DuplicateId {
+                    what: "camera",
+                    id: id.into(),
+                },
+            ));
+        }
+    }
+    Ok(cameras)
+}
+
+fn parse_camera(line: &str) -> Result<CameraRecord, Problem> {
+    let mut f = Fields::new(line);
+    let id = f.next("CAMERA_ID")?;
+    let name = f.next_str("MODEL")?;
+    let model =
+        CameraModel::from_name(name).ok_or_else(|| Problem::UnknownModel(name.to_string()))?;
+    let width = f.next("WIDTH")?;
+    let height = f.next("HEIGHT")?;
+    let params = f
+        .rest()
+        .into_iter()
+        .map(|t| parse::<f64>(t, "PARAMS"))
+        .collect::<Result<Vec<_>, _>>()?;
+    if params.len() != model.num_params() {
+        return Err(Problem::ParamCount {
+            model: model.name(),
+            expected: model.num_params(),
+            found: params.len(),
+        });
+    }
+    Ok(CameraRecord {
+        id,
+        model,
+        width,
+        height,
+        params,
+    })
+}
+
+/// Reads `images.txt`: each data line is followed by its POINTS2D line, which may be empty
+/// (COLMAP reads the next line unconditionally). A missing POINTS2D line at the very end of
+/// the file is read as empty.
+pub(crate) fn read_images(path: &Path) -> Result<ImagesRead, Error> {
+    let text = read_text(path)?;
+    let mut out = ImagesRead::default();
+    let mut lines = text.lines().enumerate().map(|(i, l)| (i + 1, l.trim()));
+    while let Some((n, line)) = lines.next() {
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let mut image = parse_image(line).map_err(|p| format_error(path, n, p))?;
+        let (pn, points_line) = lines.next().unwrap_or((n + 1, ""));
+        image.points2d = parse_points2d(points_line).map_err(|p| format_error(path, pn, p))?;
+        let id = image.id;
+        if out.images.insert(id, image).is_some() {
+            return Err(format_error(
+                path,
+                n,
+                Problem::DuplicateId {
+                    what: "image",
+                    id: id.into(),
+                },
+            ));
+        }
+        out.record_location.insert(id, Location::Line(n));
+        out.points2d_location.insert(id, Location::Line(pn));
+    }
+    Ok(out)
+}
+
+fn parse_image(line: &str) -> Result<ImageRecord, Problem> {
+    let mut f = Fields::new(line);
+    let id = f.next("IMAGE_ID")?;
+    let qvec = [f.next("QW")?, f.next("QX")?, f.next("QY")?, f.next("QZ")?];
+    let tvec = [f.next("TX")?, f.next("TY")?, f.next("TZ")?];
+    let camera_id = f.next("CAMERA_ID")?;
+    let name = f.next_str("NAME")?.to_string();
+    let extra = f.rest();
+    if !extra.is_empty() {
+        return Err(Problem::Malformed(format!(
+            "unexpected `{}` after the image name (names cannot contain spaces)",
+            extra.join(" ")
+        )));
+    }
+    Ok(ImageRecord {
+        id,
+        qvec,
+        tvec,
+        camera_id,
+        name,
+        points2d: Vec::new(),
+    })
+}
+
+fn parse_points2d(line: &str) -> Result<Vec<Point2D>, Problem> {
+    let tokens: Vec<&str> = line.split_whitespace().collect();
+    if tokens.len() % 3 != 0 {
+        return Err(Problem::Malformed(format!(
+            "POINTS2D has {} numbers, not a multiple of 3 (X, Y, POINT3D_ID)",
+            tokens.len()
+        )));
+    }
+    tokens
+        .chunks_exact(3)
+        .map(|c| {
+            let xy = DVec2::new(parse(c[0], "X")?, parse(c[1], "Y")?);
+            let id: i64 = parse(c[2], "POINT3D_ID")?;
+            let point3d_id = match id {
+                -1 => None,
+                id => Some(u64::try_from(id).map_err(|_| Problem::Parse {
+                    field: "POINT3D_ID",
+                    token: c[2].to_string(),
+                })?),
+            };
+            Ok(Point2D { xy, point3d_id })
+        })
+        .collect()
+}
+
+/// Reads `points3D.txt`; a line may have an empty track.
+pub(crate) fn read_points3d(path: &Path) -> Result<PointsRead, Error> {
+    let text = read_text(path)?;
+    let mut out = PointsRead::default();
+    for (n, line) in data_lines(&text) {
+        let (id, point) = parse_point3d(line).map_err(|p| format_error(path, n, p))?;
+        if out.points.insert(id, point).is_some() {
+            return Err(format_error(
+                path,
+                n,
+                Problem::DuplicateId {
+                    what: "point3D",
+                    id,
+                },
+            ));
+        }
+        out.location.insert(id, Location::Line(n));
+    }
+    Ok(out)
+}
+
+fn parse_point3d(line: &str) -> Result<(u64, Point3D), Problem> {
+    let mut f = Fields::new(line);
+    let id = f.next("POINT3D_ID")?;
+    let xyz = DVec3::new(f.next("X")?, f.next("Y")?, f.next("Z")?);
+    let rgb = [f.next("R")?, f.next("G")?, f.next("B")?];
+    let error = f.next("ERROR")?;
+    let rest = f.rest();
+    if rest.len() % 2 != 0 {
+        return Err(Problem::Malformed(format!(
+            "TRACK has {} numbers, not pairs of (IMAGE_ID, POINT2D_IDX)",
+            rest.len()
+        )));
+    }
+    let track = rest
+        .chunks_exact(2)
+        .map(|c| {
+            Ok(TrackElement {
+                image_id: parse(c[0], "IMAGE_ID")?,
+                point2d_idx: parse(c[1], "POINT2D_IDX")?,
+            })
+        })
+        .collect::<Result<_, Problem>>()?;
+    Ok((
+        id,
+        Point3D {
+            xyz,
+            rgb,
+            error,
+            track,
+        },
+    ))
+}
+
+/// Appends a float in its shortest exact form; exponent notation only for very small or very
+/// large magnitudes so lines stay short (both forms parse exactly in C++, Python and Rust).
+fn push_f64(out: &mut String, x: f64) {
+    let a = x.abs();
+    // `write!` into a String cannot fail.
+    let _ = if a != 0.0 && a.is_finite() && !(1e-5..1e16).contains(&a) {
+        write!(out, "{x:e}")
+    } else {
+        write!(out, "{x}")
+    };
+}
+
+/// Text of `cameras.txt`.
+pub(crate) fn cameras_text(cameras: &BTreeMap<u32, CameraRecord>) -> String {
+    let mut s = String::from(
+        "# Camera list with one line of data per camera:\n#   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]\n",
+    );
+    let _ = writeln!(s, "# Number of cameras: {}", cameras.len());
+    for c in cameras.values() {
+        let _ = write!(s, "{} {} {} {}", c.id, c.model.name(), c.width, c.height);
+        for &p in &c.params {
+            s.push(' ');
+            push_f64(&mut s, p);
+        }
+        s.push('\n');
+    }
+    s
+}
+
+/// Text of `images.txt`, with the (possibly empty) POINTS2D line after every image line.
+pub(crate) fn images_text(images: &BTreeMap<u32, ImageRecord>) -> Result<String, Problem> {
+    let num_obs: usize = images
+        .values()
+        .map(|im| {
+            im.points2d
+                .iter()
+                .filter(|p| p.point3d_id.is_some())
+                .count()
+        })
+        .sum();
+    let mean = if images.is_empty() {
+        0.0
+    } else {
+        num_obs as f64 / images.len() as f64
+    };
+    let mut s = String::from(
+        "# Image list with two lines of data per image:\n#   IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME\n#   POINTS2D[] as (X, Y, POINT3D_ID)\n",
+    );
+    let _ = writeln!(
+        s,
+        "# Number of images: {}, mean observations per image: {mean}",
+        images.len()
+    );
+    for im in images.values() {
+        if im.name.is_empty() || im.name.chars().any(char::is_whitespace) {
+            return Err(Problem::BadName(im.name.clone()));
+        }
+        let _ = write!(s, "{}", im.id);
+        for &v in im.qvec.iter().chain(&im.tvec) {
+            s.push(' ');
+            push_f64(&mut s, v);
+        }
+        let _ = writeln!(s, " {} {}", im.camera_id, im.name);
+        for (k, p) in im.points2d.iter().enumerate() {
+            if k > 0 {
+                s.push(' ');
+            }
+            push_f64(&mut s, p.xy.x);
+            s.push(' ');
+            push_f64(&mut s, p.xy.y);
+            match p.point3d_id {
+                Some(id) => {
+                    let _ = write!(s, " {id}");
+                }
+                None => s.push_str(" -1"),
+            }
+        }
+        s.push('\n');
+    }
+    Ok(s)
+}
+
+/// Text of `points3D.txt`.
+pub(crate) fn points3d_text(points: &BTreeMap<u64, Point3D>) -> String {
+    let total: usize = points.values().map(|p| p.track.len()).sum();
+    let mean = if points.is_empty() {
+        0.0
+    } else {
+        total as f64 / points.len() as f64
+    };
+    let mut s = String::from(
+        "# 3D point list with one line of data per point:\n#   POINT3D_ID, X, Y, Z, R, G, B, ERROR, TRACK[] as (IMAGE_ID, POINT2D_IDX)\n",
+    );
+    let _ = writeln!(
+        s,
+        "# Number of points: {}, mean track length: {mean}",
+        points.len()
+    );
+    for (id, p) in points {
+        let _ = write!(s, "{id}");
+        for v in p.xyz.to_array() {
+            s.push(' ');
+            push_f64(&mut s, v);
+        }
+        let _ = write!(s, " {} {} {} ", p.rgb[0], p.rgb[1], p.rgb[2]);
+        push_f64(&mut s, p.error);
+        for t in &p.track {
+            let _ = write!(s, " {} {}", t.image_id, t.point2d_idx);
+        }
+        s.push('\n');
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn floats_are_written_exactly_and_parse_back() {
+        for x in [
+            0.0,
+            -0.0,
+            1.0,
+            0.1,
+            1e-7,
+            123456.789,
+            1e300,
+            -2.5e-300,
+            f64::MIN_POSITIVE,
+            959.5,
+        ] {
+            let mut s = String::new();
+            push_f64(&mut s, x);
+            assert_eq!(s.parse::<f64>().unwrap().to_bits(), x.to_bits(), "{s}");
+            assert!(s.len() < 30, "{s}");
+        }
+    }
+
+    #[test]
+    fn camera_line_errors_name_the_problem() {
+        assert_eq!(
+            parse_camera("1 PINHOLE 10 10 1 2 3"),
+            Err(Problem::ParamCount {
+                model: "PINHOLE",
+                expected: 4,
+                found: 3
+            })
+        );
+        assert_eq!(
+            parse_camera("1 PINHOLEX 10 10 1 2 3 4"),
+            Err(Problem::UnknownModel("PINHOLEX".into()))
+        );
+        assert!(matches!(
+            parse_camera("1 PINHOLE 10"),
+            Err(Problem::Missing("HEIGHT"))
+        ));
+        assert!(matches!(
+            parse_camera("x PINHOLE 10 10 1 2 3 4"),
+            Err(Problem::Parse {
+                field: "CAMERA_ID",
+                ..
+            })
+        ));
+    }
+
+    #[test]
+    fn points2d_line_reads_minus_one_as_none() {
+        let p = parse_points2d("1.5 2.5 -1 3 4 7").unwrap();
+        assert_eq!(p[0].point3d_id, None);
+        assert_eq!(p[1].point3d_id, Some(7));
+        assert!(parse_points2d("").unwrap().is_empty());
+        assert!(matches!(parse_points2d("1 2"), Err(Problem::Malformed(_))));
+        assert!(matches!(
+            parse_points2d("1 2 -2"),
+            Err(Problem::Parse { .. })
+        ));
+    }
+}
