@@ -13,6 +13,8 @@
 
 mod camera;
 mod error;
+pub mod export;
+pub mod ply;
 mod project;
 mod rasterize;
 mod rasterize_backward;

@@ -1,0 +1,81 @@
+//! Compact exports for web viewers: the antimatter15 `.splat` layout (`antimatter15/splat`,
+//! `convert.py`): 32 bytes per splat, no header, view-dependent SH dropped.
+
+use std::io::Write;
+use std::path::Path;
+
+use crate::{Error, Splats, sh_dc_to_rgb, sigmoid};
+
+/// Bytes per splat in the `.splat` layout.
+pub const SPLAT_RECORD_BYTES: usize = 32;
+
+/// Encodes splat `i` as a `.splat` record: f32 position, f32 linear scales, u8 RGBA
+/// (rgb = clamp((0.5 + C0·dc)·255), a = sigmoid(opacity)·255), u8 quaternion w, x, y, z
+/// (normalised·128 + 128).
+#[must_use]
+pub fn encode_record(splats: &Splats, i: usize) -> [u8; SPLAT_RECORD_BYTES] {
+    let mut r = [0u8; SPLAT_RECORD_BYTES];
+    let mut put = |o: usize, v: f32| r[o..o + 4].copy_from_slice(&v.to_le_bytes());
+    let m = splats.means[i];
+    let s = splats.scale(i);
+    for (k, v) in [m.x, m.y, m.z, s.x, s.y, s.z].into_iter().enumerate() {
+        put(4 * k, v);
+    }
+    let to_u8 = |v: f32| (v * 255.0).round().clamp(0.0, 255.0) as u8;
+    let rgb = sh_dc_to_rgb(splats.sh_of(i)[0]);
+    r[24] = to_u8(rgb[0]);
+    r[25] = to_u8(rgb[1]);
+    r[26] = to_u8(rgb[2]);
+    r[27] = to_u8(sigmoid(splats.opacity_logits[i]));
+    let q = splats.rotation(i);
+    for (k, c) in [q.w, q.x, q.y, q.z].into_iter().enumerate() {
+        r[28 + k] = (c * 128.0 + 128.0).round().clamp(0.0, 255.0) as u8;
+    }
+    r
+}
+
+/// Writes `splats` as a `.splat` file, sorted like the reference converter by
+/// exp(Σ log-scale)·sigmoid(opacity), largest first; atomic.
+pub fn write_splat(path: &Path, splats: &Splats) -> Result<(), Error> {
+    splats.validate()?;
+    let mut order: Vec<usize> = (0..splats.len()).collect();
+    let key = |i: usize| {
+        let l = splats.log_scales[i];
+        -((l.x + l.y + l.z).exp() * sigmoid(splats.opacity_logits[i]))
+    };
+    order.sort_by(|&a, &b| key(a).total_cmp(&key(b)).then(a.cmp(&b)));
+    crate::ply::write_atomic(path, |w| {
+        for i in order {
+            w.write_all(&encode_record(splats, i))?;
+        }
+        Ok(())
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+
+    #[test]
+    fn record_layout_matches_the_reference_converter() {
+        let mut s = Splats::new(0);
+        let q = glam::Quat::from_rotation_y(0.7);
+        s.push(
+            Vec3::new(1.0, -2.0, 3.5),
+            Vec3::new(0.0, -1.0, 0.5),
+            [2.0 * q.w, 2.0 * q.x, 2.0 * q.y, 2.0 * q.z],
+            0.0,
+            &[crate::rgb_to_sh_dc([1.0, 0.5, 0.0])],
+        );
+        let r = encode_record(&s, 0);
+        let f = |o: usize| f32::from_le_bytes(r[o..o + 4].try_into().unwrap());
+        assert_eq!([f(0), f(4), f(8)], [1.0, -2.0, 3.5]);
+        assert!((f(12) - 1.0).abs() < 1e-6 && (f(16) - (-1.0f32).exp()).abs() < 1e-6);
+        assert_eq!(&r[24..28], &[255, 128, 0, 128]);
+        assert_eq!(r[28], (q.w * 128.0 + 128.0).round() as u8);
+        assert_eq!(r[29], 128);
+        assert_eq!(r[30], (q.y * 128.0 + 128.0).round() as u8);
+        assert_eq!(r[31], 128);
+    }
+}

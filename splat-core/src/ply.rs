@@ -1,0 +1,533 @@
+//! The Inria 3DGS PLY (`gaussian_model.py::save_ply/load_ply`): one `vertex` element with
+//! `x y z [nx ny nz] f_dc_0..2 f_rest_* opacity scale_0..2 rot_0..3`.
+//!
+//! Reading accepts any property order (Brush and others write their own), `float` or `double`
+//! (and integer types) for every property, binary little/big endian or ASCII, with or without
+//! normals, and derives the SH degree from the number of `f_rest` (0/9/24/45), which are
+//! channel-major: `f_rest_{c·K' + j}` is coefficient j + 1 of channel c, K' = (degree + 1)² − 1.
+//! Writing produces exactly Inria's layout: binary little endian, all `float`, normals as zeros.
+
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+
+use glam::Vec3;
+
+use crate::{Error, Splats, num_sh_coeffs};
+
+/// Largest vertex count accepted (a header claiming more is refused before allocating).
+pub const MAX_SPLATS: usize = 200_000_000;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Format {
+    Ascii,
+    BinaryLe,
+    BinaryBe,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Scalar {
+    I8,
+    U8,
+    I16,
+    U16,
+    I32,
+    U32,
+    F32,
+    F64,
+}
+
+impl Scalar {
+    fn parse(s: &str) -> Option<Self> {
+        Some(match s {
+            "char" | "int8" => Self::I8,
+            "uchar" | "uint8" => Self::U8,
+            "short" | "int16" => Self::I16,
+            "ushort" | "uint16" => Self::U16,
+            "int" | "int32" => Self::I32,
+            "uint" | "uint32" => Self::U32,
+            "float" | "float32" => Self::F32,
+            "double" | "float64" => Self::F64,
+            _ => return None,
+        })
+    }
+
+    fn size(self) -> usize {
+        match self {
+            Self::I8 | Self::U8 => 1,
+            Self::I16 | Self::U16 => 2,
+            Self::I32 | Self::U32 | Self::F32 => 4,
+            Self::F64 => 8,
+        }
+    }
+
+    /// Decodes one value from the start of `b` (which holds at least `size()` bytes).
+    fn read(self, b: &[u8], le: bool) -> f64 {
+        macro_rules! num {
+            ($t:ty, $n:expr) => {{
+                let mut a = [0u8; $n];
+                a.copy_from_slice(&b[..$n]);
+                if le {
+                    <$t>::from_le_bytes(a)
+                } else {
+                    <$t>::from_be_bytes(a)
+                }
+            }};
+        }
+        match self {
+            Self::I8 => f64::from(b[0] as i8),
+            Self::U8 => f64::from(b[0]),
+            Self::I16 => f64::from(num!(i16, 2)),
+            Self::U16 => f64::from(num!(u16, 2)),
+            Self::I32 => f64::from(num!(i32, 4)),
+            Self::U32 => f64::from(num!(u32, 4)),
+            Self::F32 => f64::from(num!(f32, 4)),
+            Self::F64 => num!(f64, 8),
+        }
+    }
+}
+
+#[derive(Clone, Debug)]
+enum Property {
+    Scalar { name: String, ty: Scalar },
+    List { count: Scalar, item: Scalar },
+}
+
+#[derive(Clone, Debug)]
+struct Element {
+    name: String,
+    count: usize,
+    props: Vec<Property>,
+}
+
+struct Header {
+    format: Format,
+    elements: Vec<Element>,
+    /// Byte offset of the body.
+    body: usize,
+}
+
+fn header_err(path: &Path, line: usize, message: impl Into<String>) -> Error {
+    Error::Header {
+        path: path.to_path_buf(),
+        line,
+        message: message.into(),
+    }
+}
+
+fn parse_header(path: &Path, data: &[u8]) -> Result<Header, Error> {
+    let mut pos = 0;
+    let mut line_no = 0;
+    let mut format = None;
+    let mut elements: Vec<Element> = Vec::new();
+    loop {
+        let Some(nl) = data[pos..].iter().position(|&b| b == b'\n') else {
+            return Err(header_err(path, line_no + 1, "no `end_header` line"));
+        };
+        let raw = &data[pos..pos + nl];
+        pos += nl + 1;
+        line_no += 1;
+        let line = std::str::from_utf8(raw)
+            .map_err(|_| header_err(path, line_no, "header is not text"))?
+            .trim_end_matches('\r')
+            .trim();
+        let mut words = line.split_whitespace();
+        let first = words.next().unwrap_or("");
+        if line_no == 1 {
+            if line != "ply" {
+                return Err(header_err(path, 1, "not a PLY file (first line is not `ply`)"));
+            }
+            continue;
+        }
+        match first {
+            "" | "comment" | "obj_info" => {}
+            "format" => {
+                format = Some(match words.next() {
+                    Some("ascii") => Format::Ascii,
+                    Some("binary_little_endian") => Format::BinaryLe,
+                    Some("binary_big_endian") => Format::BinaryBe,
+                    other => {
+                        return Err(header_err(path, line_no, format!("unknown format {other:?}")));
+                    }
+                });
+            }
+            "element" => {
+                let name = words
+                    .next()
+                    .ok_or_else(|| header_err(path, line_no, "element without a name"))?;
+                let count = words
+                    .next()
+                    .and_then(|c| c.parse::<usize>().ok())
+                    .ok_or_else(|| header_err(path, line_no, "element count is not a number"))?;
+                elements.push(Element {
+                    name: name.to_string(),
+                    count,
+                    props: Vec::new(),
+                });
+            }
+            "property" => {
+                let el = elements
+                    .last_mut()
+                    .ok_or_else(|| header_err(path, line_no, "property before any element"))?;
+                let ty = words.next().unwrap_or("");
+                let prop = if ty == "list" {
+                    let count = words.next().and_then(Scalar::parse);
+                    let item = words.next().and_then(Scalar::parse);
+                    match (count, item) {
+                        (Some(count), Some(item)) => Property::List { count, item },
+                        _ => return Err(header_err(path, line_no, "bad list property types")),
+                    }
+                } else {
+                    let ty = Scalar::parse(ty).ok_or_else(|| {
+                        header_err(path, line_no, format!("unknown property type `{ty}`"))
+                    })?;
+                    let name = words
+                        .next()
+                        .ok_or_else(|| header_err(path, line_no, "property without a name"))?;
+                    Property::Scalar {
+                        name: name.to_string(),
+                        ty,
+                    }
+                };
+                el.props.push(prop);
+            }
+            "end_header" => break,
+            other => {
+                return Err(header_err(path, line_no, format!("unknown keyword `{other}`")));
+            }
+        }
+    }
+    let format = format.ok_or_else(|| header_err(path, 0, "no `format` line"))?;
+    Ok(Header {
+        format,
+        elements,
+        body: pos,
+    })
+}
+
+/// Column of each 3DGS attribute in the vertex element.
+struct Columns {
+    mean: [usize; 3],
+    dc: [usize; 3],
+    rest: Vec<usize>,
+    opacity: usize,
+    scale: [usize; 3],
+    rot: [usize; 4],
+}
+
+fn find_columns(path: &Path, el: &Element) -> Result<Columns, Error> {
+    let mut names = Vec::with_capacity(el.props.len());
+    for p in &el.props {
+        match p {
+            Property::Scalar { name, .. } => names.push(name.as_str()),
+            Property::List { .. } => {
+                return Err(header_err(
+                    path,
+                    0,
+                    "the vertex element has a list property; 3DGS vertices hold scalars only",
+                ));
+            }
+        }
+    }
+    let col = |n: &str| -> Result<usize, Error> {
+        names
+            .iter()
+            .position(|&m| m == n)
+            .ok_or_else(|| header_err(path, 0, format!("vertex property `{n}` is missing")))
+    };
+    let mut rest = Vec::new();
+    while let Some(c) = names
+        .iter()
+        .position(|&m| m == format!("f_rest_{}", rest.len()))
+    {
+        rest.push(c);
+    }
+    let n_rest_props = names.iter().filter(|m| m.starts_with("f_rest_")).count();
+    if n_rest_props != rest.len() {
+        return Err(header_err(
+            path,
+            0,
+            format!(
+                "f_rest properties are not numbered 0..{} without gaps ({n_rest_props} present)",
+                n_rest_props
+            ),
+        ));
+    }
+    Ok(Columns {
+        mean: [col("x")?, col("y")?, col("z")?],
+        dc: [col("f_dc_0")?, col("f_dc_1")?, col("f_dc_2")?],
+        rest,
+        opacity: col("opacity")?,
+        scale: [col("scale_0")?, col("scale_1")?, col("scale_2")?],
+        rot: [col("rot_0")?, col("rot_1")?, col("rot_2")?, col("rot_3")?],
+    })
+}
+
+/// Reads a 3DGS PLY file.
+pub fn read_splats(path: &Path) -> Result<Splats, Error> {
+    let data = std::fs::read(path).map_err(|source| Error::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    parse_splats(path, &data)
+}
+
+/// Parses the bytes of a 3DGS PLY file; `path` is used in error messages.
+pub fn parse_splats(path: &Path, data: &[u8]) -> Result<Splats, Error> {
+    let header = parse_header(path, data)?;
+    let vi = header
+        .elements
+        .iter()
+        .position(|e| e.name == "vertex")
+        .ok_or_else(|| header_err(path, 0, "no `vertex` element"))?;
+    let el = &header.elements[vi];
+    let cols = find_columns(path, el)?;
+    let degree = match cols.rest.len() {
+        0 => 0,
+        9 => 1,
+        24 => 2,
+        45 => 3,
+        n => {
+            return Err(header_err(
+                path,
+                0,
+                format!("{n} f_rest properties; 3DGS degree 0–3 has 0, 9, 24 or 45"),
+            ));
+        }
+    };
+    let n = el.count;
+    if n > MAX_SPLATS {
+        return Err(header_err(
+            path,
+            0,
+            format!("{n} vertices claimed (at most {MAX_SPLATS} are accepted)"),
+        ));
+    }
+    let n_props = el.props.len();
+    let body = &data[header.body..];
+    let mut values = vec![0.0_f64; n_props];
+    let mut splats = Splats::new(degree);
+    let k = num_sh_coeffs(degree);
+    let kp = k - 1;
+    let mut sh = vec![[0.0_f32; 3]; k];
+    let mut emit = |splats: &mut Splats, v: &[f64]| {
+        let f = |c: usize| v[c] as f32;
+        sh[0] = cols.dc.map(f);
+        for j in 0..kp {
+            for (ch, coef) in (0..3).map(|ch| (ch, f(cols.rest[ch * kp + j]))) {
+                sh[j + 1][ch] = coef;
+            }
+        }
+        splats.push(
+            Vec3::new(f(cols.mean[0]), f(cols.mean[1]), f(cols.mean[2])),
+            Vec3::new(f(cols.scale[0]), f(cols.scale[1]), f(cols.scale[2])),
+            cols.rot.map(f),
+            f(cols.opacity),
+            &sh,
+        );
+    };
+    match header.format {
+        Format::Ascii => {
+            let text = std::str::from_utf8(body).map_err(|e| Error::Body {
+                path: path.to_path_buf(),
+                offset: (header.body + e.valid_up_to()) as u64,
+                index: 0,
+                message: "ASCII body is not text".into(),
+            })?;
+            let mut lines = text.lines().filter(|l| !l.trim().is_empty());
+            // Skip elements before the vertex element (one line per item).
+            for e in &header.elements[..vi] {
+                for _ in 0..e.count {
+                    lines.next();
+                }
+            }
+            for i in 0..n {
+                let line = lines.next().ok_or_else(|| Error::Body {
+                    path: path.to_path_buf(),
+                    offset: data.len() as u64,
+                    index: i,
+                    message: format!("file ends after {i} of {n} vertices"),
+                })?;
+                let mut it = line.split_whitespace();
+                for (c, slot) in values.iter_mut().enumerate() {
+                    *slot = it.next().and_then(|w| w.parse().ok()).ok_or_else(|| Error::Body {
+                        path: path.to_path_buf(),
+                        offset: 0,
+                        index: i,
+                        message: format!("property {c} is missing or not a number"),
+                    })?;
+                }
+                emit(&mut splats, &values);
+            }
+        }
+        Format::BinaryLe | Format::BinaryBe => {
+            let le = header.format == Format::BinaryLe;
+            let mut off = 0;
+            for (ei, e) in header.elements[..vi].iter().enumerate() {
+                off = skip_element(body, off, e, le).map_err(|m| Error::Body {
+                    path: path.to_path_buf(),
+                    offset: (header.body + off) as u64,
+                    index: ei,
+                    message: m,
+                })?;
+            }
+            let mut layout = Vec::with_capacity(n_props);
+            let mut stride = 0;
+            for p in &el.props {
+                if let Property::Scalar { ty, .. } = p {
+                    layout.push((stride, *ty));
+                    stride += ty.size();
+                }
+            }
+            let need = n.checked_mul(stride).and_then(|b| b.checked_add(off));
+            if need.is_none_or(|need| need > body.len()) {
+                return Err(Error::Body {
+                    path: path.to_path_buf(),
+                    offset: (header.body + off) as u64,
+                    index: (body.len().saturating_sub(off)) / stride.max(1),
+                    message: format!(
+                        "{n} vertices of {stride} bytes need {} bytes but the body after this \
+                         offset has {}",
+                        n.saturating_mul(stride),
+                        body.len().saturating_sub(off)
+                    ),
+                });
+            }
+            splats.means.reserve(n);
+            for i in 0..n {
+                let rec = &body[off + i * stride..off + (i + 1) * stride];
+                for (slot, &(o, ty)) in values.iter_mut().zip(&layout) {
+                    *slot = ty.read(&rec[o..], le);
+                }
+                emit(&mut splats, &values);
+            }
+        }
+    }
+    Ok(splats)
+}
+
+/// Skips one element's items in a binary body, returning the offset after it.
+fn skip_element(body: &[u8], mut off: usize, e: &Element, le: bool) -> Result<usize, String> {
+    let fixed: Option<usize> = e
+        .props
+        .iter()
+        .map(|p| match p {
+            Property::Scalar { ty, .. } => Some(ty.size()),
+            Property::List { .. } => None,
+        })
+        .sum();
+    if let Some(stride) = fixed {
+        let end = e
+            .count
+            .checked_mul(stride)
+            .and_then(|b| b.checked_add(off))
+            .filter(|&end| end <= body.len())
+            .ok_or_else(|| format!("element `{}` runs past the end of the file", e.name))?;
+        return Ok(end);
+    }
+    for _ in 0..e.count {
+        for p in &e.props {
+            let (size, n) = match p {
+                Property::Scalar { ty, .. } => (ty.size(), 1),
+                Property::List { count, item } => {
+                    if off + count.size() > body.len() {
+                        return Err(format!("element `{}` runs past the end of the file", e.name));
+                    }
+                    let n = count.read(&body[off..], le);
+                    off += count.size();
+                    (item.size(), n.max(0.0) as usize)
+                }
+            };
+            off = n
+                .checked_mul(size)
+                .and_then(|b| b.checked_add(off))
+                .filter(|&end| end <= body.len())
+                .ok_or_else(|| format!("element `{}` runs past the end of the file", e.name))?;
+        }
+    }
+    Ok(off)
+}
+
+/// Returns the Inria property names in file order for SH degree `degree`.
+#[must_use]
+pub fn inria_property_names(degree: u32) -> Vec<String> {
+    let mut names: Vec<String> = ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
+        .iter()
+        .map(|s| (*s).to_string())
+        .collect();
+    names.extend((0..3 * (num_sh_coeffs(degree) - 1)).map(|i| format!("f_rest_{i}")));
+    names.push("opacity".into());
+    names.extend((0..3).map(|i| format!("scale_{i}")));
+    names.extend((0..4).map(|i| format!("rot_{i}")));
+    names
+}
+
+/// Writes `splats` as an Inria 3DGS PLY, atomically (a temporary file in the same directory,
+/// renamed over `path` once complete).
+pub fn write_splats(path: &Path, splats: &Splats) -> Result<(), Error> {
+    splats.validate()?;
+    write_atomic(path, |w| {
+        let names = inria_property_names(splats.sh_degree);
+        let mut head = format!(
+            "ply\nformat binary_little_endian 1.0\nelement vertex {}\n",
+            splats.len()
+        );
+        for n in &names {
+            head.push_str("property float ");
+            head.push_str(n);
+            head.push('\n');
+        }
+        head.push_str("end_header\n");
+        w.write_all(head.as_bytes())?;
+        let k = splats.coeffs_per_splat();
+        let mut rec: Vec<f32> = Vec::with_capacity(names.len());
+        for i in 0..splats.len() {
+            rec.clear();
+            rec.extend(splats.means[i].to_array());
+            rec.extend([0.0; 3]);
+            let sh = splats.sh_of(i);
+            rec.extend(sh[0]);
+            for ch in 0..3 {
+                rec.extend(sh[1..k].iter().map(|c| c[ch]));
+            }
+            rec.push(splats.opacity_logits[i]);
+            rec.extend(splats.log_scales[i].to_array());
+            rec.extend(splats.rotations[i]);
+            for v in &rec {
+                w.write_all(&v.to_le_bytes())?;
+            }
+        }
+        Ok(())
+    })
+}
+
+/// Writes a file through `body` into a temporary sibling and renames it over `path`.
+pub(crate) fn write_atomic(
+    path: &Path,
+    body: impl FnOnce(&mut BufWriter<std::fs::File>) -> std::io::Result<()>,
+) -> Result<(), Error> {
+    let io = |source| Error::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let name = path.file_name().map_or_else(
+        || std::ffi::OsString::from("splats"),
+        std::ffi::OsStr::to_os_string,
+    );
+    let mut tmp_name = std::ffi::OsString::from(".");
+    tmp_name.push(&name);
+    tmp_name.push(format!(".tmp{}", std::process::id()));
+    let tmp: PathBuf = path.with_file_name(tmp_name);
+    let result = (|| {
+        let file = std::fs::File::create(&tmp)?;
+        let mut w = BufWriter::new(file);
+        body(&mut w)?;
+        let file = w.into_inner().map_err(std::io::IntoInnerError::into_error)?;
+        file.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    if let Err(e) = result {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(io(e));
+    }
+    Ok(())
+}
