@@ -135,7 +135,7 @@ impl Builder<'_> {
             Some(i) => i.into_u32().collect(),
             None => (0..count as u32).collect(),
         };
-        if indices.len() % 3 != 0 {
+        if !indices.len().is_multiple_of(3) {
             return Err(self.err(format!(
                 "{what} has {} indices, not a multiple of 3",
                 indices.len()

@@ -55,7 +55,7 @@ impl VertexData {
 
     /// Splits every column into runs of `chunk` points.
     fn split(&mut self, chunk: usize, num_cameras: usize) -> Vec<Out<'_>> {
-        let mut positions = self.positions.chunks_mut(chunk);
+        let positions = self.positions.chunks_mut(chunk);
         let mut normals = self.normals.as_mut().map(|v| v.chunks_mut(chunk));
         let mut colors = self.colors.as_mut().map(|v| v.chunks_mut(chunk));
         let mut cameras = self.camera_colors.chunks_mut((chunk * num_cameras).max(1));
@@ -66,7 +66,7 @@ impl VertexData {
             .map(|v| v.chunks_mut(chunk))
             .collect();
         let mut outs = Vec::new();
-        while let Some(p) = positions.next() {
+        for p in positions {
             outs.push(Out {
                 positions: p,
                 normals: normals.as_mut().and_then(Iterator::next),
