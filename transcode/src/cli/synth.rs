@@ -1,10 +1,76 @@
-//! PLACEHOLDER: owned by the helper implementing this subcommand; replace this whole file.
+//! `transcode synth`: a synthetic plenoptic cloud (8iVSLF layout) from a real mesh.
 
-/// Arguments (to be defined by the subcommand's owner).
+use std::path::PathBuf;
+use std::time::Duration;
+
+use anyhow::Context;
+use indicatif::{ProgressBar, ProgressStyle};
+use transcode::scene::{SynthConfig, synth_from_mesh};
+
+/// Arguments of `transcode synth`.
 #[derive(Debug, clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// The mesh to sample (OBJ, glTF/GLB or PLY with faces).
+    #[arg(long)]
+    pub mesh: PathBuf,
+    /// Output plenoptic PLY.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Number of capture cameras (on two rings around the mesh).
+    #[arg(long, default_value_t = SynthConfig::default().cameras)]
+    pub cameras: usize,
+    /// Number of surface samples (samples sharing a voxel are merged).
+    #[arg(long, default_value_t = SynthConfig::default().points)]
+    pub points: usize,
+    /// Voxel grid width spanned by the mesh's longest side.
+    #[arg(long, default_value_t = SynthConfig::default().grid)]
+    pub grid: u32,
+    /// Specular weight of the shading model.
+    #[arg(long, default_value_t = SynthConfig::default().specular)]
+    pub specular: f32,
+    /// Blinn–Phong exponent of the shading model.
+    #[arg(long, default_value_t = SynthConfig::default().shininess)]
+    pub shininess: f32,
+    /// Seed of the surface sampler.
+    #[arg(long, default_value_t = SynthConfig::default().seed)]
+    pub seed: u64,
+}
 
-/// Runs the subcommand.
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("this subcommand is not built yet")
+/// Loads the mesh, synthesises the plenoptic cloud and writes it.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let spinner = ProgressBar::new_spinner().with_style(
+        ProgressStyle::with_template("{spinner} {msg} [{elapsed}]")
+            .unwrap_or_else(|_| ProgressStyle::default_spinner()),
+    );
+    spinner.enable_steady_tick(Duration::from_millis(120));
+    spinner.set_message(format!("reading {}", args.mesh.display()));
+    let mesh = plenoptic_io::read_mesh(&args.mesh)
+        .with_context(|| format!("cannot read the mesh {}", args.mesh.display()))?;
+    let config = SynthConfig {
+        points: args.points,
+        cameras: args.cameras,
+        grid: args.grid,
+        specular: args.specular,
+        shininess: args.shininess,
+        seed: args.seed,
+        ..SynthConfig::default()
+    };
+    spinner.set_message(format!(
+        "sampling {} points and shading them for {} cameras",
+        args.points, args.cameras
+    ));
+    let cloud = synth_from_mesh(&mesh, &config)
+        .with_context(|| format!("cannot synthesise from {}", args.mesh.display()))?;
+    spinner.set_message(format!("writing {}", args.out.display()));
+    plenoptic_io::write_cloud(&args.out, &cloud)
+        .with_context(|| format!("cannot write {}", args.out.display()))?;
+    spinner.finish_and_clear();
+    println!(
+        "wrote {} ({} points, {} capture cameras, grid {})",
+        args.out.display(),
+        cloud.len(),
+        cloud.num_cameras,
+        args.grid
+    );
+    Ok(())
 }

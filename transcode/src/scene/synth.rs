@@ -1,0 +1,313 @@
+//! `synth`: a plenoptic cloud made from a real mesh, with the demo's shading model.
+
+use std::collections::HashMap;
+
+use camera_model::rig::{WORLD_UP, framing_focal};
+use camera_model::{Camera, Intrinsics, Pose};
+use glam::{DVec3, Vec3};
+use plenoptic_io::{Mesh, PlenopticCloud};
+use rand::{RngExt, SeedableRng};
+use rayon::prelude::*;
+
+use super::{Error, Gloss, Shading, capture_cameras, capture_directions, to_u8_grid};
+use crate::views::{self, ViewImage, ViewOptions};
+
+/// Parameters of [`synth_from_mesh`].
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SynthConfig {
+    /// Number of surface samples (before merging samples that fall in the same voxel).
+    pub points: usize,
+    /// Number of capture cameras (on two rings).
+    pub cameras: usize,
+    /// Voxel grid width: the mesh's longest side spans `grid − 1` voxels.
+    pub grid: u32,
+    /// Capture-camera distance from the mesh centre, in bounding-sphere radii.
+    pub camera_distance: f64,
+    /// Specular weight added to every surface.
+    pub specular: f32,
+    /// Blinn–Phong exponent.
+    pub shininess: f32,
+    /// The shading model.
+    pub shading: Shading,
+    /// Side of the capture cameras' depth maps used for visibility, in pixels.
+    pub visibility_resolution: u32,
+    /// Seed of the surface sampler.
+    pub seed: u64,
+}
+
+impl Default for SynthConfig {
+    fn default() -> Self {
+        Self {
+            points: 100_000,
+            cameras: 13,
+            grid: 1024,
+            camera_distance: 3.0,
+            specular: 0.5,
+            shininess: 40.0,
+            shading: Shading::default(),
+            visibility_resolution: 1024,
+            seed: 0,
+        }
+    }
+}
+
+impl SynthConfig {
+    fn validate(&self) -> Result<(), Error> {
+        let bad = |m: String| Err(Error::InvalidConfig(m));
+        if !(1..=50_000_000).contains(&self.points) {
+            return bad(format!(
+                "points must be in 1..=50000000, got {}",
+                self.points
+            ));
+        }
+        if !(1..=64).contains(&self.cameras) {
+            return bad(format!("cameras must be in 1..=64, got {}", self.cameras));
+        }
+        if !(2..=65_536).contains(&self.grid) {
+            return bad(format!("grid must be in 2..=65536, got {}", self.grid));
+        }
+        if !(self.camera_distance > 1.0 && self.camera_distance.is_finite()) {
+            return bad(format!(
+                "camera_distance must exceed 1 radius, got {}",
+                self.camera_distance
+            ));
+        }
+        if !(self.specular >= 0.0 && self.shininess > 0.0 && self.shininess.is_finite()) {
+            return bad(format!(
+                "bad gloss: specular {}, shininess {}",
+                self.specular, self.shininess
+            ));
+        }
+        if !(16..=8192).contains(&self.visibility_resolution) {
+            return bad(format!(
+                "visibility_resolution must be in 16..=8192, got {}",
+                self.visibility_resolution
+            ));
+        }
+        self.shading.validate()
+    }
+}
+
+/// One surface sample in mesh units.
+struct Sample {
+    position: Vec3,
+    normal: Vec3,
+    albedo: [f32; 3],
+}
+
+/// Samples `config.points` points on the mesh (area-weighted), shades them towards 13 (or
+/// `config.cameras`) capture cameras on two rings, and voxelises them into an 8iVSLF-layout cloud.
+///
+/// Albedo is [`views::albedo_at`] (base colour × texture × vertex colour). A capture camera sees a
+/// sample when the sample is not farther than the camera's depth map of the mesh (rendered with
+/// [`views::render_mesh`]) by more than the map's resolution allows; hidden samples get the main
+/// colour. Samples in the same voxel are merged by averaging (as PccAppRenderer's
+/// `--dropdups=2`); frame_to_world maps voxels back to mesh units.
+pub fn synth_from_mesh(mesh: &Mesh, config: &SynthConfig) -> Result<PlenopticCloud, Error> {
+    config.validate()?;
+    views::check_mesh(mesh)?;
+    let samples = sample_surface(mesh, config.points, config.seed)?;
+
+    // Bounds and the voxel frame: voxel = (p − lo) · scale.
+    let (lo, hi) = mesh
+        .positions
+        .iter()
+        .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), &p| {
+            (lo.min(p), hi.max(p))
+        });
+    let extent = (hi - lo).max_element();
+    if !(extent > 0.0 && extent.is_finite()) {
+        return Err(Error::EmptyMesh(format!(
+            "the mesh's bounding box has extent {extent}"
+        )));
+    }
+    let scale = f64::from(config.grid - 1) / f64::from(extent);
+    let center = 0.5 * (lo + hi);
+    let radius = 0.5 * (hi - lo).length();
+
+    // Capture cameras in mesh units, with depth maps for visibility.
+    let res = config.visibility_resolution;
+    let distance = config.camera_distance * f64::from(radius);
+    let focal = framing_focal(f64::from(radius), distance, res, res, 0.02)?;
+    let intrinsics = Intrinsics::centered(res, res, focal, focal);
+    let eyes: Vec<DVec3> = capture_directions(config.cameras)
+        .iter()
+        .map(|d| center.as_dvec3() + distance * *d)
+        .collect();
+    let cameras: Vec<Camera> = eyes
+        .iter()
+        .map(|&e| Camera::new(intrinsics, Pose::look_at(e, center.as_dvec3(), WORLD_UP)))
+        .collect();
+    let depth_maps: Vec<ViewImage> = cameras
+        .iter()
+        .map(|c| views::render_mesh(mesh, c, &ViewOptions::default()))
+        .collect::<Result<_, _>>()?;
+
+    let gloss = Gloss {
+        specular: config.specular,
+        shininess: config.shininess,
+    };
+    let shaded: Vec<([f32; 3], Vec<[f32; 3]>, Vec3)> = samples
+        .par_iter()
+        .map(|s| {
+            let main = config.shading.diffuse_color(s.normal, s.albedo);
+            let mut facing = 0i32;
+            let colors = cameras
+                .iter()
+                .zip(&depth_maps)
+                .map(|(cam, map)| {
+                    let to_cam = (cam.center().as_vec3() - s.position).normalize_or_zero();
+                    if !sees(cam, map, s.position, s.normal) {
+                        return main;
+                    }
+                    facing += if s.normal.dot(to_cam) >= 0.0 { 1 } else { -1 };
+                    config.shading.color(s.normal, to_cam, s.albedo, gloss)
+                })
+                .collect();
+            // Orient the stored normal towards the cameras that see the sample (meshes may wind either way).
+            let normal = if facing < 0 { -s.normal } else { s.normal };
+            (main, colors, normal)
+        })
+        .collect();
+
+    // Voxelise and merge.
+    let n_cam = config.cameras;
+    let mut index: HashMap<[i32; 3], usize> = HashMap::new();
+    let mut acc: Vec<(Vec3, Vec3, [f32; 3], Vec<[f32; 3]>, f32)> = Vec::new();
+    for (s, (main, colors, normal)) in samples.iter().zip(shaded) {
+        let v = ((s.position - lo).as_dvec3() * scale).round();
+        let key = [v.x as i32, v.y as i32, v.z as i32];
+        let slot = *index.entry(key).or_insert_with(|| {
+            acc.push((
+                v.as_vec3(),
+                Vec3::ZERO,
+                [0.0; 3],
+                vec![[0.0; 3]; n_cam],
+                0.0,
+            ));
+            acc.len() - 1
+        });
+        let a = &mut acc[slot];
+        a.1 += normal;
+        for k in 0..3 {
+            a.2[k] += main[k];
+            for (sum, c) in a.3.iter_mut().zip(&colors) {
+                sum[k] += c[k];
+            }
+        }
+        a.4 += 1.0;
+    }
+    let mut cloud = PlenopticCloud {
+        num_cameras: n_cam,
+        cameras: capture_cameras(
+            &eyes
+                .iter()
+                .map(|e| (*e - lo.as_dvec3()) * scale)
+                .collect::<Vec<_>>(),
+            (center - lo).as_dvec3() * scale,
+            1.0 / scale,
+            lo.as_dvec3(),
+        ),
+        frame_to_world_scale: Some(1.0 / scale),
+        frame_to_world_translation: Some(lo.as_dvec3()),
+        width: Some(config.grid - 1),
+        ..Default::default()
+    };
+    let mut normals = Vec::with_capacity(acc.len());
+    for (p, n, main, colors, count) in acc {
+        cloud.positions.push(p);
+        normals.push(n.normalize_or(Vec3::Y));
+        cloud.colors.push(to_u8_grid(main.map(|c| c / count)));
+        cloud
+            .camera_colors
+            .extend(colors.into_iter().map(|c| to_u8_grid(c.map(|v| v / count))));
+    }
+    cloud.normals = Some(normals);
+    Ok(cloud)
+}
+
+/// Whether capture camera `cam` sees the surface point `p` (normal `n`), by its depth map.
+fn sees(cam: &Camera, map: &ViewImage, p: Vec3, n: Vec3) -> bool {
+    let pd = p.as_dvec3();
+    let Some(uv) = cam.project(pd) else {
+        return false;
+    };
+    if !cam.intrinsics.contains(uv) {
+        return false;
+    }
+    let (x, y) = (uv.x as u32, uv.y as u32);
+    let surface = f64::from(map.depth_at(x, y));
+    if surface <= 0.0 {
+        return false;
+    }
+    let depth = cam.depth(pd);
+    // The map holds the surface at the pixel centre, up to half a pixel away from p: on a slope of
+    // angle θ to the view that changes depth by footprint·tanθ. Allow two pixels' worth, capped.
+    let footprint = depth / cam.intrinsics.fx;
+    let view = (cam.center() - pd).normalize();
+    let cos = f64::from(n.as_dvec3().dot(view).abs()).max(0.2);
+    let slack = 2.0 * footprint * (1.0 - cos * cos).sqrt() / cos + 1e-4 * depth;
+    depth <= surface + slack
+}
+
+/// `count` points on the mesh, area-weighted, with interpolated normals and albedo.
+fn sample_surface(mesh: &Mesh, count: usize, seed: u64) -> Result<Vec<Sample>, Error> {
+    let areas: Vec<f64> = mesh
+        .triangles
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|v| mesh.positions[v as usize].as_dvec3());
+            0.5 * (b - a).cross(c - a).length()
+        })
+        .collect();
+    let mut cdf = Vec::with_capacity(areas.len());
+    let mut total = 0.0;
+    for a in &areas {
+        total += if a.is_finite() { *a } else { 0.0 };
+        cdf.push(total);
+    }
+    if !(total > 0.0 && total.is_finite()) {
+        return Err(Error::EmptyMesh(format!(
+            "{} triangles with total area {total}",
+            mesh.triangles.len()
+        )));
+    }
+    let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(seed);
+    let draws: Vec<(f64, f32, f32)> = (0..count)
+        .map(|_| {
+            (
+                rng.random::<f64>() * total,
+                rng.random::<f32>(),
+                rng.random::<f32>(),
+            )
+        })
+        .collect();
+    Ok(draws
+        .into_par_iter()
+        .map(|(r, r1, r2)| {
+            let t = cdf.partition_point(|&c| c <= r).min(cdf.len() - 1);
+            // Uniform point in a triangle (Osada et al. 2002): (1 − √r1, √r1(1 − r2), √r1·r2).
+            let s = r1.sqrt();
+            let bary = [1.0 - s, s * (1.0 - r2), s * r2];
+            let tri = mesh.triangles[t];
+            let [a, b, c] = tri.map(|v| mesh.positions[v as usize]);
+            let position = bary[0] * a + bary[1] * b + bary[2] * c;
+            let face = (b - a).cross(c - a).normalize_or(Vec3::Y);
+            let normal = match &mesh.normals {
+                Some(n) => {
+                    let v = bary[0] * n[tri[0] as usize]
+                        + bary[1] * n[tri[1] as usize]
+                        + bary[2] * n[tri[2] as usize];
+                    v.try_normalize().unwrap_or(face)
+                }
+                None => face,
+            };
+            Sample {
+                position,
+                normal,
+                albedo: views::albedo_at(mesh, t, bary),
+            }
+        })
+        .collect())
+}

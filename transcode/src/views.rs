@@ -1,1 +1,0 @@
-//! Reference renderer: plenoptic clouds and meshes to RGB, alpha and depth images per camera.

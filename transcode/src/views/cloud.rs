@@ -1,0 +1,440 @@
+//! Point clouds drawn as the PccAppRenderer draws them: voxel cubes (or discs), z-buffered,
+//! coloured towards the viewer.
+
+use camera_model::Camera;
+use glam::Vec3;
+use plenoptic_io::PlenopticCloud;
+use plenoptic_io::view_color::interpolate;
+use rayon::prelude::*;
+
+use super::zbuffer::ZBuffer;
+use super::{
+    Error, PointShape, ViewCamera, ViewImage, ViewOptions, render_supersampled, shade_pixels,
+};
+
+/// Points per parallel work item of the visibility pass.
+const CHUNK: usize = 16_384;
+
+/// Renders a (plenoptic) point cloud from `camera`.
+///
+/// Each point is a cube of side `opts.point_size` centred on it, axis-aligned in the cloud's frame
+/// (PccAppRenderer `--type 0`), or a view-aligned disc (`--type 1`). The colour of a point is
+/// [`interpolate`]d towards the camera centre from its per-camera colours and the capture-camera
+/// positions (main colour when the cloud has no rig or no camera faces the viewer). The cloud is
+/// drawn in its own (voxel) frame, where the rig positions live.
+pub fn render_cloud(
+    cloud: &PlenopticCloud,
+    camera: &Camera,
+    opts: &ViewOptions,
+) -> Result<ViewImage, Error> {
+    check_cloud(cloud)?;
+    let capture: Vec<Vec3> = cloud.camera_positions();
+    render_supersampled(camera, opts, |cam| render_once(cloud, &capture, cam, opts))
+}
+
+/// Checks that the cloud's arrays agree and that ids fit the z-buffer.
+fn check_cloud(cloud: &PlenopticCloud) -> Result<(), Error> {
+    let n = cloud.len();
+    if n >= u32::MAX as usize {
+        return Err(Error::InvalidModel(format!(
+            "{n} points exceed the renderer's limit of {}",
+            u32::MAX - 1
+        )));
+    }
+    if cloud.colors.len() != n {
+        return Err(Error::InvalidModel(format!(
+            "{n} points but {} main colours",
+            cloud.colors.len()
+        )));
+    }
+    if cloud.camera_colors.len() != n * cloud.num_cameras {
+        return Err(Error::InvalidModel(format!(
+            "{n} points × {} cameras but {} per-camera colours",
+            cloud.num_cameras,
+            cloud.camera_colors.len()
+        )));
+    }
+    Ok(())
+}
+
+/// One render at the camera's own resolution.
+fn render_once(
+    cloud: &PlenopticCloud,
+    capture: &[Vec3],
+    camera: &Camera,
+    opts: &ViewOptions,
+) -> Result<ViewImage, Error> {
+    let view = ViewCamera::new(camera)?;
+    let zbuf = ZBuffer::new(view.pixels());
+    match opts.point_shape {
+        PointShape::Cube => draw_cubes(&cloud.positions, &view, 0.5 * opts.point_size, &zbuf),
+        PointShape::Disc => {
+            draw_discs(&cloud.positions, &view, disc_radius(opts.point_size), &zbuf)
+        }
+    }
+    let viewer = view.center;
+    let exponent = opts.exponent;
+    Ok(shade_pixels(&view, &zbuf, opts.background, |id, _, _| {
+        let i = id as usize;
+        interpolate(
+            cloud.positions[i],
+            viewer,
+            capture,
+            cloud.camera_colors_of(i),
+            cloud.colors[i],
+            exponent,
+        )
+    }))
+}
+
+/// Radius of the PccAppRenderer's disc: its fragment shader keeps exp(−|c|²) ≥ 0.5 on a quad of
+/// half-size `point_size`, i.e. |c| ≤ √ln 2 half-sizes.
+fn disc_radius(point_size: f32) -> f32 {
+    std::f32::consts::LN_2.sqrt() * point_size
+}
+
+/// Visibility pass for cubes of half-side `h`: each pixel whose centre ray hits a cube records the
+/// entry depth (camera z) of the nearest hit.
+fn draw_cubes(positions: &[Vec3], view: &ViewCamera, h: f32, zbuf: &ZBuffer) {
+    let r = view.rotation;
+    // Camera-space half-extents of a world-axis-aligned cube: |R|·(h, h, h).
+    let extent = Vec3::new(
+        h * (r.x_axis.x.abs() + r.y_axis.x.abs() + r.z_axis.x.abs()),
+        h * (r.x_axis.y.abs() + r.y_axis.y.abs() + r.z_axis.y.abs()),
+        h * (r.x_axis.z.abs() + r.y_axis.z.abs() + r.z_axis.z.abs()),
+    );
+    let w = view.width as usize;
+    positions
+        .par_chunks(CHUNK)
+        .enumerate()
+        .for_each(|(chunk, points)| {
+            for (j, &p) in points.iter().enumerate() {
+                let c = r * p + view.translation;
+                let Some((x0, x1, y0, y1)) = view.pixel_range(c - extent, c + extent) else {
+                    continue;
+                };
+                let id = (chunk * CHUNK + j) as u32;
+                // Slab test in world axes, relative to the camera centre for precision.
+                let rel = p - view.center;
+                let (lo, hi) = (rel - h, rel + h);
+                for y in y0..=y1 {
+                    for x in x0..=x1 {
+                        let d = view.world_ray(x, y);
+                        let inv = d.recip();
+                        let t0 = lo * inv;
+                        let t1 = hi * inv;
+                        let near = t0.min(t1).max_element();
+                        let far = t0.max(t1).min_element();
+                        if near <= far && near > 0.0 {
+                            zbuf.insert(y as usize * w + x as usize, near, id);
+                        }
+                    }
+                }
+            }
+        });
+}
+
+/// Visibility pass for view-aligned discs of radius `radius` at the point's depth.
+fn draw_discs(positions: &[Vec3], view: &ViewCamera, radius: f32, zbuf: &ZBuffer) {
+    let w = view.width as usize;
+    let extent = Vec3::new(radius, radius, 0.0);
+    let r2 = radius * radius;
+    positions
+        .par_chunks(CHUNK)
+        .enumerate()
+        .for_each(|(chunk, points)| {
+            for (j, &p) in points.iter().enumerate() {
+                let c = view.rotation * p + view.translation;
+                let Some((x0, x1, y0, y1)) = view.pixel_range(c - extent, c + extent) else {
+                    continue;
+                };
+                let id = (chunk * CHUNK + j) as u32;
+                for y in y0..=y1 {
+                    for x in x0..=x1 {
+                        // The pixel ray meets the disc's plane z = c.z at camera_ray·c.z.
+                        let q = view.camera_ray(x, y) * c.z;
+                        let (dx, dy) = (q.x - c.x, q.y - c.y);
+                        if dx * dx + dy * dy <= r2 {
+                            zbuf.insert(y as usize * w + x as usize, c.z, id);
+                        }
+                    }
+                }
+            }
+        });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use camera_model::{Intrinsics, Pose};
+    use glam::DVec3;
+    use plenoptic_io::CaptureCamera;
+
+    fn cloud_of(positions: Vec<Vec3>, colors: Vec<[f32; 3]>) -> PlenopticCloud {
+        PlenopticCloud {
+            positions,
+            colors,
+            ..Default::default()
+        }
+    }
+
+    fn camera(eye: DVec3, target: DVec3, w: u32, h: u32, fov: f64) -> Camera {
+        Camera::new(
+            Intrinsics::from_fov_y(w, h, fov),
+            Pose::look_at(eye, target, DVec3::Y),
+        )
+    }
+
+    /// A closed voxelised sphere shell: voxels inside the ball with a 6-neighbour outside.
+    fn voxel_sphere(radius: f32) -> Vec<Vec3> {
+        let r = radius.ceil() as i32 + 1;
+        let inside = |x: i32, y: i32, z: i32| ((x * x + y * y + z * z) as f32) <= radius * radius;
+        let mut out = Vec::new();
+        for x in -r..=r {
+            for y in -r..=r {
+                for z in -r..=r {
+                    if inside(x, y, z)
+                        && [
+                            (1, 0, 0),
+                            (-1, 0, 0),
+                            (0, 1, 0),
+                            (0, -1, 0),
+                            (0, 0, 1),
+                            (0, 0, -1),
+                        ]
+                        .iter()
+                        .any(|&(a, b, c)| !inside(x + a, y + b, z + c))
+                    {
+                        out.push(Vec3::new(x as f32, y as f32, z as f32));
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn voxel_surface_is_watertight() {
+        let radius = 40.0;
+        let pts = voxel_sphere(radius);
+        let n = pts.len();
+        let cloud = cloud_of(pts, vec![[1.0, 1.0, 1.0]; n]);
+        // Several directions, some oblique, close enough that a voxel spans several pixels and far
+        // enough that it spans less than one.
+        for (eye, w) in [
+            (DVec3::new(0.0, 0.0, 300.0), 256),
+            (DVec3::new(170.0, 120.0, 190.0), 512),
+            (DVec3::new(-900.0, 400.0, 50.0), 128),
+        ] {
+            let cam = camera(eye, DVec3::ZERO, w, w, 40.0);
+            let img = render_cloud(&cloud, &cam, &ViewOptions::default()).unwrap();
+            // Every pixel whose ray meets a ball slightly smaller than the voxel hull must be covered.
+            let mut inside = 0;
+            for y in 0..w {
+                for x in 0..w {
+                    let ray = cam.ray(glam::DVec2::new(x as f64 + 0.5, y as f64 + 0.5));
+                    let b = ray.origin.dot(ray.direction);
+                    let c = ray.origin.length_squared() - (radius as f64 - 1.0).powi(2);
+                    if b * b - c > 0.0 {
+                        inside += 1;
+                        assert_eq!(
+                            img.alpha_at(x, y),
+                            1.0,
+                            "hole at ({x}, {y}) seen from {eye}"
+                        );
+                    }
+                }
+            }
+            assert!(inside > 100, "the sphere covers {inside} pixels only");
+        }
+    }
+
+    #[test]
+    fn single_point_renders_at_the_projected_pixel() {
+        let cam = camera(
+            DVec3::new(30.0, 20.0, 400.0),
+            DVec3::new(3.0, -2.0, 1.0),
+            640,
+            480,
+            20.0,
+        );
+        for p in [
+            Vec3::new(3.3, -2.1, 1.7),
+            Vec3::new(10.0, 5.0, -4.0),
+            Vec3::new(-12.0, 9.0, 3.0),
+        ] {
+            let cloud = cloud_of(vec![p], vec![[0.2, 0.4, 0.6]]);
+            // A tiny cube covers at most the one pixel whose centre is nearest its projection.
+            let opts = ViewOptions {
+                point_size: 0.05,
+                ..Default::default()
+            };
+            let uv = cam.project(p.as_dvec3()).unwrap();
+            // Shift the point so its projection lands on a pixel centre, then check that pixel alone.
+            let (px, py) = (uv.x.floor(), uv.y.floor());
+            let target = glam::DVec2::new(px + 0.5, py + 0.5);
+            let ray = cam.ray(target);
+            let q = ray.at(cam.center().distance(p.as_dvec3()));
+            let cloud = PlenopticCloud {
+                positions: vec![q.as_vec3()],
+                ..cloud
+            };
+            let img = render_cloud(&cloud, &cam, &opts).unwrap();
+            let covered: Vec<(u32, u32)> = (0..480)
+                .flat_map(|y| (0..640).map(move |x| (x, y)))
+                .filter(|&(x, y)| img.alpha_at(x, y) > 0.0)
+                .collect();
+            assert_eq!(covered, vec![(px as u32, py as u32)]);
+            assert_eq!(img.rgb_at(px as u32, py as u32), [0.2, 0.4, 0.6]);
+            let depth = cam.depth(q) as f32;
+            let d = img.depth_at(px as u32, py as u32);
+            assert!((d - depth).abs() < 0.05, "depth {d} vs {depth}");
+        }
+    }
+
+    #[test]
+    fn point_seen_by_one_capture_camera_shows_its_colour() {
+        // Three capture cameras 120° apart around the point; the viewer sits next to camera 1.
+        let p = Vec3::new(10.0, 10.0, 10.0);
+        let caps = [
+            DVec3::new(1000.0, 10.0, 10.0),
+            DVec3::new(10.0, 10.0, 1000.0),
+            DVec3::new(-900.0, 10.0, -900.0),
+        ];
+        let colours = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+        let cloud = PlenopticCloud {
+            positions: vec![p],
+            colors: vec![[0.5, 0.5, 0.5]],
+            num_cameras: 3,
+            camera_colors: colours.to_vec(),
+            cameras: caps
+                .iter()
+                .map(|&position| CaptureCamera {
+                    position,
+                    matrix: None,
+                })
+                .collect(),
+            ..Default::default()
+        };
+        // Viewer exactly on camera 1's axis: camera 0 is at 90° (weight 0), camera 2 beyond.
+        let cam = camera(DVec3::new(10.0, 10.0, 200.0), p.as_dvec3(), 64, 64, 20.0);
+        let img = render_cloud(
+            &cloud,
+            &cam,
+            &ViewOptions {
+                point_size: 4.0,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        assert_eq!(img.rgb_at(32, 32), [0.0, 1.0, 0.0]);
+        // From behind every camera the main colour shows.
+        let cloud_front = PlenopticCloud {
+            cameras: cloud.cameras[..2].to_vec(),
+            num_cameras: 2,
+            camera_colors: colours[..2].to_vec(),
+            ..cloud.clone()
+        };
+        let back = camera(DVec3::new(-300.0, 10.0, -300.0), p.as_dvec3(), 64, 64, 20.0);
+        let img = render_cloud(
+            &cloud_front,
+            &back,
+            &ViewOptions {
+                point_size: 4.0,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        assert_eq!(img.rgb_at(32, 32), [0.5, 0.5, 0.5]);
+    }
+
+    #[test]
+    fn nearer_point_wins_and_background_elsewhere() {
+        let cam = camera(DVec3::new(0.0, 0.0, 100.0), DVec3::ZERO, 32, 32, 30.0);
+        let cloud = cloud_of(
+            vec![Vec3::new(0.0, 0.0, -5.0), Vec3::new(0.0, 0.0, 5.0)],
+            vec![[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]],
+        );
+        let opts = ViewOptions {
+            point_size: 4.0,
+            background: [0.25, 0.5, 0.75],
+            ..Default::default()
+        };
+        let img = render_cloud(&cloud, &cam, &opts).unwrap();
+        assert_eq!(img.rgb_at(16, 16), [0.0, 0.0, 1.0]);
+        assert!(
+            (img.depth_at(16, 16) - 93.0).abs() < 1e-3,
+            "front face of the near cube at z = 93"
+        );
+        assert_eq!(img.rgb_at(0, 0), [0.25, 0.5, 0.75]);
+        assert_eq!(img.alpha_at(0, 0), 0.0);
+        assert_eq!(img.depth_at(0, 0), 0.0);
+    }
+
+    #[test]
+    fn disc_covers_its_radius() {
+        // fx = fy = f; a disc of radius ρ at depth z covers pixel centres within f·ρ/z of its centre.
+        let cam = Camera::new(
+            Intrinsics::centered(101, 101, 100.0, 100.0),
+            Pose::look_at(DVec3::new(0.0, 0.0, 50.0), DVec3::ZERO, DVec3::Y),
+        );
+        let cloud = cloud_of(vec![Vec3::ZERO], vec![[1.0; 3]]);
+        let opts = ViewOptions {
+            point_shape: PointShape::Disc,
+            point_size: 10.0,
+            ..Default::default()
+        };
+        let img = render_cloud(&cloud, &cam, &opts).unwrap();
+        let r_px = 100.0 * disc_radius(10.0) / 50.0;
+        for y in 0..101u32 {
+            for x in 0..101u32 {
+                let d = ((x as f32 + 0.5 - 50.5).powi(2) + (y as f32 + 0.5 - 50.5).powi(2)).sqrt();
+                if (d - r_px).abs() > 1e-3 {
+                    assert_eq!(
+                        img.alpha_at(x, y) == 1.0,
+                        d < r_px,
+                        "pixel ({x}, {y}) at {d} px, radius {r_px}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn supersampling_averages_coverage() {
+        let cam = camera(DVec3::new(0.0, 0.0, 100.0), DVec3::ZERO, 16, 16, 30.0);
+        let cloud = cloud_of(vec![Vec3::ZERO], vec![[1.0; 3]]);
+        let opts = ViewOptions {
+            point_size: 10.0,
+            supersample: 4,
+            ..Default::default()
+        };
+        let img = render_cloud(&cloud, &cam, &opts).unwrap();
+        assert_eq!((img.width, img.height), (16, 16));
+        // Total coverage ≈ the cube face's projected area in pixels (front face at z = 95).
+        let f = 8.0 / (15f32.to_radians().tan());
+        let area = (f * 10.0 / 95.0).powi(2);
+        let total: f32 = img.alpha.iter().sum();
+        assert!(
+            (total - area).abs() < 0.1 * area,
+            "coverage {total} vs {area}"
+        );
+        assert!(img.alpha.iter().any(|&a| a > 0.0 && a < 1.0));
+        for (i, &a) in img.alpha.iter().enumerate() {
+            assert!(
+                (img.rgb[3 * i] - a).abs() < 1e-6,
+                "white on black equals coverage"
+            );
+        }
+    }
+
+    #[test]
+    fn inconsistent_cloud_is_refused() {
+        let cam = camera(DVec3::new(0.0, 0.0, 100.0), DVec3::ZERO, 8, 8, 30.0);
+        let cloud = cloud_of(vec![Vec3::ZERO, Vec3::ONE], vec![[1.0; 3]]);
+        assert!(matches!(
+            render_cloud(&cloud, &cam, &ViewOptions::default()),
+            Err(Error::InvalidModel(_))
+        ));
+    }
+}

@@ -1,0 +1,603 @@
+//! Meshes rasterised with perspective-correct attributes: bilinear textures, vertex colours,
+//! material base colours, and per-vertex plenoptic colours.
+
+use camera_model::Camera;
+use glam::{Vec2, Vec3};
+use plenoptic_io::view_color::interpolate;
+use plenoptic_io::{Mesh, Texture};
+use rayon::prelude::*;
+
+use super::zbuffer::ZBuffer;
+use super::{Error, ViewCamera, ViewImage, ViewOptions, render_supersampled, shade_pixels};
+
+/// Triangles per parallel work item of the visibility pass.
+const CHUNK: usize = 4_096;
+
+/// Barycentric slack: pixel centres exactly on a shared edge are claimed by both triangles
+/// (the z-buffer keeps one) instead of by neither through rounding.
+const EDGE_EPS: f32 = 1e-5;
+
+/// Nearest depth (camera z) a surface may have; geometry at or behind the camera is clipped.
+const NEAR: f32 = 1e-4;
+
+/// Renders a triangle mesh from `camera`.
+///
+/// Depth and barycentric coordinates come from intersecting each pixel-centre ray with the
+/// triangle, which is exactly perspective-correct. Colour: for a mesh with per-vertex plenoptic
+/// colours, each vertex's colour is [`interpolate`]d towards the viewer and the result is
+/// interpolated across the triangle (the PccAppRenderer's surface shader); otherwise
+/// [`albedo_at`]: material base colour × bilinear texture × vertex colour.
+pub fn render_mesh(mesh: &Mesh, camera: &Camera, opts: &ViewOptions) -> Result<ViewImage, Error> {
+    check_mesh(mesh)?;
+    render_supersampled(camera, opts, |cam| render_once(mesh, cam, opts))
+}
+
+/// Checks every index and array length the renderer relies on.
+pub(crate) fn check_mesh(mesh: &Mesh) -> Result<(), Error> {
+    let nv = mesh.positions.len();
+    let nt = mesh.triangles.len();
+    if nt >= u32::MAX as usize {
+        return Err(Error::InvalidModel(format!(
+            "{nt} triangles exceed the renderer's limit of {}",
+            u32::MAX - 1
+        )));
+    }
+    if let Some((t, tri)) = mesh
+        .triangles
+        .iter()
+        .enumerate()
+        .find(|(_, tri)| tri.iter().any(|&v| v as usize >= nv))
+    {
+        return Err(Error::InvalidModel(format!(
+            "triangle {t} {tri:?} refers to a vertex beyond the {nv} vertices"
+        )));
+    }
+    let per_vertex = [
+        ("normals", mesh.normals.as_ref().map(Vec::len)),
+        ("texture coordinates", mesh.uvs.as_ref().map(Vec::len)),
+        ("vertex colours", mesh.colors.as_ref().map(Vec::len)),
+    ];
+    for (what, len) in per_vertex {
+        if let Some(len) = len.filter(|&l| l != nv) {
+            return Err(Error::InvalidModel(format!(
+                "{nv} vertices but {len} {what}"
+            )));
+        }
+    }
+    if mesh.camera_colors.len() != nv * mesh.num_cameras {
+        return Err(Error::InvalidModel(format!(
+            "{nv} vertices × {} cameras but {} per-camera colours",
+            mesh.num_cameras,
+            mesh.camera_colors.len()
+        )));
+    }
+    if !mesh.triangle_materials.is_empty() && mesh.triangle_materials.len() != nt {
+        return Err(Error::InvalidModel(format!(
+            "{nt} triangles but {} triangle materials",
+            mesh.triangle_materials.len()
+        )));
+    }
+    if let Some((t, m)) = mesh
+        .triangle_materials
+        .iter()
+        .enumerate()
+        .find(|(_, m)| **m as usize >= mesh.materials.len())
+    {
+        return Err(Error::InvalidModel(format!(
+            "triangle {t} uses material {m} of {}",
+            mesh.materials.len()
+        )));
+    }
+    for (i, m) in mesh.materials.iter().enumerate() {
+        if let Some(t) = m.texture.filter(|&t| t >= mesh.textures.len()) {
+            return Err(Error::InvalidModel(format!(
+                "material {i} ({}) uses texture {t} of {}",
+                m.name,
+                mesh.textures.len()
+            )));
+        }
+    }
+    for (i, t) in mesh.textures.iter().enumerate() {
+        if t.width == 0 || t.height == 0 || t.pixels.len() != t.width as usize * t.height as usize {
+            return Err(Error::InvalidModel(format!(
+                "texture {i} is {}×{} with {} pixels",
+                t.width,
+                t.height,
+                t.pixels.len()
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// One render at the camera's own resolution.
+fn render_once(mesh: &Mesh, camera: &Camera, opts: &ViewOptions) -> Result<ViewImage, Error> {
+    let view = ViewCamera::new(camera)?;
+    let cam_space: Vec<Vec3> = mesh
+        .positions
+        .par_iter()
+        .map(|&p| view.rotation * p + view.translation)
+        .collect();
+    let zbuf = ZBuffer::new(view.pixels());
+    draw_triangles(&mesh.triangles, &cam_space, &view, &zbuf);
+    let plenoptic = vertex_view_colors(mesh, view.center, opts.exponent);
+    Ok(shade_pixels(&view, &zbuf, opts.background, |id, x, y| {
+        let t = id as usize;
+        let tri = mesh.triangles[t];
+        let [a, b, c] = tri.map(|v| cam_space[v as usize]);
+        // The winning ray hit this triangle in the visibility pass; recompute its barycentrics.
+        let bary =
+            intersect(view.camera_ray(x, y), a, b, c).map_or([1.0 / 3.0; 3], |(_, bary)| bary);
+        match &plenoptic {
+            Some(colors) => mix(tri.map(|v| colors[v as usize]), bary),
+            None => albedo_at(mesh, t, bary),
+        }
+    }))
+}
+
+/// The view colour of every vertex of a mesh with per-vertex plenoptic colours, or `None`.
+fn vertex_view_colors(mesh: &Mesh, viewer: Vec3, exponent: i32) -> Option<Vec<[f32; 3]>> {
+    if mesh.num_cameras == 0 {
+        return None;
+    }
+    let capture: Vec<Vec3> = mesh.cameras.iter().map(|c| c.position.as_vec3()).collect();
+    Some(
+        (0..mesh.positions.len())
+            .into_par_iter()
+            .map(|v| {
+                let main = mesh.colors.as_ref().map_or([1.0; 3], |c| c[v]);
+                interpolate(
+                    mesh.positions[v],
+                    viewer,
+                    &capture,
+                    mesh.camera_colors_of(v),
+                    main,
+                    exponent,
+                )
+            })
+            .collect(),
+    )
+}
+
+/// Visibility pass: the nearest triangle under each pixel centre.
+fn draw_triangles(triangles: &[[u32; 3]], cam_space: &[Vec3], view: &ViewCamera, zbuf: &ZBuffer) {
+    let w = view.width as usize;
+    triangles
+        .par_chunks(CHUNK)
+        .enumerate()
+        .for_each(|(chunk, tris)| {
+            for (j, tri) in tris.iter().enumerate() {
+                let [a, b, c] = tri.map(|v| cam_space[v as usize]);
+                let Some((x0, x1, y0, y1)) = screen_bounds(a, b, c, view) else {
+                    continue;
+                };
+                let id = (chunk * CHUNK + j) as u32;
+                for y in y0..=y1 {
+                    for x in x0..=x1 {
+                        if let Some((t, _)) = intersect(view.camera_ray(x, y), a, b, c) {
+                            zbuf.insert(y as usize * w + x as usize, t, id);
+                        }
+                    }
+                }
+            }
+        });
+}
+
+/// Pixel range covered by the part of a camera-space triangle in front of the near plane.
+fn screen_bounds(a: Vec3, b: Vec3, c: Vec3, view: &ViewCamera) -> Option<(u32, u32, u32, u32)> {
+    // Clip against z = NEAR: keep the vertices in front and the edge crossings.
+    let mut pts = [Vec3::ZERO; 6];
+    let mut n = 0;
+    for (p, q) in [(a, b), (b, c), (c, a)] {
+        if p.z >= NEAR {
+            pts[n] = p;
+            n += 1;
+        }
+        if (p.z >= NEAR) != (q.z >= NEAR) {
+            let s = (NEAR - p.z) / (q.z - p.z);
+            pts[n] = p + s * (q - p);
+            pts[n].z = NEAR;
+            n += 1;
+        }
+    }
+    if n == 0 {
+        return None;
+    }
+    // Bound the projections: a zero-thickness box per point keeps ViewCamera::pixel_range's maths.
+    let mut lo = Vec2::splat(f32::INFINITY);
+    let mut hi = Vec2::splat(f32::NEG_INFINITY);
+    for p in &pts[..n] {
+        let q = Vec2::new(p.x / p.z, p.y / p.z);
+        lo = lo.min(q);
+        hi = hi.max(q);
+    }
+    view.pixel_range(lo.extend(1.0), hi.extend(1.0))
+}
+
+/// Ray (origin 0, direction `d` with z = 1) against triangle (a, b, c), both sides
+/// (Möller & Trumbore 1997): the hit's camera z and barycentrics, when in front of the near plane.
+#[inline]
+fn intersect(d: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Option<(f32, [f32; 3])> {
+    let e1 = b - a;
+    let e2 = c - a;
+    let p = d.cross(e2);
+    let det = e1.dot(p);
+    if det == 0.0 || !det.is_finite() {
+        return None;
+    }
+    let inv = 1.0 / det;
+    let s = -a;
+    let u = s.dot(p) * inv;
+    if !(-EDGE_EPS..=1.0 + EDGE_EPS).contains(&u) {
+        return None;
+    }
+    let q = s.cross(e1);
+    let v = d.dot(q) * inv;
+    if v < -EDGE_EPS || u + v > 1.0 + EDGE_EPS {
+        return None;
+    }
+    // d has z = 1, so the ray parameter is the camera z of the hit.
+    let t = e2.dot(q) * inv;
+    if t < NEAR {
+        return None;
+    }
+    Some((t, [1.0 - u - v, u, v]))
+}
+
+/// Barycentric mix of three colours.
+#[inline]
+fn mix(c: [[f32; 3]; 3], bary: [f32; 3]) -> [f32; 3] {
+    std::array::from_fn(|k| bary[0] * c[0][k] + bary[1] * c[1][k] + bary[2] * c[2][k])
+}
+
+/// The view-independent colour of triangle `t` at barycentrics `bary`: material base colour ×
+/// bilinear texture (when the material has one and the mesh has texture coordinates) × vertex
+/// colour (when present); white when none is given (glTF's default base colour).
+#[must_use]
+pub fn albedo_at(mesh: &Mesh, t: usize, bary: [f32; 3]) -> [f32; 3] {
+    let tri = mesh.triangles[t];
+    let mut color = [1.0f32; 3];
+    if let Some(material) = mesh
+        .triangle_materials
+        .get(t)
+        .and_then(|&m| mesh.materials.get(m as usize))
+    {
+        for (k, c) in color.iter_mut().enumerate() {
+            *c *= material.base_color[k];
+        }
+        if let (Some(tex), Some(uvs)) = (
+            material.texture.and_then(|i| mesh.textures.get(i)),
+            &mesh.uvs,
+        ) {
+            let uv = bary[0] * uvs[tri[0] as usize]
+                + bary[1] * uvs[tri[1] as usize]
+                + bary[2] * uvs[tri[2] as usize];
+            let s = sample_bilinear(tex, uv);
+            for (k, c) in color.iter_mut().enumerate() {
+                *c *= s[k];
+            }
+        }
+    }
+    if let Some(colors) = &mesh.colors {
+        let v = mix(tri.map(|v| colors[v as usize]), bary);
+        for (k, c) in color.iter_mut().enumerate() {
+            *c *= v[k];
+        }
+    }
+    color
+}
+
+/// Bilinear sample of a texture at `uv` (image convention: (0, 0) is the top-left corner of the
+/// texture, texel (i, j)'s centre at ((i + 0.5)/W, (j + 0.5)/H)), wrapping around (glTF's default
+/// REPEAT sampler).
+#[must_use]
+pub fn sample_bilinear(tex: &Texture, uv: Vec2) -> [f32; 4] {
+    let (w, h) = (tex.width as i64, tex.height as i64);
+    let x = uv.x * w as f32 - 0.5;
+    let y = uv.y * h as f32 - 0.5;
+    if !(x.is_finite() && y.is_finite()) {
+        return tex.pixels[0];
+    }
+    let (x0, y0) = (x.floor(), y.floor());
+    let (fx, fy) = (x - x0, y - y0);
+    let texel = |i: i64, j: i64| tex.pixels[(j.rem_euclid(h) * w + i.rem_euclid(w)) as usize];
+    let (i, j) = (x0 as i64, y0 as i64);
+    let (c00, c10, c01, c11) = (
+        texel(i, j),
+        texel(i + 1, j),
+        texel(i, j + 1),
+        texel(i + 1, j + 1),
+    );
+    std::array::from_fn(|k| {
+        let top = c00[k] + fx * (c10[k] - c00[k]);
+        let bottom = c01[k] + fx * (c11[k] - c01[k]);
+        top + fy * (bottom - top)
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use camera_model::{Intrinsics, Pose};
+    use glam::DVec3;
+    use plenoptic_io::{CaptureCamera, Material};
+
+    fn quad(colors: Option<Vec<[f32; 3]>>) -> Mesh {
+        Mesh {
+            positions: vec![
+                Vec3::new(-1.0, -1.0, 0.0),
+                Vec3::new(1.0, -1.0, 0.0),
+                Vec3::new(1.0, 1.0, 0.0),
+                Vec3::new(-1.0, 1.0, 0.0),
+            ],
+            colors,
+            triangles: vec![[0, 1, 2], [0, 2, 3]],
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn perspective_correct_interpolation_matches_closed_form() {
+        // A plane receding in depth with the colour red = its world x mapped to [0, 1]: screen-space
+        // (affine) interpolation would bend this; the closed form is the x of the ray's hit.
+        let mesh = Mesh {
+            positions: vec![
+                Vec3::new(-4.0, -1.0, -10.0),
+                Vec3::new(4.0, -1.0, 0.0),
+                Vec3::new(4.0, 1.0, 0.0),
+                Vec3::new(-4.0, 1.0, -10.0),
+            ],
+            colors: Some(vec![
+                [0.0, 0.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [0.0, 0.0, 0.0],
+            ]),
+            triangles: vec![[0, 1, 2], [0, 2, 3]],
+            ..Default::default()
+        };
+        let cam = Camera::new(
+            Intrinsics::from_fov_y(200, 100, 30.0),
+            Pose::look_at(
+                DVec3::new(0.0, 0.0, 8.0),
+                DVec3::new(0.0, 0.0, -3.0),
+                DVec3::Y,
+            ),
+        );
+        let img = render_mesh(&mesh, &cam, &ViewOptions::default()).unwrap();
+        let mut checked = 0;
+        for y in 0..100 {
+            for x in 0..200 {
+                if img.alpha_at(x, y) == 0.0 {
+                    continue;
+                }
+                let ray = cam.ray(glam::DVec2::new(f64::from(x) + 0.5, f64::from(y) + 0.5));
+                // Plane through the quad: z = −10 + 10·(x + 4)/8, i.e. 10x − 8z = 40... solve along the ray.
+                let (o, d) = (ray.origin, ray.direction);
+                let s = (40.0 - 10.0 * o.x + 8.0 * o.z) / (10.0 * d.x - 8.0 * d.z);
+                let hit = ray.at(s);
+                let expected = ((hit.x + 4.0) / 8.0) as f32;
+                assert!(
+                    (img.rgb_at(x, y)[0] - expected).abs() < 2e-3,
+                    "({x}, {y}): {} vs {expected}",
+                    img.rgb_at(x, y)[0]
+                );
+                let depth = cam.depth(hit) as f32;
+                assert!((img.depth_at(x, y) - depth).abs() < 1e-3 * depth);
+                checked += 1;
+            }
+        }
+        assert!(checked > 2000, "only {checked} pixels covered");
+    }
+
+    #[test]
+    fn shared_edges_leave_no_cracks() {
+        // A fan of thin triangles around a centre: every pixel inside the polygon must be covered.
+        let n = 97;
+        let mut positions = vec![Vec3::ZERO];
+        for k in 0..n {
+            let a = std::f32::consts::TAU * k as f32 / n as f32;
+            positions.push(Vec3::new(a.cos(), a.sin(), 0.0));
+        }
+        let triangles = (0..n as u32)
+            .map(|k| [0, 1 + k, 1 + (k + 1) % n as u32])
+            .collect();
+        let mesh = Mesh {
+            positions,
+            triangles,
+            ..Default::default()
+        };
+        let cam = Camera::new(
+            Intrinsics::from_fov_y(300, 300, 30.0),
+            Pose::look_at(DVec3::new(0.3, 0.2, 4.5), DVec3::ZERO, DVec3::Y),
+        );
+        let img = render_mesh(&mesh, &cam, &ViewOptions::default()).unwrap();
+        let inner = (std::f64::consts::PI / n as f64).cos() - 1e-3;
+        let mut inside = 0;
+        for y in 0..300 {
+            for x in 0..300 {
+                let ray = cam.ray(glam::DVec2::new(f64::from(x) + 0.5, f64::from(y) + 0.5));
+                let hit = ray.at(-ray.origin.z / ray.direction.z);
+                if hit.truncate().length() < inner {
+                    inside += 1;
+                    assert_eq!(img.alpha_at(x, y), 1.0, "crack at ({x}, {y})");
+                }
+            }
+        }
+        assert!(inside > 5000);
+    }
+
+    #[test]
+    fn plenoptic_vertices_are_interpolated_then_mixed() {
+        let mut mesh = quad(Some(vec![[0.5; 3]; 4]));
+        mesh.num_cameras = 2;
+        mesh.cameras = vec![
+            CaptureCamera {
+                position: DVec3::new(0.0, 0.0, 100.0),
+                matrix: None,
+            },
+            CaptureCamera {
+                position: DVec3::new(0.0, 0.0, -100.0),
+                matrix: None,
+            },
+        ];
+        // Camera 0 sees red on the left vertices and green on the right ones; camera 1 blue.
+        mesh.camera_colors = [
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [1.0, 0.0, 0.0],
+        ]
+        .iter()
+        .flat_map(|&c| [c, [0.0, 0.0, 1.0]])
+        .collect();
+        let cam = Camera::new(
+            Intrinsics::from_fov_y(64, 64, 40.0),
+            Pose::look_at(DVec3::new(0.0, 0.0, 5.0), DVec3::ZERO, DVec3::Y),
+        );
+        let img = render_mesh(&mesh, &cam, &ViewOptions::default()).unwrap();
+        // Each vertex's view colour, by the one interpolation, then mixed by perspective-correct barycentrics.
+        let viewer = Vec3::new(0.0, 0.0, 5.0);
+        let caps = [Vec3::new(0.0, 0.0, 100.0), Vec3::new(0.0, 0.0, -100.0)];
+        let vc: Vec<[f32; 3]> = (0..4)
+            .map(|v| {
+                interpolate(
+                    mesh.positions[v],
+                    viewer,
+                    &caps,
+                    mesh.camera_colors_of(v),
+                    [0.5; 3],
+                    10,
+                )
+            })
+            .collect();
+        for (x, y) in [(20u32, 32u32), (32, 20), (44, 40), (31, 33)] {
+            let ray = cam.ray(glam::DVec2::new(f64::from(x) + 0.5, f64::from(y) + 0.5));
+            let hit = ray.at(-ray.origin.z / ray.direction.z).as_vec3();
+            // Bilinear on the square is not barycentric; use the triangle that holds the hit.
+            let (tri, bary) = if hit.y <= hit.x {
+                (
+                    [0usize, 1, 2],
+                    [
+                        (1.0 - hit.x) / 2.0,
+                        (hit.x - hit.y) / 2.0,
+                        (1.0 + hit.y) / 2.0,
+                    ],
+                )
+            } else {
+                (
+                    [0usize, 2, 3],
+                    [
+                        (1.0 - hit.y) / 2.0,
+                        (1.0 + hit.x) / 2.0,
+                        (hit.y - hit.x) / 2.0,
+                    ],
+                )
+            };
+            let expected = mix(tri.map(|v| vc[v]), bary);
+            let got = img.rgb_at(x, y);
+            for k in 0..3 {
+                assert!(
+                    (got[k] - expected[k]).abs() < 1e-3,
+                    "({x}, {y}): {got:?} vs {expected:?}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn bilinear_sampling_matches_hand_values() {
+        let tex = Texture {
+            width: 2,
+            height: 2,
+            pixels: vec![
+                [0.0, 0.0, 0.0, 1.0],
+                [1.0, 0.0, 0.0, 1.0],
+                [0.0, 1.0, 0.0, 1.0],
+                [1.0, 1.0, 1.0, 1.0],
+            ],
+        };
+        // Texel centres give the texels.
+        assert_eq!(
+            sample_bilinear(&tex, Vec2::new(0.25, 0.25)),
+            [0.0, 0.0, 0.0, 1.0]
+        );
+        assert_eq!(
+            sample_bilinear(&tex, Vec2::new(0.75, 0.75)),
+            [1.0, 1.0, 1.0, 1.0]
+        );
+        // The middle is the mean of the four.
+        assert_eq!(
+            sample_bilinear(&tex, Vec2::new(0.5, 0.5)),
+            [0.5, 0.5, 0.25, 1.0]
+        );
+        // Wrapping: u = 1.25 is u = 0.25.
+        assert_eq!(
+            sample_bilinear(&tex, Vec2::new(1.25, 0.75)),
+            sample_bilinear(&tex, Vec2::new(0.25, 0.75))
+        );
+        // A quarter of the way from texel (0,0) to (1,0).
+        let s = sample_bilinear(&tex, Vec2::new(0.375, 0.25));
+        assert!((s[0] - 0.25).abs() < 1e-6);
+    }
+
+    #[test]
+    fn material_texture_and_vertex_colours_multiply() {
+        let mut mesh = quad(Some(vec![[0.5, 1.0, 1.0]; 4]));
+        mesh.uvs = Some(vec![
+            Vec2::new(0.0, 1.0),
+            Vec2::new(1.0, 1.0),
+            Vec2::new(1.0, 0.0),
+            Vec2::new(0.0, 0.0),
+        ]);
+        mesh.textures = vec![Texture {
+            width: 1,
+            height: 1,
+            pixels: vec![[1.0, 0.5, 1.0, 1.0]],
+        }];
+        mesh.materials = vec![Material {
+            name: "m".into(),
+            base_color: [1.0, 1.0, 0.5, 1.0],
+            texture: Some(0),
+        }];
+        mesh.triangle_materials = vec![0, 0];
+        let c = albedo_at(&mesh, 1, [0.2, 0.3, 0.5]);
+        assert_eq!(c, [0.5, 0.5, 0.5]);
+    }
+
+    #[test]
+    fn bad_indices_are_refused() {
+        let mut mesh = quad(None);
+        mesh.triangles.push([0, 1, 9]);
+        let cam = Camera::new(
+            Intrinsics::from_fov_y(8, 8, 40.0),
+            Pose::look_at(DVec3::new(0.0, 0.0, 5.0), DVec3::ZERO, DVec3::Y),
+        );
+        let err = render_mesh(&mesh, &cam, &ViewOptions::default()).unwrap_err();
+        assert!(err.to_string().contains("triangle 2"), "{err}");
+    }
+
+    #[test]
+    fn geometry_behind_the_camera_is_clipped() {
+        // A huge floor passing under and behind the camera still renders in front of it.
+        let mesh = Mesh {
+            positions: vec![
+                Vec3::new(-100.0, -1.0, -100.0),
+                Vec3::new(100.0, -1.0, -100.0),
+                Vec3::new(0.0, -1.0, 100.0),
+            ],
+            triangles: vec![[0, 1, 2]],
+            ..Default::default()
+        };
+        let cam = Camera::new(
+            Intrinsics::from_fov_y(40, 40, 60.0),
+            Pose::look_at(DVec3::ZERO, DVec3::new(0.0, -0.3, -1.0), DVec3::Y),
+        );
+        let img = render_mesh(&mesh, &cam, &ViewOptions::default()).unwrap();
+        assert_eq!(img.alpha_at(20, 39), 1.0);
+        assert_eq!(img.alpha_at(20, 0), 0.0);
+        let ray = cam.ray(glam::DVec2::new(20.5, 39.5));
+        let hit = ray.at((-1.0 - ray.origin.y) / ray.direction.y);
+        assert!((f64::from(img.depth_at(20, 39)) - cam.depth(hit)).abs() < 1e-3);
+    }
+}

@@ -1,0 +1,220 @@
+//! Writers for rendered views: RGB PNG (8- or 16-bit), alpha PNG, depth EXR; all atomic.
+
+use std::path::{Path, PathBuf};
+
+use image::codecs::png::PngEncoder;
+use image::{ExtendedColorType, ImageEncoder};
+
+use super::{Error, ViewImage};
+use crate::atomic::{write_atomic, write_atomic_with};
+
+/// Bits per channel of a PNG.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+pub enum BitDepth {
+    /// 8 bits per channel (what trainers expect).
+    #[default]
+    Eight,
+    /// 16 bits per channel (big-endian in the file, as PNG requires).
+    Sixteen,
+}
+
+/// The files written for one view by [`write_view_images`].
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ViewFiles {
+    /// `<stem>.png`.
+    pub rgb: PathBuf,
+    /// `<stem>_alpha.png`.
+    pub alpha: PathBuf,
+    /// `<stem>_depth.exr`.
+    pub depth: PathBuf,
+}
+
+/// Writes `<dir>/<stem>.png` (RGB), `<dir>/<stem>_alpha.png` (8-bit grey) and
+/// `<dir>/<stem>_depth.exr` (channel `Z`, camera z, 0 where nothing is seen).
+pub fn write_view_images(
+    image: &ViewImage,
+    dir: &Path,
+    stem: &str,
+    depth: BitDepth,
+) -> Result<ViewFiles, Error> {
+    let files = ViewFiles {
+        rgb: dir.join(format!("{stem}.png")),
+        alpha: dir.join(format!("{stem}_alpha.png")),
+        depth: dir.join(format!("{stem}_depth.exr")),
+    };
+    write_rgb_png(&files.rgb, image, depth)?;
+    write_alpha_png(&files.alpha, image)?;
+    write_depth_exr(&files.depth, image)?;
+    Ok(files)
+}
+
+/// Quantises [0, 1] to `max` with rounding (values outside are clamped).
+fn quantise(v: f32, max: f32) -> f32 {
+    (v.clamp(0.0, 1.0) * max).round()
+}
+
+/// Writes the colour of a view as an RGB PNG, atomically.
+pub fn write_rgb_png(path: &Path, image: &ViewImage, depth: BitDepth) -> Result<(), Error> {
+    check_len(path, image.rgb.len(), 3 * pixels(image))?;
+    let bytes: Vec<u8> = match depth {
+        BitDepth::Eight => image
+            .rgb
+            .iter()
+            .map(|&v| quantise(v, 255.0) as u8)
+            .collect(),
+        BitDepth::Sixteen => image
+            .rgb
+            .iter()
+            .flat_map(|&v| (quantise(v, 65535.0) as u16).to_be_bytes())
+            .collect(),
+    };
+    let color = match depth {
+        BitDepth::Eight => ExtendedColorType::Rgb8,
+        BitDepth::Sixteen => ExtendedColorType::Rgb16,
+    };
+    write_png(path, &bytes, image.width, image.height, color)
+}
+
+/// Writes the alpha mask of a view as an 8-bit greyscale PNG, atomically.
+pub fn write_alpha_png(path: &Path, image: &ViewImage) -> Result<(), Error> {
+    check_len(path, image.alpha.len(), pixels(image))?;
+    let bytes: Vec<u8> = image
+        .alpha
+        .iter()
+        .map(|&v| quantise(v, 255.0) as u8)
+        .collect();
+    write_png(
+        path,
+        &bytes,
+        image.width,
+        image.height,
+        ExtendedColorType::L8,
+    )
+}
+
+/// Writes the depth of a view as a single-channel (`Z`, f32) OpenEXR file, atomically.
+pub fn write_depth_exr(path: &Path, image: &ViewImage) -> Result<(), Error> {
+    use exr::prelude::{
+        AnyChannel, AnyChannels, Encoding, FlatSamples, Image, Layer, LayerAttributes, SmallVec,
+        WritableImage,
+    };
+    check_len(path, image.depth.len(), pixels(image))?;
+    let channel = AnyChannel::new("Z", FlatSamples::F32(image.depth.clone()));
+    let layer = Layer::new(
+        (image.width as usize, image.height as usize),
+        LayerAttributes::named("depth"),
+        Encoding::FAST_LOSSLESS,
+        AnyChannels::sort(SmallVec::from_vec(vec![channel])),
+    );
+    let exr_image = Image::from_layer(layer);
+    let mut failure = None;
+    write_atomic_with(path, |w| {
+        exr_image.write().to_buffered(w).map_err(|e| {
+            let message = e.to_string();
+            failure = Some(message.clone());
+            std::io::Error::other(message)
+        })
+    })
+    .map_err(|source| match failure {
+        Some(message) => Error::Encode {
+            path: path.to_path_buf(),
+            message,
+        },
+        None => Error::Io {
+            path: path.to_path_buf(),
+            source,
+        },
+    })
+}
+
+/// Encodes a PNG in memory and writes it atomically.
+fn write_png(
+    path: &Path,
+    bytes: &[u8],
+    width: u32,
+    height: u32,
+    color: ExtendedColorType,
+) -> Result<(), Error> {
+    let mut png = Vec::new();
+    PngEncoder::new(&mut png)
+        .write_image(bytes, width, height, color)
+        .map_err(|e| Error::Encode {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+    write_atomic(path, &png).map_err(|source| Error::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+fn pixels(image: &ViewImage) -> usize {
+    image.width as usize * image.height as usize
+}
+
+/// Refuses an image whose buffer does not match its size, before anything is written.
+fn check_len(path: &Path, got: usize, expected: usize) -> Result<(), Error> {
+    if got == expected {
+        Ok(())
+    } else {
+        Err(Error::Encode {
+            path: path.to_path_buf(),
+            message: format!("buffer holds {got} values, the image size needs {expected}"),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn image() -> ViewImage {
+        ViewImage {
+            width: 3,
+            height: 2,
+            rgb: (0..18).map(|i| i as f32 / 17.0).collect(),
+            alpha: vec![0.0, 0.5, 1.0, 1.0, 0.25, 0.0],
+            depth: vec![0.0, 1.5, 2.25, 1e4, 3.0, 0.0],
+        }
+    }
+
+    #[test]
+    fn pngs_and_exr_round_trip() {
+        let dir = tempfile::tempdir().unwrap();
+        let img = image();
+        let files = write_view_images(&img, dir.path(), "v0", BitDepth::Eight).unwrap();
+        let rgb = image::open(&files.rgb).unwrap().to_rgb8();
+        assert_eq!(rgb.dimensions(), (3, 2));
+        for (i, &v) in rgb.as_raw().iter().enumerate() {
+            assert_eq!(v, (img.rgb[i] * 255.0).round() as u8);
+        }
+        let a = image::open(&files.alpha).unwrap().to_luma8();
+        assert_eq!(a.as_raw(), &vec![0u8, 128, 255, 255, 64, 0]);
+        let exr = exr::prelude::read_first_flat_layer_from_file(&files.depth).unwrap();
+        let samples: Vec<f32> = exr.layer_data.channel_data.list[0]
+            .sample_data
+            .values_as_f32()
+            .collect();
+        assert_eq!(samples, img.depth);
+        // Nothing but the three files.
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 3);
+    }
+
+    #[test]
+    fn sixteen_bit_png_keeps_precision() {
+        let dir = tempfile::tempdir().unwrap();
+        let img = image();
+        let p = dir.path().join("v.png");
+        write_rgb_png(&p, &img, BitDepth::Sixteen).unwrap();
+        let rgb = image::open(&p).unwrap().to_rgb16();
+        for (i, &v) in rgb.as_raw().iter().enumerate() {
+            assert_eq!(v, (img.rgb[i] * 65535.0).round() as u16);
+        }
+    }
+
+    #[test]
+    fn missing_folder_is_a_clear_error() {
+        let err = write_alpha_png(Path::new("/nonexistent/dir/a.png"), &image()).unwrap_err();
+        assert!(err.to_string().contains("/nonexistent/dir/a.png"), "{err}");
+    }
+}

@@ -1,0 +1,111 @@
+//! The virtual camera rig that frames an input: where the reference views are taken from.
+
+use camera_model::rig::{WORLD_UP, fibonacci_sphere, framing_distance, look_at_rig};
+use camera_model::{Camera, Intrinsics};
+use glam::DVec3;
+use plenoptic_io::Model;
+
+use super::Error;
+use crate::config::RigConfig;
+
+/// Centre (of the bounding box) and radius (farthest point from it) of a cloud's points or a
+/// mesh's vertices, in the input's own units.
+pub fn bounding_sphere(model: &Model) -> Result<(DVec3, f64), Error> {
+    let points = match model {
+        Model::Cloud(c) => &c.positions,
+        Model::Mesh(m) => &m.positions,
+    };
+    if points.is_empty() {
+        return Err(Error::InvalidModel(
+            "the input has no points or vertices".into(),
+        ));
+    }
+    let (lo, hi) = points
+        .iter()
+        .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), p| {
+            (lo.min(p.as_dvec3()), hi.max(p.as_dvec3()))
+        });
+    if !(lo.is_finite() && hi.is_finite()) {
+        return Err(Error::InvalidModel(
+            "the input has non-finite coordinates".into(),
+        ));
+    }
+    let center = 0.5 * (lo + hi);
+    let radius = points
+        .iter()
+        .map(|p| p.as_dvec3().distance(center))
+        .fold(0.0f64, f64::max);
+    // A single point still needs a sphere to frame.
+    Ok((center, radius.max(1e-3 * center.length().max(1.0))))
+}
+
+/// `rig.cameras` cameras on a Fibonacci sphere around (`center`, `radius`), each looking at the
+/// centre with +y up, with `rig.fov_y_deg` over `rig.height` rows, at the distance where the
+/// sphere fills the image up to `rig.margin`.
+pub fn fibonacci_rig(center: DVec3, radius: f64, rig: &RigConfig) -> Result<Vec<Camera>, Error> {
+    if rig.cameras == 0 || rig.width == 0 || rig.height == 0 {
+        return Err(Error::InvalidOption(format!(
+            "a rig needs cameras and a size, got {} cameras of {}×{}",
+            rig.cameras, rig.width, rig.height
+        )));
+    }
+    if !(rig.fov_y_deg > 0.0 && rig.fov_y_deg < 180.0) {
+        return Err(Error::InvalidOption(format!(
+            "fov_y_deg must be in (0, 180), got {}",
+            rig.fov_y_deg
+        )));
+    }
+    let intrinsics = Intrinsics::from_fov_y(rig.width, rig.height, rig.fov_y_deg);
+    let distance = framing_distance(radius, &intrinsics, rig.margin)
+        .map_err(|e| Error::InvalidOption(e.to_string()))?;
+    Ok(look_at_rig(
+        &fibonacci_sphere(rig.cameras),
+        center,
+        distance,
+        intrinsics,
+        WORLD_UP,
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+    use plenoptic_io::PlenopticCloud;
+
+    #[test]
+    fn rig_frames_the_sphere() {
+        let cloud = PlenopticCloud {
+            positions: vec![Vec3::new(0.0, 0.0, 0.0), Vec3::new(100.0, 50.0, 20.0)],
+            colors: vec![[0.0; 3]; 2],
+            ..Default::default()
+        };
+        let (c, r) = bounding_sphere(&Model::Cloud(cloud)).unwrap();
+        assert_eq!(c, DVec3::new(50.0, 25.0, 10.0));
+        assert!((r - DVec3::new(50.0, 25.0, 10.0).length()).abs() < 1e-9);
+        let rig = RigConfig {
+            cameras: 10,
+            ..RigConfig::default()
+        };
+        let cams = fibonacci_rig(c, r, &rig).unwrap();
+        assert_eq!(cams.len(), 10);
+        for cam in &cams {
+            let uv = cam.project(c).unwrap();
+            assert!(
+                (uv.x - f64::from(rig.width) / 2.0).abs() < 1e-6
+                    && (uv.y - f64::from(rig.height) / 2.0).abs() < 1e-6
+            );
+            // Every point of the sphere's surface projects inside the image.
+            for d in [
+                DVec3::X,
+                DVec3::Y,
+                DVec3::Z,
+                DVec3::NEG_X,
+                DVec3::NEG_Y,
+                DVec3::NEG_Z,
+            ] {
+                assert!(cam.intrinsics.contains(cam.project(c + r * d).unwrap()));
+            }
+        }
+    }
+}
