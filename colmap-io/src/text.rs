@@ -188,7 +188,7 @@ fn parse_image(line: &str) -> Result<ImageRecord, Problem> {
 
 fn parse_points2d(line: &str) -> Result<Vec<Point2D>, Problem> {
     let tokens: Vec<&str> = line.split_whitespace().collect();
-    if tokens.len() % 3 != 0 {
+    if !tokens.len().is_multiple_of(3) {
         return Err(Problem::Malformed(format!(
             "POINTS2D has {} numbers, not a multiple of 3 (X, Y, POINT3D_ID)",
             tokens.len()
@@ -239,7 +239,7 @@ fn parse_point3d(line: &str) -> Result<(u64, Point3D), Problem> {
     let rgb = [f.next("R")?, f.next("G")?, f.next("B")?];
     let error = f.next("ERROR")?;
     let rest = f.rest();
-    if rest.len() % 2 != 0 {
+    if !rest.len().is_multiple_of(2) {
         return Err(Problem::Malformed(format!(
             "TRACK has {} numbers, not pairs of (IMAGE_ID, POINT2D_IDX)",
             rest.len()
