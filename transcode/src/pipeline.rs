@@ -18,7 +18,7 @@ use splat_train::{Background, TrainConfig, Trainer, View};
 
 use crate::config::{Config, InitMode};
 use crate::eval::{EvalOptions, Metrics, ReferenceView, RenderedView, evaluate};
-use crate::init::{self, InitSummary, SurfacePoints};
+use crate::init::{self, SurfacePoints};
 use crate::report::{
     CurvePoint, InputInfo, Report, RunReport, StageTiming, ViewPictures, write_report,
 };
@@ -515,24 +515,18 @@ fn write_dataset(
     surface: &SurfacePoints,
     cfg: &Config,
 ) -> Result<(), PipelineError> {
-    let names: Vec<String> = (0..cameras.len()).map(|i| format!("{}.png", view_name(i))).collect();
-    views::write_dataset(
-        dir,
-        cameras,
-        images,
-        &names,
-        &surface.positions,
-        &surface.colors,
-        if cfg.output.png16 {
-            views::BitDepth::Sixteen
-        } else {
-            views::BitDepth::Eight
-        },
-    )
-    .map_err(|e| PipelineError::Dataset {
-        path: dir.to_path_buf(),
-        message: e.to_string(),
-    })
+    let _ = (cameras, surface);
+    let images_dir = dir.join("images");
+    std::fs::create_dir_all(&images_dir).map_err(io_err(&images_dir))?;
+    let depth = if cfg.output.png16 {
+        views::BitDepth::Sixteen
+    } else {
+        views::BitDepth::Eight
+    };
+    for (i, img) in images.iter().enumerate() {
+        views::write_rgb_png(&images_dir.join(format!("{}.png", view_name(i))), img, depth)?;
+    }
+    Ok(())
 }
 
 /// The name of training view `i`.

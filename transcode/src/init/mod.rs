@@ -554,7 +554,7 @@ fn read_points3d(dir: &Path) -> Result<(Vec<Vec3>, Vec<[f32; 3]>), InitError> {
     let positions = rec
         .points3d
         .values()
-        .map(|p| Vec3::new(p.xyz[0] as f32, p.xyz[1] as f32, p.xyz[2] as f32))
+        .map(|p| p.xyz.as_vec3())
         .collect();
     let colors = rec
         .points3d
@@ -665,7 +665,8 @@ mod tests {
     #[test]
     fn sh_fit_reproduces_interpolated_colours() {
         // 13 cameras as in 8iVSLF. Measured RMS error against the interpolated colour on 997
-        // directions the fit never saw: degree 3 ≈ 0.03, degree 0 ≈ 0.15 (colour units in [0, 1]).
+        // directions the fit never saw, with neighbouring cameras of very different colours:
+        // degree 0/1/2/3 ≈ 0.139/0.090/0.045/0.037 (colour units in [0, 1]).
         let p = plenoptic_point(13);
         let cfg = InitConfig::default();
         let mut errs = [0.0; 4];
@@ -701,7 +702,8 @@ mod tests {
 
     #[test]
     fn auto_degree_picks_the_lowest_within_tolerance() {
-        assert_eq!(auto_degree(&[0.1, 0.05, 0.031, 0.03], 0.01), 1);
+        assert_eq!(auto_degree(&[0.1, 0.05, 0.031, 0.03], 0.01), 2);
+        assert_eq!(auto_degree(&[0.1, 0.035, 0.031, 0.03], 0.01), 1);
         assert_eq!(auto_degree(&[0.1, 0.05, 0.035, 0.03], 0.001), 3);
     }
 
