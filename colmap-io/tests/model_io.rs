@@ -20,7 +20,7 @@ fn sample() -> Reconstruction {
         959.5,
         0.1,
         -0.0,
-        123456789.123456789,
+        123_456_789.123_456_78,
         7e-310,
     ];
     for (i, model) in CameraModel::ALL.iter().enumerate() {
