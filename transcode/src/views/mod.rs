@@ -13,12 +13,14 @@
 //! Cameras follow COLMAP: pixel (0, 0)'s centre is at (0.5, 0.5), x right, y down, z forward.
 
 mod cloud;
+mod dataset;
 mod mesh;
 mod output;
 mod rig;
 mod zbuffer;
 
 pub use cloud::render_cloud;
+pub use dataset::{DatasetOptions, dataset_image_name, write_dataset};
 pub(crate) use mesh::check_mesh;
 pub use mesh::{albedo_at, render_mesh, sample_bilinear};
 pub use output::{
@@ -159,6 +161,9 @@ pub enum Error {
         /// The cause.
         source: std::io::Error,
     },
+    /// Writing the COLMAP dataset failed.
+    #[error("cannot write the COLMAP dataset: {0}")]
+    Colmap(#[from] colmap_io::Error),
     /// An image could not be encoded.
     #[error("cannot encode {path}: {message}")]
     Encode {

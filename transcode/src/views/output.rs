@@ -55,6 +55,19 @@ fn quantise(v: f32, max: f32) -> f32 {
 
 /// Writes the colour of a view as an RGB PNG, atomically.
 pub fn write_rgb_png(path: &Path, image: &ViewImage, depth: BitDepth) -> Result<(), Error> {
+    let png = encode_png_rgb(path, image, depth)?;
+    write_atomic(path, &png).map_err(|source| Error::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// Encodes the colour of a view as RGB PNG bytes (`path` only names errors).
+pub(crate) fn encode_png_rgb(
+    path: &Path,
+    image: &ViewImage,
+    depth: BitDepth,
+) -> Result<Vec<u8>, Error> {
     check_len(path, image.rgb.len(), 3 * pixels(image))?;
     let bytes: Vec<u8> = match depth {
         BitDepth::Eight => image
@@ -72,7 +85,7 @@ pub fn write_rgb_png(path: &Path, image: &ViewImage, depth: BitDepth) -> Result<
         BitDepth::Eight => ExtendedColorType::Rgb8,
         BitDepth::Sixteen => ExtendedColorType::Rgb16,
     };
-    write_png(path, &bytes, image.width, image.height, color)
+    encode_png(path, &bytes, image.width, image.height, color)
 }
 
 /// Writes the alpha mask of a view as an 8-bit greyscale PNG, atomically.
@@ -83,13 +96,17 @@ pub fn write_alpha_png(path: &Path, image: &ViewImage) -> Result<(), Error> {
         .iter()
         .map(|&v| quantise(v, 255.0) as u8)
         .collect();
-    write_png(
+    let png = encode_png(
         path,
         &bytes,
         image.width,
         image.height,
         ExtendedColorType::L8,
-    )
+    )?;
+    write_atomic(path, &png).map_err(|source| Error::Io {
+        path: path.to_path_buf(),
+        source,
+    })
 }
 
 /// Writes the depth of a view as a single-channel (`Z`, f32) OpenEXR file, atomically.
@@ -127,14 +144,14 @@ pub fn write_depth_exr(path: &Path, image: &ViewImage) -> Result<(), Error> {
     })
 }
 
-/// Encodes a PNG in memory and writes it atomically.
-fn write_png(
+/// Encodes a PNG in memory.
+fn encode_png(
     path: &Path,
     bytes: &[u8],
     width: u32,
     height: u32,
     color: ExtendedColorType,
-) -> Result<(), Error> {
+) -> Result<Vec<u8>, Error> {
     let mut png = Vec::new();
     PngEncoder::new(&mut png)
         .write_image(bytes, width, height, color)
@@ -142,10 +159,7 @@ fn write_png(
             path: path.to_path_buf(),
             message: e.to_string(),
         })?;
-    write_atomic(path, &png).map_err(|source| Error::Io {
-        path: path.to_path_buf(),
-        source,
-    })
+    Ok(png)
 }
 
 fn pixels(image: &ViewImage) -> usize {

@@ -1,0 +1,249 @@
+//! The COLMAP training dataset of an input: rendered images, cameras and the input's points.
+
+use std::path::Path;
+use std::sync::Mutex;
+
+use camera_model::Camera;
+use colmap_io::Format;
+use colmap_io::dataset::{DatasetWriter, points_without_tracks, reconstruction_from_cameras};
+use glam::Vec3;
+use plenoptic_io::{Model, PlenopticCloud};
+use rayon::prelude::*;
+
+use super::mesh::albedo_at;
+use super::output::{encode_png_rgb, write_alpha_png, write_depth_exr};
+use super::{BitDepth, Error, ViewImage, ViewOptions, render_model};
+
+/// What [`write_dataset`] writes besides `images/` and `sparse/0/`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DatasetOptions {
+    /// Bits per channel of the RGB images.
+    pub bit_depth: BitDepth,
+    /// Alpha masks as `masks/<name>.png` (8-bit grey), same names as the images.
+    pub masks: bool,
+    /// Depth as `depth/<stem>.exr` (channel `Z`, camera z, 0 where nothing is seen).
+    pub depth: bool,
+}
+
+impl Default for DatasetOptions {
+    fn default() -> Self {
+        Self {
+            bit_depth: BitDepth::Eight,
+            masks: true,
+            depth: false,
+        }
+    }
+}
+
+/// The image file name of view `i` in a dataset (`view_000.png`): one dot and no folders, as
+/// COLMAP's text format and Inria's loader need.
+#[must_use]
+pub fn dataset_image_name(i: usize) -> String {
+    format!("view_{i:03}.png")
+}
+
+/// Renders `model` from every camera (in parallel over views) and writes the dataset folder:
+/// `dir/images/view_NNN.png`, `dir/masks/` and `dir/depth/` when asked, `dir/sparse/0/` in both
+/// text and binary (PINHOLE cameras, world→camera poses, points3D = the input's points with their
+/// colours and empty tracks) and `dir/sparse/0/points3D.ply` (Inria's loader reads it first).
+/// `on_view` is called once per finished view. Returns the rendered images in camera order.
+pub fn write_dataset(
+    dir: &Path,
+    model: &Model,
+    cameras: &[Camera],
+    view: &ViewOptions,
+    opts: &DatasetOptions,
+    on_view: &(dyn Fn() + Sync),
+) -> Result<Vec<ViewImage>, Error> {
+    view.validate()?;
+    if cameras.is_empty() {
+        return Err(Error::InvalidOption(
+            "a dataset needs at least one camera".into(),
+        ));
+    }
+    let writer = DatasetWriter::create(dir)?;
+    let mkdir = |name: &str| -> Result<std::path::PathBuf, Error> {
+        let path = dir.join(name);
+        std::fs::create_dir_all(&path).map_err(|source| Error::Io {
+            path: path.clone(),
+            source,
+        })?;
+        Ok(path)
+    };
+    let masks_dir = if opts.masks {
+        Some(mkdir("masks")?)
+    } else {
+        None
+    };
+    let depth_dir = if opts.depth {
+        Some(mkdir("depth")?)
+    } else {
+        None
+    };
+
+    let names: Vec<String> = (0..cameras.len()).map(dataset_image_name).collect();
+    let slots: Mutex<Vec<Option<ViewImage>>> = Mutex::new(vec![None; cameras.len()]);
+    cameras
+        .par_iter()
+        .enumerate()
+        .try_for_each(|(i, camera)| -> Result<(), Error> {
+            let image = render_model(model, camera, view)?;
+            let name = &names[i];
+            let png = encode_png_rgb(&writer.images_dir().join(name), &image, opts.bit_depth)?;
+            writer.write_image(name, &png)?;
+            if let Some(masks) = &masks_dir {
+                write_alpha_png(&masks.join(name), &image)?;
+            }
+            if let Some(depth) = &depth_dir {
+                let stem = name.trim_end_matches(".png");
+                write_depth_exr(&depth.join(format!("{stem}.exr")), &image)?;
+            }
+            // A poisoned lock means another view panicked; its panic propagates from rayon anyway.
+            if let Ok(mut slots) = slots.lock() {
+                slots[i] = Some(image);
+            }
+            on_view();
+            Ok(())
+        })?;
+
+    let points = input_points(model);
+    let mut rec = reconstruction_from_cameras(names.iter().map(String::as_str).zip(cameras))?;
+    rec.points3d =
+        points_without_tracks(points.positions.iter().zip(&points.colors).map(|(p, c)| {
+            (
+                p.as_dvec3(),
+                c.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8),
+            )
+        }));
+    writer.finish(&rec, Format::Text)?;
+    writer.finish(&rec, Format::Binary)?;
+    let ply = writer.sparse_dir().join("points3D.ply");
+    plenoptic_io::write_cloud(&ply, &points).map_err(|e| Error::Encode {
+        path: ply.clone(),
+        message: e.to_string(),
+    })?;
+
+    let images = slots.into_inner().unwrap_or_default();
+    images
+        .into_iter()
+        .enumerate()
+        .map(|(i, v)| v.ok_or_else(|| Error::InvalidOption(format!("view {i} was not rendered"))))
+        .collect()
+}
+
+/// The input's points with one colour each and normals (zero when unknown: Inria's loader
+/// requires the nx/ny/nz columns): a cloud's points and main colours, or a mesh's referenced
+/// vertices with their albedo.
+fn input_points(model: &Model) -> PlenopticCloud {
+    match model {
+        Model::Cloud(c) => PlenopticCloud {
+            positions: c.positions.clone(),
+            normals: Some(
+                c.normals
+                    .clone()
+                    .unwrap_or_else(|| vec![Vec3::ZERO; c.len()]),
+            ),
+            colors: c.colors.clone(),
+            ..Default::default()
+        },
+        Model::Mesh(m) => {
+            let mut color: Vec<Option<[f32; 3]>> = vec![None; m.positions.len()];
+            for (t, tri) in m.triangles.iter().enumerate() {
+                for (corner, &v) in tri.iter().enumerate() {
+                    let slot = &mut color[v as usize];
+                    if slot.is_none() {
+                        let mut bary = [0.0; 3];
+                        bary[corner] = 1.0;
+                        *slot = Some(albedo_at(m, t, bary));
+                    }
+                }
+            }
+            let mut out = PlenopticCloud {
+                normals: Some(Vec::new()),
+                ..Default::default()
+            };
+            for (v, c) in color.iter().enumerate() {
+                if let Some(c) = c {
+                    out.positions.push(m.positions[v]);
+                    out.colors.push(*c);
+                    if let Some(n) = out.normals.as_mut() {
+                        n.push(m.normals.as_ref().map_or(Vec3::ZERO, |ns| ns[v]));
+                    }
+                }
+            }
+            out
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::RigConfig;
+    use crate::views::{bounding_sphere, fibonacci_rig};
+
+    #[test]
+    fn dataset_round_trips_through_colmap_io() {
+        let cloud = crate::scene::demo_scene(&crate::scene::DemoConfig {
+            grid: 32,
+            ..Default::default()
+        })
+        .unwrap();
+        let model = Model::Cloud(cloud.clone());
+        let (c, r) = bounding_sphere(&model).unwrap();
+        let cams = fibonacci_rig(
+            c,
+            r,
+            &RigConfig {
+                cameras: 5,
+                width: 64,
+                height: 48,
+                ..RigConfig::default()
+            },
+        )
+        .unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let count = std::sync::atomic::AtomicUsize::new(0);
+        let opts = DatasetOptions {
+            depth: true,
+            ..DatasetOptions::default()
+        };
+        let images = write_dataset(
+            dir.path(),
+            &model,
+            &cams,
+            &ViewOptions::default(),
+            &opts,
+            &|| {
+                count.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            },
+        )
+        .unwrap();
+        assert_eq!(count.into_inner(), 5);
+        assert_eq!(images.len(), 5);
+        for fmt in [Format::Text, Format::Binary] {
+            let rec = colmap_io::read_model_as(&dir.path().join("sparse/0"), fmt).unwrap();
+            assert_eq!(rec.images.len(), 5);
+            assert_eq!(rec.points3d.len(), cloud.len());
+            for (i, cam) in cams.iter().enumerate() {
+                let got = rec.camera_of(i as u32 + 1).unwrap();
+                assert!((got.center() - cam.center()).length() < 1e-6);
+                assert_eq!(rec.images[&(i as u32 + 1)].name, dataset_image_name(i));
+            }
+        }
+        // The PNG on disk is the returned image, quantised.
+        let png = image::open(dir.path().join("images/view_002.png"))
+            .unwrap()
+            .to_rgb8();
+        assert_eq!(png.dimensions(), (64, 48));
+        for (a, b) in png.as_raw().iter().zip(&images[2].rgb) {
+            assert_eq!(*a, (b * 255.0).round() as u8);
+        }
+        assert!(dir.path().join("masks/view_002.png").is_file());
+        assert!(dir.path().join("depth/view_002.exr").is_file());
+        let ply = plenoptic_io::read_cloud(&dir.path().join("sparse/0/points3D.ply")).unwrap();
+        assert_eq!(ply.positions, cloud.positions);
+        assert!(ply.normals.is_some());
+    }
+}
