@@ -134,7 +134,11 @@ fn parse_header(path: &Path, data: &[u8]) -> Result<Header, Error> {
         let first = words.next().unwrap_or("");
         if line_no == 1 {
             if line != "ply" {
-                return Err(header_err(path, 1, "not a PLY file (first line is not `ply`)"));
+                return Err(header_err(
+                    path,
+                    1,
+                    "not a PLY file (first line is not `ply`)",
+                ));
             }
             continue;
         }
@@ -146,7 +150,11 @@ fn parse_header(path: &Path, data: &[u8]) -> Result<Header, Error> {
                     Some("binary_little_endian") => Format::BinaryLe,
                     Some("binary_big_endian") => Format::BinaryBe,
                     other => {
-                        return Err(header_err(path, line_no, format!("unknown format {other:?}")));
+                        return Err(header_err(
+                            path,
+                            line_no,
+                            format!("unknown format {other:?}"),
+                        ));
                     }
                 });
             }
@@ -192,7 +200,11 @@ fn parse_header(path: &Path, data: &[u8]) -> Result<Header, Error> {
             }
             "end_header" => break,
             other => {
-                return Err(header_err(path, line_no, format!("unknown keyword `{other}`")));
+                return Err(header_err(
+                    path,
+                    line_no,
+                    format!("unknown keyword `{other}`"),
+                ));
             }
         }
     }
@@ -349,12 +361,15 @@ pub fn parse_splats(path: &Path, data: &[u8]) -> Result<Splats, Error> {
                 })?;
                 let mut it = line.split_whitespace();
                 for (c, slot) in values.iter_mut().enumerate() {
-                    *slot = it.next().and_then(|w| w.parse().ok()).ok_or_else(|| Error::Body {
-                        path: path.to_path_buf(),
-                        offset: 0,
-                        index: i,
-                        message: format!("property {c} is missing or not a number"),
-                    })?;
+                    *slot = it
+                        .next()
+                        .and_then(|w| w.parse().ok())
+                        .ok_or_else(|| Error::Body {
+                            path: path.to_path_buf(),
+                            offset: 0,
+                            index: i,
+                            message: format!("property {c} is missing or not a number"),
+                        })?;
                 }
                 emit(&mut splats, &values);
             }
@@ -430,7 +445,10 @@ fn skip_element(body: &[u8], mut off: usize, e: &Element, le: bool) -> Result<us
                 Property::Scalar { ty, .. } => (ty.size(), 1),
                 Property::List { count, item } => {
                     if off + count.size() > body.len() {
-                        return Err(format!("element `{}` runs past the end of the file", e.name));
+                        return Err(format!(
+                            "element `{}` runs past the end of the file",
+                            e.name
+                        ));
                     }
                     let n = count.read(&body[off..], le);
                     off += count.size();
@@ -450,10 +468,12 @@ fn skip_element(body: &[u8], mut off: usize, e: &Element, le: bool) -> Result<us
 /// Returns the Inria property names in file order for SH degree `degree`.
 #[must_use]
 pub fn inria_property_names(degree: u32) -> Vec<String> {
-    let mut names: Vec<String> = ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
-        .iter()
-        .map(|s| (*s).to_string())
-        .collect();
+    let mut names: Vec<String> = [
+        "x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2",
+    ]
+    .iter()
+    .map(|s| (*s).to_string())
+    .collect();
     names.extend((0..3 * (num_sh_coeffs(degree) - 1)).map(|i| format!("f_rest_{i}")));
     names.push("opacity".into());
     names.extend((0..3).map(|i| format!("scale_{i}")));
@@ -521,7 +541,9 @@ pub(crate) fn write_atomic(
         let file = std::fs::File::create(&tmp)?;
         let mut w = BufWriter::new(file);
         body(&mut w)?;
-        let file = w.into_inner().map_err(std::io::IntoInnerError::into_error)?;
+        let file = w
+            .into_inner()
+            .map_err(std::io::IntoInnerError::into_error)?;
         file.sync_all()?;
         std::fs::rename(&tmp, path)
     })();

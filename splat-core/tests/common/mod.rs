@@ -34,7 +34,11 @@ impl Rng {
 /// A camera at `eye` looking at `target` (COLMAP axes), with the given intrinsics.
 pub fn look_at(eye: Vec3, target: Vec3, w: u32, h: u32, f: f32, cx: f32, cy: f32) -> RenderCamera {
     let z = (target - eye).normalize();
-    let up = if z.y.abs() > 0.9 { Vec3::X } else { Vec3::NEG_Y };
+    let up = if z.y.abs() > 0.9 {
+        Vec3::X
+    } else {
+        Vec3::NEG_Y
+    };
     let x = up.cross(z).normalize();
     let x = -x;
     let y = z.cross(x);
@@ -54,18 +58,34 @@ pub fn look_at(eye: Vec3, target: Vec3, w: u32, h: u32, f: f32, cx: f32, cy: f32
 
 /// Random splats in a ball of radius `r` around `center`, random anisotropic scales
 /// exp(U[ls_lo, ls_hi]), random rotations, opacities, SH of degree `degree`.
-pub fn random_splats(rng: &mut Rng, n: usize, center: Vec3, r: f32, ls: (f32, f32), op: (f32, f32), degree: u32) -> Splats {
+pub fn random_splats(
+    rng: &mut Rng,
+    n: usize,
+    center: Vec3,
+    r: f32,
+    ls: (f32, f32),
+    op: (f32, f32),
+    degree: u32,
+) -> Splats {
     let mut s = Splats::new(degree);
     let k = splat_core::num_sh_coeffs(degree);
     for _ in 0..n {
         let m = center + Vec3::new(rng.uniform(-r, r), rng.uniform(-r, r), rng.uniform(-r, r));
-        let l = Vec3::new(rng.uniform(ls.0, ls.1), rng.uniform(ls.0, ls.1), rng.uniform(ls.0, ls.1));
+        let l = Vec3::new(
+            rng.uniform(ls.0, ls.1),
+            rng.uniform(ls.0, ls.1),
+            rng.uniform(ls.0, ls.1),
+        );
         let q = [rng.normal(), rng.normal(), rng.normal(), rng.normal()];
         let o = splat_core::logit(rng.uniform(op.0, op.1));
         let sh: Vec<[f32; 3]> = (0..k)
             .map(|j| {
                 let amp = if j == 0 { 1.2 } else { 0.25 };
-                [rng.uniform(-amp, amp), rng.uniform(-amp, amp), rng.uniform(-amp, amp)]
+                [
+                    rng.uniform(-amp, amp),
+                    rng.uniform(-amp, amp),
+                    rng.uniform(-amp, amp),
+                ]
             })
             .collect();
         s.push(m, l, q, o, &sh);
@@ -116,7 +136,11 @@ impl RefSplats {
     pub fn from(s: &Splats) -> Self {
         Self {
             means: s.means.iter().map(|m| m.as_dvec3().to_array()).collect(),
-            log_scales: s.log_scales.iter().map(|m| m.as_dvec3().to_array()).collect(),
+            log_scales: s
+                .log_scales
+                .iter()
+                .map(|m| m.as_dvec3().to_array())
+                .collect(),
             rots: s.rotations.iter().map(|q| q.map(f64::from)).collect(),
             logits: s.opacity_logits.iter().map(|&o| f64::from(o)).collect(),
             degree: s.sh_degree,
@@ -140,15 +164,35 @@ fn sh_basis(deg: u32, d: [f64; 3]) -> Vec<f64> {
     let (x, y, z) = (d[0], d[1], d[2]);
     let c0 = 0.28209479177387814;
     let c1 = 0.4886025119029199;
-    let c2 = [1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792, 0.5462742152960396];
-    let c3 = [-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.3731763325901154, -0.4570457994644658, 1.445305721320277, -0.5900435899266435];
+    let c2 = [
+        1.0925484305920792,
+        -1.0925484305920792,
+        0.31539156525252005,
+        -1.0925484305920792,
+        0.5462742152960396,
+    ];
+    let c3 = [
+        -0.5900435899266435,
+        2.890611442640554,
+        -0.4570457994644658,
+        0.3731763325901154,
+        -0.4570457994644658,
+        1.445305721320277,
+        -0.5900435899266435,
+    ];
     let mut b = vec![c0];
     if deg >= 1 {
         b.extend([-c1 * y, c1 * z, -c1 * x]);
     }
     if deg >= 2 {
         let (xx, yy, zz) = (x * x, y * y, z * z);
-        b.extend([c2[0] * x * y, c2[1] * y * z, c2[2] * (2.0 * zz - xx - yy), c2[3] * x * z, c2[4] * (xx - yy)]);
+        b.extend([
+            c2[0] * x * y,
+            c2[1] * y * z,
+            c2[2] * (2.0 * zz - xx - yy),
+            c2[3] * x * z,
+            c2[4] * (xx - yy),
+        ]);
     }
     if deg >= 3 {
         let (xx, yy, zz) = (x * x, y * y, z * z);
@@ -197,10 +241,21 @@ struct RefSplat2d {
 
 /// Renders with the Inria rules in f64 without tiles: per pixel, all splats whose tile
 /// rectangle covers the pixel's tile, sorted by (depth, index), composited front to back.
-pub fn render_ref(s: &RefSplats, cam: &RenderCamera, bg: [f64; 3], degree: u32, antialiased: bool) -> RefImage {
+pub fn render_ref(
+    s: &RefSplats,
+    cam: &RenderCamera,
+    bg: [f64; 3],
+    degree: u32,
+    antialiased: bool,
+) -> RefImage {
     let w = cam.width as usize;
     let h = cam.height as usize;
-    let (fx, fy, cx, cy) = (f64::from(cam.fx), f64::from(cam.fy), f64::from(cam.cx), f64::from(cam.cy));
+    let (fx, fy, cx, cy) = (
+        f64::from(cam.fx),
+        f64::from(cam.fy),
+        f64::from(cam.cx),
+        f64::from(cam.cy),
+    );
     let rc = cam.rotation;
     let wr: M3 = std::array::from_fn(|i| std::array::from_fn(|j| f64::from(rc.col(j)[i])));
     let tw = cam.translation.as_dvec3().to_array();
@@ -212,32 +267,62 @@ pub fn render_ref(s: &RefSplats, cam: &RenderCamera, bg: [f64; 3], degree: u32, 
     let mut list = Vec::new();
     for i in 0..s.len() {
         let m = s.means[i];
-        let p: [f64; 3] = std::array::from_fn(|r| (0..3).map(|k| wr[r][k] * m[k]).sum::<f64>() + tw[r]);
+        let p: [f64; 3] =
+            std::array::from_fn(|r| (0..3).map(|k| wr[r][k] * m[k]).sum::<f64>() + tw[r]);
         if !(p[2] > 0.01) {
             continue;
         }
         let o = 1.0 / (1.0 + (-s.logits[i]).exp());
         let q = s.rots[i];
         let n = (q.iter().map(|v| v * v).sum::<f64>()).sqrt();
-        let (qw, qx, qy, qz) = if n > 1e-30 { (q[0] / n, q[1] / n, q[2] / n, q[3] / n) } else { (1.0, 0.0, 0.0, 0.0) };
+        let (qw, qx, qy, qz) = if n > 1e-30 {
+            (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
+        } else {
+            (1.0, 0.0, 0.0, 0.0)
+        };
         let r: M3 = [
-            [1.0 - 2.0 * (qy * qy + qz * qz), 2.0 * (qx * qy - qw * qz), 2.0 * (qx * qz + qw * qy)],
-            [2.0 * (qx * qy + qw * qz), 1.0 - 2.0 * (qx * qx + qz * qz), 2.0 * (qy * qz - qw * qx)],
-            [2.0 * (qx * qz - qw * qy), 2.0 * (qy * qz + qw * qx), 1.0 - 2.0 * (qx * qx + qy * qy)],
+            [
+                1.0 - 2.0 * (qy * qy + qz * qz),
+                2.0 * (qx * qy - qw * qz),
+                2.0 * (qx * qz + qw * qy),
+            ],
+            [
+                2.0 * (qx * qy + qw * qz),
+                1.0 - 2.0 * (qx * qx + qz * qz),
+                2.0 * (qy * qz - qw * qx),
+            ],
+            [
+                2.0 * (qx * qz - qw * qy),
+                2.0 * (qy * qz + qw * qx),
+                1.0 - 2.0 * (qx * qx + qy * qy),
+            ],
         ];
         let sc = s.log_scales[i].map(f64::exp);
-        let s2: M3 = [[sc[0] * sc[0], 0.0, 0.0], [0.0, sc[1] * sc[1], 0.0], [0.0, 0.0, sc[2] * sc[2]]];
+        let s2: M3 = [
+            [sc[0] * sc[0], 0.0, 0.0],
+            [0.0, sc[1] * sc[1], 0.0],
+            [0.0, 0.0, sc[2] * sc[2]],
+        ];
         let sigma = mm(&mm(&r, &s2), &tr(&r));
         let sc_cam = mm(&mm(&wr, &sigma), &tr(&wr));
         let tanx = 0.5 * w as f64 / fx;
         let tany = 0.5 * h as f64 / fy;
         let ux = (p[0] / p[2]).clamp(-(cx / fx + 0.3 * tanx), (w as f64 - cx) / fx + 0.3 * tanx);
         let uy = (p[1] / p[2]).clamp(-(cy / fy + 0.3 * tany), (h as f64 - cy) / fy + 0.3 * tany);
-        let j = [[fx / p[2], 0.0, -fx * ux / p[2]], [0.0, fy / p[2], -fy * uy / p[2]]];
+        let j = [
+            [fx / p[2], 0.0, -fx * ux / p[2]],
+            [0.0, fy / p[2], -fy * uy / p[2]],
+        ];
         let mut c2 = [[0.0; 2]; 2];
         for a in 0..2 {
             for b in 0..2 {
-                c2[a][b] = (0..3).map(|k| (0..3).map(|l| j[a][k] * sc_cam[k][l] * j[b][l]).sum::<f64>()).sum();
+                c2[a][b] = (0..3)
+                    .map(|k| {
+                        (0..3)
+                            .map(|l| j[a][k] * sc_cam[k][l] * j[b][l])
+                            .sum::<f64>()
+                    })
+                    .sum();
             }
         }
         let det0 = c2[0][0] * c2[1][1] - c2[0][1] * c2[1][0];
@@ -246,7 +331,11 @@ pub fn render_ref(s: &RefSplats, cam: &RenderCamera, bg: [f64; 3], degree: u32, 
         if det <= 0.0 {
             continue;
         }
-        let comp = if antialiased { (det0.max(0.0) / det).sqrt() } else { 1.0 };
+        let comp = if antialiased {
+            (det0.max(0.0) / det).sqrt()
+        } else {
+            1.0
+        };
         let op = o * comp;
         if op < 1.0 / 255.0 {
             continue;
@@ -257,9 +346,13 @@ pub fn render_ref(s: &RefSplats, cam: &RenderCamera, bg: [f64; 3], degree: u32, 
         let xy = [fx * p[0] / p[2] + cx - 0.5, fy * p[1] / p[2] + cy - 0.5];
         let rect = [
             ((xy[0] - radius) / 16.0).floor().clamp(0.0, tiles_x as f64) as i64,
-            ((xy[0] + radius + 15.0) / 16.0).floor().clamp(0.0, tiles_x as f64) as i64,
+            ((xy[0] + radius + 15.0) / 16.0)
+                .floor()
+                .clamp(0.0, tiles_x as f64) as i64,
             ((xy[1] - radius) / 16.0).floor().clamp(0.0, tiles_y as f64) as i64,
-            ((xy[1] + radius + 15.0) / 16.0).floor().clamp(0.0, tiles_y as f64) as i64,
+            ((xy[1] + radius + 15.0) / 16.0)
+                .floor()
+                .clamp(0.0, tiles_y as f64) as i64,
         ];
         if rect[0] >= rect[1] || rect[2] >= rect[3] {
             continue;
@@ -274,10 +367,22 @@ pub fn render_ref(s: &RefSplats, cam: &RenderCamera, bg: [f64; 3], degree: u32, 
             }
         }
         let color = color.map(|v| (v + 0.5).max(0.0));
-        list.push(RefSplat2d { xy, conic: [c / det, -b / det, a / det], opacity: op, color, depth: p[2], rect, index: i });
+        list.push(RefSplat2d {
+            xy,
+            conic: [c / det, -b / det, a / det],
+            opacity: op,
+            color,
+            depth: p[2],
+            rect,
+            index: i,
+        });
     }
     list.sort_by(|a, b| a.depth.total_cmp(&b.depth).then(a.index.cmp(&b.index)));
-    let mut out = RefImage { rgb: vec![0.0; 3 * w * h], alpha: vec![0.0; w * h], depth: vec![0.0; w * h] };
+    let mut out = RefImage {
+        rgb: vec![0.0; 3 * w * h],
+        alpha: vec![0.0; w * h],
+        depth: vec![0.0; w * h],
+    };
     for py in 0..h {
         for px in 0..w {
             let (tx, ty) = ((px / 16) as i64, (py / 16) as i64);
@@ -290,7 +395,8 @@ pub fn render_ref(s: &RefSplats, cam: &RenderCamera, bg: [f64; 3], degree: u32, 
                 }
                 let dx = g.xy[0] - px as f64;
                 let dy = g.xy[1] - py as f64;
-                let power = -0.5 * (g.conic[0] * dx * dx + g.conic[2] * dy * dy) - g.conic[1] * dx * dy;
+                let power =
+                    -0.5 * (g.conic[0] * dx * dx + g.conic[2] * dy * dy) - g.conic[1] * dx * dy;
                 if power > 0.0 {
                     continue;
                 }
@@ -313,15 +419,31 @@ pub fn render_ref(s: &RefSplats, cam: &RenderCamera, bg: [f64; 3], degree: u32, 
                 out.rgb[3 * p + ch] = col[ch] + t * bg[ch];
             }
             out.alpha[p] = 1.0 - t;
-            out.depth[p] = if 1.0 - t > 1e-6 { dsum / (1.0 - t) } else { 0.0 };
+            out.depth[p] = if 1.0 - t > 1e-6 {
+                dsum / (1.0 - t)
+            } else {
+                0.0
+            };
         }
     }
     out
 }
 
 /// A camera whose rotation is a unit quaternion (to build test cameras from COLMAP text).
-pub fn camera_from_colmap(q_wxyz: [f64; 4], t: [f64; 3], w: u32, h: u32, k: [f64; 4]) -> RenderCamera {
-    let q = Quat::from_xyzw(q_wxyz[1] as f32, q_wxyz[2] as f32, q_wxyz[3] as f32, q_wxyz[0] as f32).normalize();
+pub fn camera_from_colmap(
+    q_wxyz: [f64; 4],
+    t: [f64; 3],
+    w: u32,
+    h: u32,
+    k: [f64; 4],
+) -> RenderCamera {
+    let q = Quat::from_xyzw(
+        q_wxyz[1] as f32,
+        q_wxyz[2] as f32,
+        q_wxyz[3] as f32,
+        q_wxyz[0] as f32,
+    )
+    .normalize();
     RenderCamera {
         width: w,
         height: h,
