@@ -1,10 +1,91 @@
-//! PLACEHOLDER: owned by the helper implementing this subcommand; replace this whole file.
+//! `transcode views INPUT --out DIR`: render the reference views of an input and write the COLMAP
+//! dataset only (no training).
 
-/// Arguments (to be defined by the subcommand's owner).
+use std::path::PathBuf;
+
+use anyhow::Context as _;
+use indicatif::{ProgressBar, ProgressStyle};
+use transcode::config::Config;
+use transcode::views::{self, BitDepth, DatasetOptions, PointShape};
+
+use super::config::{Overrides, require_file};
+
+/// Arguments of `transcode views`.
 #[derive(Debug, clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// Input: plenoptic or coloured point cloud (PLY) or mesh (OBJ, glTF/GLB, PLY).
+    input: PathBuf,
+    /// Dataset folder to write (images/, masks/, sparse/0/).
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+    #[command(flatten)]
+    overrides: Overrides,
+    /// Point size in voxels (cube side, or the disc's half-size).
+    #[arg(long)]
+    point_size: Option<f32>,
+    /// Draw points as view-aligned discs instead of voxel cubes.
+    #[arg(long)]
+    disc: bool,
+    /// Supersampling factor for anti-aliasing (1 = off).
+    #[arg(long, value_name = "K")]
+    supersample: Option<u32>,
+    /// Exponent n of the view interpolation weight max(0, cos)^n.
+    #[arg(long, value_name = "N")]
+    exponent: Option<i32>,
+    /// Write 16-bit PNGs.
+    #[arg(long)]
+    png16: bool,
+    /// Also write depth maps (depth/view_NNN.exr).
+    #[arg(long)]
+    depth: bool,
+}
 
-/// Runs the subcommand.
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("this subcommand is not built yet")
+/// Runs `transcode views`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    require_file(&args.input, "input")?;
+    let config = args.overrides.resolve(Config::default())?;
+    let mut view = config.renderer.clone();
+    if let Some(s) = args.point_size {
+        view.point_size = s;
+    }
+    if args.disc {
+        view.point_shape = PointShape::Disc;
+    }
+    if let Some(k) = args.supersample {
+        view.supersample = k;
+    }
+    if let Some(n) = args.exponent {
+        view.exponent = n;
+    }
+    view.validate()?;
+    let opts = DatasetOptions {
+        bit_depth: if args.png16 || config.output.png16 {
+            BitDepth::Sixteen
+        } else {
+            BitDepth::Eight
+        },
+        masks: true,
+        depth: args.depth,
+    };
+
+    let model = plenoptic_io::load(&args.input)
+        .with_context(|| format!("cannot read {}", args.input.display()))?;
+    let (center, radius) = views::bounding_sphere(&model)?;
+    let cameras = views::fibonacci_rig(center, radius, &config.rig)?;
+
+    let bar = ProgressBar::new(cameras.len() as u64).with_style(
+        ProgressStyle::with_template("{bar:40} {pos}/{len} views [{elapsed} < {eta}]")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let images = views::write_dataset(&args.out, &model, &cameras, &view, &opts, &|| bar.inc(1))
+        .with_context(|| format!("cannot write the dataset {}", args.out.display()))?;
+    bar.finish_and_clear();
+    println!(
+        "wrote {} views of {}×{} to {} (images/, masks/, sparse/0/ in text and binary)",
+        images.len(),
+        config.rig.width,
+        config.rig.height,
+        args.out.display()
+    );
+    Ok(())
 }
