@@ -24,7 +24,10 @@ pub(crate) fn read_gltf(path: &Path) -> Result<Mesh, Error> {
     // gltf has had panics on malformed input (gltf-rs/gltf#359); turn any into an error.
     let imported = std::panic::catch_unwind(|| gltf::import(path))
         .map_err(|_| err("the glTF importer failed on malformed input".into()))?;
-    let (document, buffers, images) = imported.map_err(|e| err(e.to_string()))?;
+    let (document, buffers, images) = imported.map_err(|e| match e {
+        gltf::Error::Io(io) => err(missing_resource(path).unwrap_or_else(|| io.to_string())),
+        other => err(other.to_string()),
+    })?;
     let scene = document
         .default_scene()
         .or_else(|| document.scenes().next())
@@ -62,6 +65,29 @@ pub(crate) fn read_gltf(path: &Path) -> Result<Mesh, Error> {
     mesh.uvs = builder.uvs;
     mesh.colors = builder.colors;
     Ok(mesh)
+}
+
+/// Names the first external buffer or image that does not exist next to the glTF file (the
+/// importer's I/O error does not say which one it was).
+fn missing_resource(path: &Path) -> Option<String> {
+    let document = gltf::Gltf::open(path).ok()?;
+    let dir = path.parent().unwrap_or_else(|| Path::new(""));
+    let buffers = document.buffers().filter_map(|b| match b.source() {
+        gltf::buffer::Source::Uri(uri) => {
+            Some(format!("buffer {} refers to '{uri}'", b.index())).zip(Some(uri))
+        }
+        gltf::buffer::Source::Bin => None,
+    });
+    let images = document.images().filter_map(|i| match i.source() {
+        gltf::image::Source::Uri { uri, .. } => {
+            Some(format!("image {} refers to '{uri}'", i.index())).zip(Some(uri))
+        }
+        gltf::image::Source::View { .. } => None,
+    });
+    buffers
+        .chain(images)
+        .find(|(_, uri)| !uri.starts_with("data:") && !dir.join(uri).exists())
+        .map(|(what, _)| format!("{what}, which does not exist in {}", dir.display()))
 }
 
 /// Accumulates primitives into one mesh.

@@ -13,6 +13,7 @@ mod gltf_mesh;
 mod mesh;
 mod obj;
 pub mod ply;
+pub mod summary;
 pub mod view_color;
 
 pub use cloud::{CaptureCamera, ColorType, ExtraProperty, PlenopticCloud, PlyLayout};
