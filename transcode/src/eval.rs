@@ -4,6 +4,8 @@
 //! on each with their coverage masks, the splats are rendered over each. A floater that happens to
 //! match one background shows on the other. PSNR and SSIM are `splat_train::metrics`'.
 
+use std::path::{Path, PathBuf};
+
 use camera_model::Camera;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -12,6 +14,131 @@ use splat_core::{Rasterizer, RenderCamera, RenderOptions, Splats};
 use splat_train::metrics;
 
 use crate::init::PointIndex;
+
+/// Errors of reading reference views.
+#[derive(Debug, thiserror::Error)]
+pub enum EvalError {
+    /// The COLMAP model could not be read (colmap-io's message names the file).
+    #[error("reference cameras: {source}")]
+    Colmap {
+        /// The model folder.
+        path: PathBuf,
+        /// The cause.
+        source: colmap_io::Error,
+    },
+    /// An image or mask could not be read.
+    #[error("cannot read {path}: {message}")]
+    Image {
+        /// The file.
+        path: PathBuf,
+        /// What went wrong.
+        message: String,
+    },
+    /// An image's size disagrees with its camera.
+    #[error("{path} is {got_w}×{got_h} but its camera is {want_w}×{want_h}")]
+    Size {
+        /// The file.
+        path: PathBuf,
+        /// Image width.
+        got_w: u32,
+        /// Image height.
+        got_h: u32,
+        /// Camera width.
+        want_w: u32,
+        /// Camera height.
+        want_h: u32,
+    },
+    /// The folder holds no images.
+    #[error("no reference images in {0}")]
+    Empty(PathBuf),
+}
+
+/// Reads reference views from a dataset folder: `sparse/0/` (text or binary, pinhole cameras),
+/// `images/NAME`, and `masks/NAME` when present (else the image's own alpha channel, else full
+/// coverage). Colours are taken as composited on black, as `transcode views` writes them.
+pub fn load_reference_views(dir: &Path) -> Result<Vec<ReferenceView>, EvalError> {
+    let sparse = dir.join("sparse/0");
+    let rec = colmap_io::read_model(&sparse).map_err(|source| EvalError::Colmap {
+        path: sparse.clone(),
+        source,
+    })?;
+    let mut views = Vec::with_capacity(rec.images.len());
+    for (id, image) in &rec.images {
+        let camera = rec.camera_of(*id).map_err(|source| EvalError::Colmap {
+            path: sparse.clone(),
+            source,
+        })?;
+        let path = dir.join("images").join(&image.name);
+        let img = read_image(&path)?;
+        let (w, h) = (camera.intrinsics.width, camera.intrinsics.height);
+        if (img.width(), img.height()) != (w, h) {
+            return Err(EvalError::Size {
+                path,
+                got_w: img.width(),
+                got_h: img.height(),
+                want_w: w,
+                want_h: h,
+            });
+        }
+        let rgba = img.to_rgba32f();
+        let mask_path = dir.join("masks").join(&image.name);
+        let alpha: Vec<f32> = if mask_path.is_file() {
+            let m = read_image(&mask_path)?;
+            if (m.width(), m.height()) != (w, h) {
+                return Err(EvalError::Size {
+                    path: mask_path,
+                    got_w: m.width(),
+                    got_h: m.height(),
+                    want_w: w,
+                    want_h: h,
+                });
+            }
+            m.to_luma32f().into_raw()
+        } else {
+            rgba.pixels().map(|p| p[3]).collect()
+        };
+        let rgb = rgba
+            .pixels()
+            .zip(&alpha)
+            .flat_map(|(p, &a)| {
+                // An RGBA image without a mask is straight colour: put it on black.
+                let k = if mask_path.is_file() { 1.0 } else { a };
+                [p[0] * k, p[1] * k, p[2] * k]
+            })
+            .collect();
+        let name = Path::new(&image.name)
+            .file_stem()
+            .map_or_else(|| image.name.clone(), |s| s.to_string_lossy().into_owned());
+        views.push(ReferenceView {
+            name,
+            camera,
+            rgb,
+            alpha,
+        });
+    }
+    if views.is_empty() {
+        return Err(EvalError::Empty(dir.to_path_buf()));
+    }
+    Ok(views)
+}
+
+fn read_image(path: &Path) -> Result<image::DynamicImage, EvalError> {
+    image::ImageReader::open(path)
+        .map_err(|e| EvalError::Image {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?
+        .with_guessed_format()
+        .map_err(|e| EvalError::Image {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?
+        .decode()
+        .map_err(|e| EvalError::Image {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })
+}
 
 /// A reference view: a camera, its colours composited on black and its coverage.
 #[derive(Debug, Clone, PartialEq)]
@@ -237,7 +364,8 @@ pub fn surface_distance(
         });
     }
     let mean = d.iter().map(|x| x.0 * x.1).sum::<f64>() / total;
-    let beyond = d.iter().filter(|x| x.0 > threshold).map(|x| x.1).sum::<f64>() / total;
+    // Adding 0.0 turns the empty sum's −0.0 into 0.0.
+    let beyond = d.iter().filter(|x| x.0 > threshold).map(|x| x.1).sum::<f64>() / total + 0.0;
     d.sort_by(|a, b| a.0.total_cmp(&b.0));
     let mut acc = 0.0;
     let mut p95 = d.last().map_or(0.0, |x| x.0);

@@ -94,46 +94,24 @@ pub struct Rig {
     pub radius: f64,
 }
 
-/// The input's points (cloud points or mesh vertices), for framing.
-fn model_points(model: &Model) -> &[Vec3] {
-    match model {
-        Model::Cloud(c) => &c.positions,
-        Model::Mesh(m) => &m.positions,
-    }
-}
-
-/// Training cameras on a Fibonacci sphere framing the object, and held-out cameras on the
-/// directions of a second lattice turned by half the golden angle about the up axis (so they fall
-/// between the training ones), at the configured multiples of the training distance.
+/// Training cameras from [`views::fibonacci_rig`] (a Fibonacci sphere framing the object), and
+/// held-out cameras on the directions of a second lattice turned by half the golden angle about
+/// the up axis (so they fall between the training ones), at the configured multiples of the
+/// training distance.
 pub fn build_rig(model: &Model, cfg: &crate::config::RigConfig) -> Result<Rig, PipelineError> {
-    let points = model_points(model);
-    let (lo, hi) = init::bounds(points);
-    let center = ((lo + hi) * 0.5).as_dvec3();
-    let radius = points
-        .iter()
-        .map(|p| p.as_dvec3().distance(center))
-        .fold(0.0, f64::max)
-        .max(1e-6);
+    let (center, radius) = views::bounding_sphere(model)?;
+    let train = views::fibonacci_rig(center, radius, cfg)?;
     let intrinsics = Intrinsics::from_fov_y(cfg.width, cfg.height, cfg.fov_y_deg);
     let distance = framing_distance(radius, &intrinsics, cfg.margin)?;
-    let train = look_at_rig(
-        &fibonacci_sphere(cfg.cameras),
-        center,
-        distance,
-        intrinsics,
-        WORLD_UP,
-    );
     // Half the golden angle (≈ 68.75°) about +y moves every lattice point off the training ones.
     let turn = glam::DQuat::from_rotation_y(1.199_981_614_864_326_5);
     let heldout = fibonacci_sphere(cfg.heldout_cameras)
         .into_iter()
         .enumerate()
-        .map(|(i, d)| {
+        .flat_map(|(i, d)| {
             let factor = cfg.heldout_distances[i % cfg.heldout_distances.len().max(1)];
-            let d = turn * d;
-            look_at_rig(&[d], center, distance * factor, intrinsics, WORLD_UP)
+            look_at_rig(&[turn * d], center, distance * factor, intrinsics, WORLD_UP)
         })
-        .flatten()
         .collect();
     Ok(Rig {
         train,
@@ -237,9 +215,6 @@ pub fn run(input: &Path, out: &Path, cfg: &Config, quiet: bool) -> Result<Outcom
             Err(e) => return Err(io_err(&marker)(e)),
         }
     }
-    for d in [&model_dir, &report_dir, &dataset_dir] {
-        std::fs::create_dir_all(d).map_err(io_err(d))?;
-    }
     let mut timings = Vec::new();
     let mut stage = Instant::now();
     let mut lap = |name: &str, timings: &mut Vec<StageTiming>| {
@@ -252,19 +227,22 @@ pub fn run(input: &Path, out: &Path, cfg: &Config, quiet: bool) -> Result<Outcom
         s
     };
 
-    say(format!("[1/7] loading {}", input.display()));
+    say(format!("[1/6] loading {}", input.display()));
     let model = plenoptic_io::load(input)?;
     let info = input_info(input, &model);
     if info.points == 0 {
         return Err(PipelineError::EmptyInput(input.to_path_buf()));
     }
     lap("load", &mut timings);
+    for d in [&model_dir, &report_dir, &dataset_dir] {
+        std::fs::create_dir_all(d).map_err(io_err(d))?;
+    }
 
     let rig = build_rig(&model, &cfg.rig)?;
     lap("rig", &mut timings);
 
     say(format!(
-        "[2/7] rendering {} training and {} held-out views at {}×{}",
+        "[2/6] rendering {} training views (and the COLMAP dataset) and {} held-out views at {}×{}",
         rig.train.len(),
         rig.heldout.len(),
         cfg.rig.width,
@@ -272,26 +250,38 @@ pub fn run(input: &Path, out: &Path, cfg: &Config, quiet: bool) -> Result<Outcom
     ));
     let mut opts = cfg.renderer.clone();
     opts.background = [0.0; 3];
-    let train_images = views::render_views(&model, &rig.train, &opts)?;
+    let dataset_opts = views::DatasetOptions {
+        bit_depth: if cfg.output.png16 {
+            views::BitDepth::Sixteen
+        } else {
+            views::BitDepth::Eight
+        },
+        masks: true,
+        depth: false,
+    };
+    let bar = progress_bar(rig.train.len() as u64, quiet, "views");
+    let train_images =
+        views::write_dataset(&dataset_dir, &model, &rig.train, &opts, &dataset_opts, &|| {
+            bar.inc(1);
+        })?;
+    bar.finish_and_clear();
+    lap("render training views + write dataset", &mut timings);
     let heldout_images = views::render_views(&model, &rig.heldout, &opts)?;
-    lap("render views", &mut timings);
-
-    say(format!("[3/7] writing the COLMAP dataset to {}", dataset_dir.display()));
+    lap("render held-out views", &mut timings);
+    say(format!("      dataset written to {}", dataset_dir.display()));
     let surface = SurfacePoints::from_model(
         &model,
         init::mesh_points(&cfg.init).0,
         init::mesh_points(&cfg.init).1,
         cfg.training.seed,
     );
-    write_dataset(&dataset_dir, &rig.train, &train_images, &surface, cfg)?;
-    lap("write dataset", &mut timings);
 
     let train_views: Vec<View> = rig
         .train
         .iter()
         .zip(&train_images)
         .enumerate()
-        .map(|(i, (c, img))| training_view(view_name(i), c.clone(), img))
+        .map(|(i, (c, img))| training_view(views::dataset_image_name(i), c.clone(), img))
         .collect();
     drop(train_images);
     let heldout: Vec<ReferenceView> = rig
@@ -352,7 +342,7 @@ pub fn run(input: &Path, out: &Path, cfg: &Config, quiet: bool) -> Result<Outcom
         renders_per_run.push(renders);
     }
 
-    say("[7/7] writing the report".to_string());
+    say("[6/6] writing the report".to_string());
     let pictures = pick_pictures(&heldout, &renders_per_run, cfg.eval.report_views);
     let mut report = Report {
         version: env!("CARGO_PKG_VERSION").to_string(),
@@ -400,7 +390,7 @@ fn init_train_eval(
             eprintln!("{msg}");
         }
     };
-    say(format!("[4/7] {mode} init"));
+    say(format!("[3/6] {mode} init"));
     let mut init_cfg = cfg.init.clone();
     init_cfg.mode = mode;
     let (splats, summary) =
@@ -420,7 +410,7 @@ fn init_train_eval(
     lap("init", &mut timings);
 
     say(format!(
-        "[5/7] training {} iterations{}",
+        "[4/6] training {} iterations{}",
         cfg.training.iterations,
         cfg.training
             .time_budget_s
@@ -431,7 +421,7 @@ fn init_train_eval(
     let (trained, train_report) = train(splats, train_views.to_vec(), tc, quiet)?;
     lap("train", &mut timings);
 
-    say(format!("[6/7] writing {} and evaluating", model_path.display()));
+    say(format!("[5/6] writing {} and evaluating", model_path.display()));
     splat_core::ply::write_splats(model_path, &trained).map_err(|source| {
         PipelineError::Model {
             path: model_path.to_path_buf(),
@@ -483,17 +473,7 @@ fn train(
 ) -> Result<(Splats, splat_train::TrainReport), PipelineError> {
     let total = u64::from(tc.iterations);
     let mut trainer = Trainer::new(splats, views, tc)?;
-    let bar = if quiet {
-        ProgressBar::hidden()
-    } else {
-        ProgressBar::new(total)
-    };
-    bar.set_style(
-        ProgressStyle::with_template(
-            "      {bar:30} {pos}/{len} steps, {elapsed_precise} elapsed, ETA {eta} {msg}",
-        )
-        .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
+    let bar = progress_bar(total, quiet, "steps");
     let report = trainer.run(|p| {
         bar.set_position(u64::from(p.step.iteration));
         if p.step.iteration % 25 == 0 {
@@ -507,31 +487,19 @@ fn train(
     Ok((trainer.splats().clone(), report))
 }
 
-/// Writes the COLMAP dataset: images, cameras and the surface points as points3D.
-fn write_dataset(
-    dir: &Path,
-    cameras: &[Camera],
-    images: &[ViewImage],
-    surface: &SurfacePoints,
-    cfg: &Config,
-) -> Result<(), PipelineError> {
-    let _ = (cameras, surface);
-    let images_dir = dir.join("images");
-    std::fs::create_dir_all(&images_dir).map_err(io_err(&images_dir))?;
-    let depth = if cfg.output.png16 {
-        views::BitDepth::Sixteen
-    } else {
-        views::BitDepth::Eight
-    };
-    for (i, img) in images.iter().enumerate() {
-        views::write_rgb_png(&images_dir.join(format!("{}.png", view_name(i))), img, depth)?;
+/// A progress bar on stderr (hidden when `quiet`) counting `unit`.
+fn progress_bar(total: u64, quiet: bool, unit: &str) -> ProgressBar {
+    if quiet {
+        return ProgressBar::hidden();
     }
-    Ok(())
-}
-
-/// The name of training view `i`.
-fn view_name(i: usize) -> String {
-    format!("view_{i:03}")
+    let bar = ProgressBar::new(total);
+    bar.set_style(
+        ProgressStyle::with_template(&format!(
+            "      {{bar:30}} {{pos}}/{{len}} {unit}, {{elapsed_precise}} elapsed, ETA {{eta}} {{msg}}"
+        ))
+        .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    bar
 }
 
 /// Pictures of up to `n` held-out views spread over the set.

@@ -3,7 +3,6 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::Context as _;
 use transcode::config::{Config, InitMode, Sampling, ShDegree};
 
 /// Arguments of `transcode config`.
@@ -20,7 +19,7 @@ pub struct Args {
 /// Runs `transcode config`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let config = match &args.check {
-        Some(path) => Config::load(path)?,
+        Some(path) => Config::load(path).map_err(flat)?,
         None if args.defaults => Config::default(),
         None => anyhow::bail!("say --defaults to print the defaults or --check FILE to check a file"),
     };
@@ -88,7 +87,7 @@ impl Overrides {
     /// The configuration: `base` (or the `--config` file) with the flags applied, validated.
     pub fn resolve(&self, base: Config) -> anyhow::Result<Config> {
         let mut c = match &self.config {
-            Some(path) => Config::load(path)?,
+            Some(path) => Config::load(path).map_err(flat)?,
             None => base,
         };
         let o = self;
@@ -133,9 +132,16 @@ impl Overrides {
         c.init.densify_surface |= o.densify;
         c.output.splat_file |= o.splat_file;
         c.output.compare_init |= o.compare_init;
-        c.validate().context("after applying the command-line flags")?;
+        c.validate()
+            .map_err(|e| anyhow::anyhow!("{e} (after applying the command-line flags)"))?;
         Ok(c)
     }
+}
+
+/// One-line error from a library error whose message already includes its causes (so that the
+/// `{:#}` chain printed by `main` does not repeat them).
+pub fn flat(err: impl std::fmt::Display) -> anyhow::Error {
+    anyhow::anyhow!("{err}")
 }
 
 /// Fails with a clear message when `path` does not exist.

@@ -6,7 +6,7 @@ use anyhow::Context as _;
 use transcode::config::Config;
 use transcode::scene::{DemoConfig, demo_scene};
 
-use super::config::Overrides;
+use super::config::{Overrides, flat};
 
 /// Arguments of `transcode demo`.
 #[derive(Debug, clap::Args)]
@@ -53,7 +53,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let input = input_dir.join("demo.ply");
     plenoptic_io::write_cloud(&input, &cloud)
         .with_context(|| format!("cannot write the demo scene to {}", input.display()))?;
-    let outcome = transcode::pipeline::run(&input, &args.out, &config, args.quiet)?;
+    let outcome = transcode::pipeline::run(&input, &args.out, &config, args.quiet).map_err(flat)?;
     super::run::print_outcome(&outcome);
     Ok(())
 }

@@ -1,10 +1,88 @@
-//! PLACEHOLDER: owned by the helper implementing this subcommand; replace this whole file.
+//! `transcode eval MODEL.ply --reference DIR`: metrics of a 3DGS model against reference views.
 
-/// Arguments (to be defined by the subcommand's owner).
+use std::path::PathBuf;
+
+use anyhow::Context as _;
+use transcode::config::Config;
+use transcode::eval::{EvalOptions, evaluate, load_reference_views};
+use transcode::init::{self, SurfacePoints};
+
+use super::config::{Overrides, flat, require_file};
+
+/// Arguments of `transcode eval`.
 #[derive(Debug, clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// The 3DGS model (Inria PLY).
+    model: PathBuf,
+    /// Folder of reference views: images/, sparse/0/ (COLMAP cameras) and optionally masks/.
+    #[arg(long, value_name = "DIR")]
+    reference: PathBuf,
+    /// The input model, to measure the splats' distance to its surface.
+    #[arg(long, value_name = "FILE")]
+    surface: Option<PathBuf>,
+    /// Also write the metrics as JSON to this file.
+    #[arg(long, value_name = "FILE")]
+    json: Option<PathBuf>,
+    #[command(flatten)]
+    overrides: Overrides,
+}
 
-/// Runs the subcommand.
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("this subcommand is not built yet")
+/// Runs `transcode eval`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    require_file(&args.model, "model")?;
+    let config = args.overrides.resolve(Config::default())?;
+    let splats = splat_core::ply::read_splats(&args.model).map_err(flat)?;
+    let views = load_reference_views(&args.reference).map_err(flat)?;
+    let surface = match &args.surface {
+        Some(path) => {
+            let model = plenoptic_io::load(path).map_err(flat)?;
+            let points = match &model {
+                plenoptic_io::Model::Cloud(c) => SurfacePoints::from_cloud(c).positions,
+                plenoptic_io::Model::Mesh(m) => init::sample_mesh(m, 200_000, 0).positions,
+            };
+            let spacing = init::point_spacing(&points);
+            Some((points, spacing))
+        }
+        None => None,
+    };
+    let (metrics, _) = evaluate(
+        &splats,
+        &views,
+        surface.as_ref().map(|(p, s)| (p.as_slice(), *s)),
+        &EvalOptions::from(&config.eval),
+    );
+    println!("{} views, {} splats", views.len(), metrics.splats);
+    println!("view                 PSNR black  PSNR white  SSIM black  SSIM white  alpha IoU");
+    for v in &metrics.views {
+        println!(
+            "{:<20} {:>10.2} {:>11.2} {:>11.4} {:>11.4} {:>10.4}",
+            v.name, v.psnr_black, v.psnr_white, v.ssim_black, v.ssim_white, v.alpha_iou
+        );
+    }
+    println!(
+        "{:<20} {:>10.2} {:>11.2} {:>11.4} {:>11.4} {:>10.4}",
+        "mean",
+        metrics.psnr_black,
+        metrics.psnr_white,
+        metrics.ssim_black,
+        metrics.ssim_white,
+        metrics.alpha_iou
+    );
+    if let Some(d) = &metrics.surface {
+        println!(
+            "distance to surface: mean {:.4}, p95 {:.4} (spacing {:.4}); {} floaters beyond {:.4} hold {:.2}% of the opacity",
+            d.mean,
+            d.p95,
+            d.spacing,
+            d.floaters,
+            d.threshold,
+            100.0 * d.floater_share
+        );
+    }
+    if let Some(path) = &args.json {
+        let json = serde_json::to_vec_pretty(&metrics)?;
+        transcode::atomic::write_atomic(path, &json)
+            .with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    Ok(())
 }

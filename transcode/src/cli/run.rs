@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use transcode::config::Config;
 
-use super::config::{Overrides, require_file};
+use super::config::{Overrides, flat, require_file};
 
 /// Arguments of `transcode run`.
 #[derive(Debug, clap::Args)]
@@ -25,7 +25,7 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     require_file(&args.input, "input")?;
     let config = args.overrides.resolve(Config::default())?;
-    let outcome = transcode::pipeline::run(&args.input, &args.out, &config, args.quiet)?;
+    let outcome = transcode::pipeline::run(&args.input, &args.out, &config, args.quiet).map_err(flat)?;
     print_outcome(&outcome);
     Ok(())
 }

@@ -33,7 +33,7 @@ pub enum InitError {
     #[error("the input has no points to initialise splats from")]
     Empty,
     /// The COLMAP model given for sparse init could not be read.
-    #[error("cannot read the COLMAP points3D of {path}: {source}")]
+    #[error("sparse init from COLMAP points3D: {source}")]
     Colmap {
         /// The model folder.
         path: PathBuf,
