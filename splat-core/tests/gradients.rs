@@ -11,6 +11,7 @@
 //! parameter group, ‖analytic − numeric‖ ≤ 1e-4·‖numeric‖, and every element within
 //! 1e-3·max|numeric| — two orders above the f32 noise, and far below what any wrong sign,
 //! factor or missing term produces (those give errors of order 1).
+#![allow(clippy::needless_range_loop)] // index loops mirror the maths in these checks
 
 mod common;
 

@@ -269,7 +269,7 @@ pub fn render_ref(
         let m = s.means[i];
         let p: [f64; 3] =
             std::array::from_fn(|r| (0..3).map(|k| wr[r][k] * m[k]).sum::<f64>() + tw[r]);
-        if !(p[2] > 0.01) {
+        if p[2].is_nan() || p[2] <= 0.01 {
             continue;
         }
         let o = 1.0 / (1.0 + (-s.logits[i]).exp());
