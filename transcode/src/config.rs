@@ -248,7 +248,7 @@ impl Default for InitConfig {
             mesh_points: MeshPoints::Samples,
             mesh_samples: 20_000,
             sh_degree: ShDegree::Auto,
-            sh_tolerance: 0.01,
+            sh_tolerance: 0.002,
             fit_directions: 128,
             ridge: 1e-3,
             normal_neighbours: 12,

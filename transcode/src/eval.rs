@@ -181,6 +181,10 @@ pub struct ViewMetrics {
     pub ssim_white: f64,
     /// Intersection over union of rendered coverage and the reference mask (both thresholded).
     pub alpha_iou: f64,
+    /// Mean missing coverage (1 − rendered alpha) where the reference is fully covered: holes.
+    pub hole_alpha: f64,
+    /// Mean rendered alpha where the reference is empty: splats in free space.
+    pub free_alpha: f64,
 }
 
 /// Opacity-weighted distance of splat centres to the input surface.
@@ -213,6 +217,10 @@ pub struct Metrics {
     pub ssim_white: f64,
     /// Mean alpha IoU.
     pub alpha_iou: f64,
+    /// Mean hole alpha (see [`ViewMetrics::hole_alpha`]).
+    pub hole_alpha: f64,
+    /// Mean free-space alpha (see [`ViewMetrics::free_alpha`]).
+    pub free_alpha: f64,
     /// Distance of splats to the input surface, when the surface is known.
     pub surface: Option<SurfaceDistance>,
     /// Number of splats.
@@ -282,6 +290,7 @@ pub fn evaluate(
         let (psnr_black, ssim_black, rgb, alpha) = score(Vec3::ZERO);
         let (psnr_white, ssim_white, _, _) = score(Vec3::ONE);
         let alpha_iou = iou(&alpha, &v.alpha, opts.alpha_threshold);
+        let (hole_alpha, free_alpha) = coverage_errors(&alpha, &v.alpha);
         per_view.push(ViewMetrics {
             name: v.name.clone(),
             psnr_black,
@@ -289,6 +298,8 @@ pub fn evaluate(
             ssim_black,
             ssim_white,
             alpha_iou,
+            hole_alpha,
+            free_alpha,
         });
         renders.push(RenderedView { rgb, alpha });
     }
@@ -301,6 +312,8 @@ pub fn evaluate(
         ssim_black: mean(|v| v.ssim_black),
         ssim_white: mean(|v| v.ssim_white),
         alpha_iou: mean(|v| v.alpha_iou),
+        hole_alpha: mean(|v| v.hole_alpha),
+        free_alpha: mean(|v| v.free_alpha),
         surface: surface.and_then(|(points, spacing)| {
             surface_distance(splats, points, spacing, opts.floater_spacings)
         }),
@@ -324,6 +337,23 @@ pub fn iou(a: &[f32], b: &[f32], threshold: f32) -> f64 {
     } else {
         inter as f64 / union as f64
     }
+}
+
+/// Mean of 1 − `rendered` where `reference` ≥ 0.999 (holes) and of `rendered` where `reference`
+/// ≤ 0.001 (free space); 0 for an empty set.
+#[must_use]
+pub fn coverage_errors(rendered: &[f32], reference: &[f32]) -> (f64, f64) {
+    let (mut hole, mut nh, mut free, mut nf) = (0.0f64, 0usize, 0.0f64, 0usize);
+    for (&r, &m) in rendered.iter().zip(reference) {
+        if m >= 0.999 {
+            hole += f64::from(1.0 - r);
+            nh += 1;
+        } else if m <= 0.001 {
+            free += f64::from(r);
+            nf += 1;
+        }
+    }
+    (hole / nh.max(1) as f64, free / nf.max(1) as f64)
 }
 
 /// Opacity-weighted distance of splat centres to the nearest surface point; `None` without
@@ -396,6 +426,8 @@ mod tests {
         let b = [1.0, 0.0, 1.0, 0.0];
         assert!((iou(&a, &b, 0.5) - 1.0 / 3.0).abs() < 1e-12);
         assert_eq!(iou(&[0.0; 3], &[0.0; 3], 0.5), 1.0);
+        let (hole, free) = coverage_errors(&[0.5, 1.0, 0.25, 0.0], &[1.0, 1.0, 0.0, 0.0]);
+        assert_eq!((hole, free), (0.25, 0.125));
     }
 
     #[test]

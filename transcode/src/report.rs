@@ -140,16 +140,14 @@ pub fn render_html(report: &Report, pictures: &[ViewPictures]) -> io::Result<Str
     );
     let _ = write!(
         h,
-        "<h1>transcode report</h1>\n<p>Input <code>{}</code>: {} with {} {} {}, {} capture cameras, {}. \
+        "<h1>transcode report</h1>\n<p>Input <code>{}</code>: {} with {}, {} capture cameras, {}. \
          {} training views, {} held-out views. Total {:.1} s. transcode {}.</p>\n",
         esc(&report.input.path.display().to_string()),
         esc(&report.input.kind),
-        report.input.points,
-        if report.input.triangles > 0 { "vertices" } else { "points" },
         if report.input.triangles > 0 {
-            format!("and {} triangles", report.input.triangles)
+            format!("{} vertices and {} triangles", report.input.points, report.input.triangles)
         } else {
-            String::new()
+            format!("{} points", report.input.points)
         },
         report.input.capture_cameras,
         human_bytes(report.input.bytes),
@@ -160,7 +158,10 @@ pub fn render_html(report: &Report, pictures: &[ViewPictures]) -> io::Result<Str
     );
     metrics_table(&mut h, report, &names);
     timings_table(&mut h, report, &names);
-    h.push_str("<h2>Training PSNR against wall time</h2>\n");
+    h.push_str(&format!(
+        "<h2>Training PSNR against wall time</h2>\n<p>PSNR of the training view of each logged \
+         step, as a moving mean over {CURVE_WINDOW} log points (single views vary a lot).</p>\n"
+    ));
     h.push_str(&curve_svg(report, &names));
     h.push_str(&format!(
         "<h2>Held-out views</h2>\n<p>Reference | splats | error heat map (mean absolute error over \
@@ -200,12 +201,14 @@ fn metrics_table(h: &mut String, report: &Report, names: &[String]) {
     }
     h.push_str("</tr>\n");
     type Row = (&'static str, fn(&RunReport) -> String);
-    let rows: [Row; 15] = [
+    let rows: [Row; 17] = [
         ("PSNR, black background (dB)", |r| format!("{:.2}", r.metrics.psnr_black)),
         ("PSNR, white background (dB)", |r| format!("{:.2}", r.metrics.psnr_white)),
         ("SSIM, black", |r| format!("{:.4}", r.metrics.ssim_black)),
         ("SSIM, white", |r| format!("{:.4}", r.metrics.ssim_white)),
         ("alpha IoU", |r| format!("{:.4}", r.metrics.alpha_iou)),
+        ("holes: missing alpha inside the mask", |r| format!("{:.4}", r.metrics.hole_alpha)),
+        ("free-space alpha outside the mask", |r| format!("{:.4}", r.metrics.free_alpha)),
         ("splats", |r| r.metrics.splats.to_string()),
         ("SH degree", |r| r.init.sh_degree.to_string()),
         ("distance to surface, mean (spacings)", |r| {
@@ -270,24 +273,37 @@ fn timings_table(h: &mut String, report: &Report, names: &[String]) {
     );
 }
 
+/// Log points averaged in the plotted training curve.
+pub const CURVE_WINDOW: usize = 5;
+
+/// Moving mean of the finite PSNRs of a curve over [`CURVE_WINDOW`] points: (elapsed, PSNR).
+#[must_use]
+pub fn smoothed(curve: &[CurvePoint]) -> Vec<(f64, f64)> {
+    let pts: Vec<&CurvePoint> = curve.iter().filter(|p| p.psnr.is_finite()).collect();
+    (0..pts.len())
+        .map(|i| {
+            let lo = i.saturating_sub(CURVE_WINDOW - 1);
+            let win = &pts[lo..=i];
+            let mean = win.iter().map(|p| p.psnr).sum::<f64>() / win.len() as f64;
+            (pts[i].elapsed_s, mean)
+        })
+        .collect()
+}
+
 /// Line colours of the runs in the plot.
 const RUN_COLOURS: [&str; 4] = ["#1f77b4", "#d62728", "#2ca02c", "#9467bd"];
 
 /// The training curves as an inline SVG line plot.
 fn curve_svg(report: &Report, names: &[String]) -> String {
     let (w, h, left, bottom, top, right) = (720.0, 360.0, 60.0, 40.0, 15.0, 20.0);
-    let points: Vec<&CurvePoint> = report
-        .runs
-        .iter()
-        .flat_map(|r| &r.curve)
-        .filter(|p| p.psnr.is_finite())
-        .collect();
+    let curves: Vec<Vec<(f64, f64)>> = report.runs.iter().map(|r| smoothed(&r.curve)).collect();
+    let points: Vec<(f64, f64)> = curves.iter().flatten().copied().collect();
     if points.is_empty() {
         return "<p>(no training history)</p>\n".into();
     }
-    let t_max = points.iter().map(|p| p.elapsed_s).fold(0.0, f64::max).max(1e-3);
-    let p_min = points.iter().map(|p| p.psnr).fold(f64::INFINITY, f64::min).floor();
-    let p_max = points.iter().map(|p| p.psnr).fold(f64::NEG_INFINITY, f64::max).ceil();
+    let t_max = points.iter().map(|p| p.0).fold(0.0, f64::max).max(1e-3);
+    let p_min = points.iter().map(|p| p.1).fold(f64::INFINITY, f64::min).floor();
+    let p_max = points.iter().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max).ceil();
     let p_max = if p_max <= p_min { p_min + 1.0 } else { p_max };
     let x = |t: f64| left + (w - left - right) * t / t_max;
     let y = |p: f64| top + (h - top - bottom) * (1.0 - (p - p_min) / (p_max - p_min));
@@ -327,13 +343,11 @@ fn curve_svg(report: &Report, names: &[String]) -> String {
         h / 2.0,
         h / 2.0
     );
-    for (i, (r, name)) in report.runs.iter().zip(names).enumerate() {
+    for (i, (curve, name)) in curves.iter().zip(names).enumerate() {
         let colour = RUN_COLOURS[i % RUN_COLOURS.len()];
-        let pts: Vec<String> = r
-            .curve
+        let pts: Vec<String> = curve
             .iter()
-            .filter(|p| p.psnr.is_finite())
-            .map(|p| format!("{:.1},{:.1}", x(p.elapsed_s), y(p.psnr)))
+            .map(|&(t, p)| format!("{:.1},{:.1}", x(t), y(p)))
             .collect();
         let _ = write!(
             s,
@@ -446,6 +460,22 @@ mod tests {
         let rgb = vec![0.0, 0.5, 1.0, 1.0, 0.0, 0.25];
         let uri = png_data_uri(&rgb, 2, 1).unwrap();
         assert!(uri.starts_with("data:image/png;base64,iVBORw0KGgo"));
+    }
+
+    #[test]
+    fn smoothing_is_a_trailing_mean() {
+        let curve: Vec<CurvePoint> = (0..7)
+            .map(|i| CurvePoint {
+                iteration: i,
+                elapsed_s: f64::from(i),
+                psnr: if i == 3 { f64::INFINITY } else { f64::from(i) },
+                splats: 1,
+            })
+            .collect();
+        let s = smoothed(&curve);
+        assert_eq!(s.len(), 6);
+        assert_eq!(s[0], (0.0, 0.0));
+        assert_eq!(s[5], (6.0, (6.0 + 5.0 + 4.0 + 2.0 + 1.0) / 5.0));
     }
 
     #[test]
