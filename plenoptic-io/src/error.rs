@@ -7,12 +7,12 @@ use std::path::PathBuf;
 #[non_exhaustive]
 pub enum Error {
     /// The operating system refused to open, map, read or write the file.
-    #[error("{}: {source}", path.display())]
+    #[error("{}: {error}", path.display())]
     Io {
         /// The file.
         path: PathBuf,
-        /// The underlying error.
-        source: std::io::Error,
+        /// The underlying error (shown in the message, so not repeated as a `source`).
+        error: std::io::Error,
     },
     /// The extension is not one of ply, obj, gltf, glb.
     #[error("{}: unsupported file type '{extension}' (expected .ply, .obj, .gltf or .glb)", path.display())]
@@ -143,10 +143,10 @@ pub enum Error {
 
 impl Error {
     /// Wraps an I/O error with its file.
-    pub(crate) fn io(path: &std::path::Path, source: std::io::Error) -> Self {
+    pub(crate) fn io(path: &std::path::Path, error: std::io::Error) -> Self {
         Error::Io {
             path: path.to_path_buf(),
-            source,
+            error,
         }
     }
 }

@@ -37,10 +37,23 @@ pub fn read_header(path: &Path) -> Result<Header, Error> {
 
 /// Reads a PLY point cloud (the vertex element; faces, if any, are ignored).
 pub(crate) fn read_cloud(path: &Path) -> Result<PlenopticCloud, Error> {
-    with_bytes(path, |bytes| {
-        let header = parse_header(path, bytes)?;
-        cloud_from(path, bytes, &header)
-    })
+    with_bytes(path, |bytes| cloud_from_bytes(path, bytes))
+}
+
+/// Parses a whole PLY file held in memory as a point cloud; `name` is used in error messages.
+pub fn cloud_from_bytes(name: &Path, bytes: &[u8]) -> Result<PlenopticCloud, Error> {
+    let header = parse_header(name, bytes)?;
+    cloud_from(name, bytes, &header)
+}
+
+/// Parses a whole PLY file held in memory as a mesh (if it has faces) or a cloud, like [`crate::load`].
+pub fn model_from_bytes(name: &Path, bytes: &[u8]) -> Result<Model, Error> {
+    let header = parse_header(name, bytes)?;
+    if has_faces(&header) {
+        mesh_from(name, bytes, &header).map(Model::Mesh)
+    } else {
+        cloud_from(name, bytes, &header).map(Model::Cloud)
+    }
 }
 
 /// Reads a PLY mesh; a PLY without faces is an error that says it is a point cloud.
@@ -59,14 +72,7 @@ pub(crate) fn read_mesh(path: &Path) -> Result<Mesh, Error> {
 
 /// Reads a PLY as a mesh when it has a face element with at least one face, else as a cloud.
 pub(crate) fn load(path: &Path) -> Result<Model, Error> {
-    with_bytes(path, |bytes| {
-        let header = parse_header(path, bytes)?;
-        if has_faces(&header) {
-            mesh_from(path, bytes, &header).map(Model::Mesh)
-        } else {
-            cloud_from(path, bytes, &header).map(Model::Cloud)
-        }
-    })
+    with_bytes(path, |bytes| model_from_bytes(path, bytes))
 }
 
 /// True when the header declares a face element with at least one face.
