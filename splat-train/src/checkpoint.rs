@@ -36,7 +36,11 @@ struct Header {
 /// Writes `trainer`'s state to `path` atomically (temporary sibling, fsync, rename).
 pub(crate) fn save(trainer: &Trainer, path: &Path) -> Result<(), Error> {
     let st = &trainer.state;
-    let strategy = trainer.strategy.export_state();
+    let strategy = trainer
+        .strategy
+        .as_ref()
+        .map(|s| s.export_state())
+        .unwrap_or_default();
     let header = Header {
         run: trainer.run.clone(),
         splats: st.len(),

@@ -29,6 +29,14 @@ pub enum Error {
         /// The underlying error.
         source: std::io::Error,
     },
+    /// An image file cannot be decoded or does not fit its camera.
+    #[error("{path}: {problem}")]
+    Image {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        problem: String,
+    },
     /// A checkpoint file is malformed or does not match the run it should resume.
     #[error("checkpoint {path}: {problem} (at byte {offset})")]
     Checkpoint {

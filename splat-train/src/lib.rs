@@ -26,4 +26,4 @@ pub use error::Error;
 pub use eval::{Evaluation, ViewScore, evaluate, evaluate_with};
 pub use strategy::{DensifyStrategy, InriaDensify, RefineContext, RefineReport};
 pub use trainer::{HistoryEntry, NonFinite, Progress, StepStats, Timings, TrainReport, Trainer};
-pub use view::View;
+pub use view::{View, load_view, scale_intrinsics};

@@ -22,6 +22,7 @@ pub struct LossValue {
 pub struct Loss {
     ssim: Ssim,
     d_rgb: Vec<f32>,
+    partials: Vec<(f64, f64)>,
 }
 
 impl Loss {
@@ -31,6 +32,7 @@ impl Loss {
         Self {
             ssim: Ssim::new(width, height),
             d_rgb: vec![0.0; 3 * width as usize * height as usize],
+            partials: Vec::new(),
         }
     }
 
@@ -67,8 +69,8 @@ impl Loss {
         let n = render.len();
         let k = (1.0 - lambda) / n as f32;
         // L1 part: d|r − g|/dr = sign(r − g), 0 at equality (PyTorch's subgradient).
-        let (l1, mse) = self
-            .d_rgb
+        // Partial sums per chunk, added in order so the value does not depend on scheduling.
+        self.d_rgb
             .par_chunks_mut(4096)
             .zip(render.par_chunks(4096).zip(image.par_chunks(4096)))
             .map(|(d, (r, g))| {
@@ -87,7 +89,11 @@ impl Loss {
                 }
                 (a, s)
             })
-            .reduce(|| (0.0, 0.0), |x, y| (x.0 + y.0, x.1 + y.1));
+            .collect_into_vec(&mut self.partials);
+        let (l1, mse) = self
+            .partials
+            .iter()
+            .fold((0.0, 0.0), |a, p| (a.0 + p.0, a.1 + p.1));
         let ssim = self
             .ssim
             .evaluate(render, image, target, Some((-lambda, &mut self.d_rgb)));

@@ -50,6 +50,7 @@ pub struct Ssim {
     e_xx: Vec<f32>,
     e_xy: Vec<f32>,
     prod: Vec<f32>,
+    row_sums: Vec<f64>,
 }
 
 impl Ssim {
@@ -66,6 +67,7 @@ impl Ssim {
             e_xx: vec![0.0; n],
             e_xy: vec![0.0; n],
             prod: vec![0.0; n],
+            row_sums: Vec::with_capacity(height as usize),
         }
     }
 
@@ -175,8 +177,9 @@ impl Ssim {
         // ∂SSIM/∂E[xy] (the chain through σx² and σxy folded into the first).
         let want_grad = grad.is_some();
         let row = 3 * w;
-        let sum: f64 = self
-            .mu_x
+        // Per-row partial sums, added in row order afterwards: rayon's reduction tree depends on
+        // scheduling, and a fixed order keeps the value bit-identical from run to run.
+        self.mu_x
             .par_chunks_mut(row)
             .zip(self.e_xx.par_chunks_mut(row))
             .zip(self.e_xy.par_chunks_mut(row))
@@ -205,7 +208,8 @@ impl Ssim {
                 }
                 s
             })
-            .sum();
+            .collect_into_vec(&mut self.row_sums);
+        let sum: f64 = self.row_sums.iter().sum();
         if let Some((scale, out)) = grad {
             assert_eq!(
                 out.len(),

@@ -141,11 +141,11 @@ impl InriaDensify {
             for _ in 0..SPLIT_CHILDREN {
                 let z = Vec3::new(normal(ctx.rng), normal(ctx.rng), normal(ctx.rng));
                 st.push_copy(i, mean + rotate(rot, scale * z), child_log_scale);
-                split_parent.push(false);
             }
             split_parent[i] = true;
             report.split += 1;
         }
+        split_parent.resize(st.len(), false);
         let min_logit = logit(c.min_opacity);
         let after_reset = c.opacity_reset_interval > 0 && iteration > c.opacity_reset_interval;
         let max_scale = c.max_world_scale * ctx.extent;

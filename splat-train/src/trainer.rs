@@ -50,7 +50,7 @@ pub struct StepStats {
 pub struct HistoryEntry {
     /// 1-based iteration.
     pub iteration: u32,
-    /// Training time in seconds since the run started (checkpoint pauses excluded).
+    /// Training time in seconds: the sum of step times, excluding progress callbacks and pauses.
     pub elapsed_s: f64,
     /// Loss of this step's view.
     pub loss: f64,
@@ -144,7 +144,7 @@ pub struct Trainer {
     views: Vec<View>,
     cameras: Vec<RenderCamera>,
     pub(crate) state: ParamState,
-    pub(crate) strategy: Box<dyn DensifyStrategy>,
+    pub(crate) strategy: Option<Box<dyn DensifyStrategy>>,
     pub(crate) run: RunState,
     grads: SplatGrads,
     rasterizer: Rasterizer,
@@ -165,13 +165,14 @@ impl Trainer {
     /// [`Error::Config`] for a bad configuration, [`Error::View`] for a view whose image or mask
     /// does not fit its camera, [`Error::Splats`] for inconsistent or non-finite splats.
     pub fn new(splats: Splats, views: Vec<View>, config: TrainConfig) -> Result<Self, Error> {
-        let strategy: Box<dyn DensifyStrategy> =
-            Box::new(InriaDensify::new(config.densify.unwrap_or_default()));
-        Self::with_strategy(splats, views, config, strategy)
+        let strategy = config
+            .densify
+            .map(|d| Box::new(InriaDensify::new(d)) as Box<dyn DensifyStrategy>);
+        Self::build(splats, views, config, strategy)
     }
 
-    /// Like [`Trainer::new`] with a caller-chosen refinement strategy (used when
-    /// `config.densify` is set).
+    /// Like [`Trainer::new`] with a caller-chosen refinement strategy in place of the one
+    /// `config.densify` describes (that field is then ignored).
     ///
     /// # Errors
     /// As [`Trainer::new`].
@@ -180,6 +181,15 @@ impl Trainer {
         views: Vec<View>,
         config: TrainConfig,
         strategy: Box<dyn DensifyStrategy>,
+    ) -> Result<Self, Error> {
+        Self::build(splats, views, config, Some(strategy))
+    }
+
+    fn build(
+        splats: Splats,
+        views: Vec<View>,
+        config: TrainConfig,
+        mut strategy: Option<Box<dyn DensifyStrategy>>,
     ) -> Result<Self, Error> {
         config.validate()?;
         splats
@@ -217,10 +227,9 @@ impl Trainer {
         sorted.sort_by(f32::total_cmp);
         let reset_log_scale = sorted[sorted.len() / 2];
         let n_views = views.len();
-        let mut strategy = strategy;
-        strategy
-            .import_state(&[], splats.len())
-            .map_err(Error::Config)?;
+        if let Some(s) = strategy.as_mut() {
+            s.import_state(&[], splats.len()).map_err(Error::Config)?;
+        }
         let run = RunState {
             iteration: 0,
             rng: Pcg64::seed_from_u64(config.seed),
@@ -441,16 +450,15 @@ impl Trainer {
             let t3 = Instant::now();
             self.timings.backward += t3 - t2;
             self.run.non_finite.zeroed_gradients += zero_non_finite_grads(&mut self.grads);
-            if self.config.densify.is_some() {
-                self.strategy
-                    .observe(iteration, &self.grads, self.rasterizer.radii());
+            if let Some(s) = self.strategy.as_mut() {
+                s.observe(iteration, &self.grads, self.rasterizer.radii());
             }
             self.adam_step(iteration);
             self.sanitize();
             let t4 = Instant::now();
             self.timings.adam += t4 - t3;
-            if self.config.densify.is_some() {
-                refine = self.strategy.refine(
+            if let Some(s) = self.strategy.as_mut() {
+                refine = s.refine(
                     iteration,
                     RefineContext {
                         state: &mut self.state,
@@ -466,14 +474,27 @@ impl Trainer {
         }
         self.timings.steps += 1;
         self.run.iteration = iteration;
-        StepStats {
+        let stats = StepStats {
             iteration,
             view: vi,
             loss: total,
             psnr: psnr_from_mse(value.mse),
             splats: self.state.len(),
             refine,
+        };
+        if iteration.is_multiple_of(self.config.history_every)
+            || iteration == self.config.iterations
+        {
+            // Elapsed time is filled in by `run`, which owns the clock.
+            self.run.history.push(HistoryEntry {
+                iteration,
+                elapsed_s: self.run.elapsed_s,
+                loss: stats.loss,
+                psnr: stats.psnr,
+                splats: stats.splats,
+            });
         }
+        stats
     }
 
     /// Adam on every group that is not frozen, at this step's rates.
@@ -545,9 +566,10 @@ impl Trainer {
         }
     }
 
-    /// Clamps scales and opacities to sane ranges, then resets or removes splats whose
-    /// parameters are no longer finite.
+    /// Resets or removes splats whose parameters are no longer finite, then clamps scales and
+    /// opacities to sane ranges.
     fn sanitize(&mut self) {
+        self.handle_non_finite();
         let lo = (MIN_SCALE_OF_EXTENT * self.extent).ln();
         let hi = (MAX_SCALE_OF_EXTENT * self.extent).ln();
         let s = &mut self.state.splats;
@@ -561,7 +583,12 @@ impl Trainer {
                 *o = o.clamp(-MAX_OPACITY_LOGIT, MAX_OPACITY_LOGIT);
             }
         }
-        // NaN survives the clamps above, so the scan below still sees it.
+    }
+
+    /// Resets (positions frozen) or removes splats with a non-finite parameter. Runs before the
+    /// clamps, which would turn NaN into a bound and hide it.
+    fn handle_non_finite(&mut self) {
+        let s = &self.state.splats;
         let bad: Vec<usize> = (0..s.len()).filter(|&i| !splat_is_finite(s, i)).collect();
         if bad.is_empty() {
             return;
@@ -581,7 +608,9 @@ impl Trainer {
                 keep[0] = true;
             }
             self.state.retain(&keep);
-            self.strategy.retain(&keep);
+            if let Some(s) = self.strategy.as_mut() {
+                s.retain(&keep);
+            }
             self.run.non_finite.removed_splats += bad.len() as u64;
             if let Some(i) = first_non_finite(&self.state.splats) {
                 self.state.splats.means[i] = Vec3::ZERO;
@@ -603,30 +632,31 @@ impl Trainer {
 
     /// Trains until the configured iteration count or time budget, calling `on_progress` after
     /// every step.
-    pub fn run(&mut self, mut on_progress: impl FnMut(&Progress)) -> TrainReport {
-        let start = Instant::now();
-        let before = self.run.elapsed_s;
+    pub fn run(&mut self, on_progress: impl FnMut(&Progress)) -> TrainReport {
+        self.run_until(self.config.iterations, on_progress)
+    }
+
+    /// Like [`Trainer::run`] but pauses once `until` steps are done (to evaluate or checkpoint
+    /// outside the timed steps); calling it again continues the same run.
+    pub fn run_until(&mut self, until: u32, mut on_progress: impl FnMut(&Progress)) -> TrainReport {
         let mut stopped_by_budget = false;
-        while self.run.iteration < self.config.iterations {
+        let until = until.min(self.config.iterations);
+        while self.run.iteration < until {
             if let Some(b) = self.config.time_budget
-                && before + start.elapsed().as_secs_f64() >= b.as_secs_f64()
+                && self.run.elapsed_s >= b.as_secs_f64()
             {
                 stopped_by_budget = true;
                 break;
             }
+            // Only the step is timed: the callback (progress display, evaluation) is not training.
+            let start = Instant::now();
             let s = self.step();
-            let elapsed = before + start.elapsed().as_secs_f64();
-            self.run.elapsed_s = elapsed;
-            if s.iteration.is_multiple_of(self.config.history_every)
-                || s.iteration == self.config.iterations
+            self.run.elapsed_s += start.elapsed().as_secs_f64();
+            let elapsed = self.run.elapsed_s;
+            if let Some(h) = self.run.history.last_mut()
+                && h.iteration == s.iteration
             {
-                self.run.history.push(HistoryEntry {
-                    iteration: s.iteration,
-                    elapsed_s: elapsed,
-                    loss: s.loss,
-                    psnr: s.psnr,
-                    splats: s.splats,
-                });
+                h.elapsed_s = elapsed;
             }
             on_progress(&Progress {
                 step: s,
@@ -677,7 +707,15 @@ impl Trainer {
         run: RunState,
         strategy_state: &[f32],
     ) -> Result<(), String> {
-        self.strategy.import_state(strategy_state, state.len())?;
+        match self.strategy.as_mut() {
+            Some(s) => s.import_state(strategy_state, state.len())?,
+            None if !strategy_state.is_empty() => {
+                return Err(
+                    "the checkpoint holds densification statistics but this run has none".into(),
+                );
+            }
+            None => {}
+        }
         self.grads = SplatGrads::zeros_like(&state.splats);
         self.state = state;
         self.run = run;
@@ -706,7 +744,7 @@ fn first_non_finite(s: &Splats) -> Option<usize> {
 /// Zeroes the gradients of splats with any non-finite gradient; returns how many.
 fn zero_non_finite_grads(g: &mut SplatGrads) -> u64 {
     let n = g.means.len();
-    let k = if n == 0 { 0 } else { g.sh.len() / n };
+    let k = g.sh.len().checked_div(n).unwrap_or(0);
     let mut count = 0;
     for i in 0..n {
         let ok = g.means[i].is_finite()

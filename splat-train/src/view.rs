@@ -1,5 +1,11 @@
 //! A training or evaluation view: a posed camera and its image.
 
+use std::path::Path;
+
+use camera_model::{Camera, Intrinsics};
+
+use crate::error::Error;
+
 /// An image with its camera.
 #[derive(Debug, Clone, PartialEq)]
 pub struct View {
@@ -57,5 +63,77 @@ impl View {
             ));
         }
         Ok(())
+    }
+}
+
+/// Loads a view from a PNG or JPEG file (an alpha channel becomes the mask), reduced by
+/// `downscale` ≥ 1 with the camera's intrinsics scaled to match.
+///
+/// # Errors
+/// [`Error::Image`] when the file cannot be read or decoded, or its size is not the camera's.
+pub fn load_view(path: &Path, name: &str, camera: Camera, downscale: f64) -> Result<View, Error> {
+    let fail = |problem: String| Error::Image {
+        path: path.to_path_buf(),
+        problem,
+    };
+    if !(downscale.is_finite() && downscale >= 1.0) {
+        return Err(fail(format!(
+            "downscale factor {downscale} must be at least 1"
+        )));
+    }
+    let img = image::ImageReader::open(path)
+        .map_err(|e| fail(e.to_string()))?
+        .with_guessed_format()
+        .map_err(|e| fail(e.to_string()))?
+        .decode()
+        .map_err(|e| fail(e.to_string()))?;
+    let k = camera.intrinsics;
+    if img.width() != k.width || img.height() != k.height {
+        return Err(fail(format!(
+            "image is {}×{} but its camera is {}×{}",
+            img.width(),
+            img.height(),
+            k.width,
+            k.height
+        )));
+    }
+    let has_alpha = img.color().has_alpha();
+    let mut rgba = img.into_rgba32f();
+    let mut intrinsics = k;
+    if downscale > 1.0 {
+        let w = ((f64::from(k.width) / downscale).round() as u32).max(1);
+        let h = ((f64::from(k.height) / downscale).round() as u32).max(1);
+        // The triangle filter widens its kernel by the reduction factor, so it averages.
+        rgba = image::imageops::resize(&rgba, w, h, image::imageops::FilterType::Triangle);
+        intrinsics = scale_intrinsics(&k, w, h);
+    }
+    let px = rgba.as_raw();
+    let image: Vec<f32> = px
+        .chunks_exact(4)
+        .flat_map(|p| [p[0], p[1], p[2]])
+        .collect();
+    let mask = has_alpha.then(|| px.chunks_exact(4).map(|p| p[3]).collect());
+    Ok(View {
+        name: name.to_string(),
+        camera: Camera::new(intrinsics, camera.pose),
+        image,
+        mask,
+    })
+}
+
+/// Intrinsics of the same camera at a `w × h` image size (pixel-centre convention kept: the
+/// principal point scales with the image edges).
+#[must_use]
+pub fn scale_intrinsics(k: &Intrinsics, w: u32, h: u32) -> Intrinsics {
+    let sx = f64::from(w) / f64::from(k.width);
+    let sy = f64::from(h) / f64::from(k.height);
+    Intrinsics {
+        width: w,
+        height: h,
+        fx: k.fx * sx,
+        fy: k.fy * sy,
+        cx: k.cx * sx,
+        cy: k.cy * sy,
+        skew: k.skew * sx,
     }
 }

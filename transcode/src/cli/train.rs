@@ -1,10 +1,464 @@
-//! PLACEHOLDER: owned by the helper implementing this subcommand; replace this whole file.
+//! `transcode train`: train splats on a COLMAP dataset folder (`images/` + `sparse/0/`).
 
-/// Arguments (to be defined by the subcommand's owner).
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, bail};
+use glam::Vec3;
+use indicatif::{ProgressBar, ProgressStyle};
+use rand::{RngExt, SeedableRng};
+use serde::Serialize;
+use splat_core::{Splats, logit, rgb_to_sh_dc};
+use splat_train::{
+    Background, DensifyConfig, HistoryEntry, TrainConfig, TrainReport, Trainer, View, evaluate,
+    load_view,
+};
+
+use transcode::atomic::write_atomic;
+
+/// How the initial splats are made.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Init {
+    /// The dataset's SfM points (`points3D`), with their colours (Inria's default).
+    Points3d,
+    /// Uniform random points in the bounding box of the SfM points (or of the cameras).
+    Random,
+}
+
+/// Background behind the splats.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum BackgroundArg {
+    /// Black (Inria's default).
+    Black,
+    /// White.
+    White,
+    /// A random colour every step (useful with masks).
+    Random,
+}
+
+/// Arguments of `transcode train`.
 #[derive(Debug, clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// COLMAP dataset folder with `images/` and `sparse/0/` (PINHOLE or SIMPLE_PINHOLE).
+    pub dataset: PathBuf,
+    /// Output folder for `splats.ply`, `history.json` and `checkpoint.bin`.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Optimisation steps (one view each).
+    #[arg(long, default_value_t = 7000)]
+    pub iterations: u32,
+    /// Initial splats.
+    #[arg(long, value_enum, default_value_t = Init::Points3d)]
+    pub init: Init,
+    /// Number of splats for `--init random`.
+    #[arg(long, default_value_t = 10_000)]
+    pub random_points: usize,
+    /// Keep splat positions fixed (implies no densification).
+    #[arg(long)]
+    pub freeze_positions: bool,
+    /// Grow and prune splats with Inria's adaptive density control (the default).
+    #[arg(long, overrides_with = "no_densify")]
+    pub densify: bool,
+    /// Keep the splat set fixed.
+    #[arg(long, overrides_with = "densify")]
+    pub no_densify: bool,
+    /// Never grow beyond this many splats.
+    #[arg(long, default_value_t = DensifyConfig::default().max_splats)]
+    pub max_splats: usize,
+    /// SH degree of the model (0–3).
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(0..=3))]
+    pub sh_degree: u32,
+    /// Evaluate every K iterations (0: only at the end).
+    #[arg(long, default_value_t = 0)]
+    pub eval_every: u32,
+    /// A second COLMAP dataset of held-out views to evaluate on (default: the training views).
+    #[arg(long)]
+    pub heldout: Option<PathBuf>,
+    /// Continue from `OUT/checkpoint.bin` up to `--iterations`.
+    #[arg(long)]
+    pub resume: bool,
+    /// Write `OUT/checkpoint.bin` every K iterations (0: only at the end).
+    #[arg(long, default_value_t = 0)]
+    pub checkpoint_every: u32,
+    /// Divide the image size by this factor (intrinsics are scaled to match).
+    #[arg(long, default_value_t = 1.0)]
+    pub downscale: f64,
+    /// Background colour.
+    #[arg(long, value_enum, default_value_t = BackgroundArg::Black)]
+    pub background: BackgroundArg,
+    /// Seed of the run.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Stop after this many seconds of training.
+    #[arg(long)]
+    pub time_budget: Option<f64>,
+    /// Do not show a progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+}
 
-/// Runs the subcommand.
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("this subcommand is not built yet")
+/// One evaluation during the run.
+#[derive(Debug, Clone, Serialize)]
+struct EvalPoint {
+    iteration: u32,
+    elapsed_s: f64,
+    splats: usize,
+    psnr: f64,
+    ssim: f64,
+}
+
+/// Contents of `history.json`.
+#[derive(Debug, Serialize)]
+struct History<'a> {
+    dataset: String,
+    heldout: Option<String>,
+    views: usize,
+    eval_views: usize,
+    iterations: u32,
+    elapsed_s: f64,
+    wall_s: f64,
+    splats: usize,
+    non_finite: splat_train::NonFinite,
+    refine: splat_train::RefineReport,
+    timings_s: Timings,
+    steps: &'a [HistoryEntry],
+    evaluations: &'a [EvalPoint],
+}
+
+/// Time per phase in seconds.
+#[derive(Debug, Serialize)]
+struct Timings {
+    forward: f64,
+    loss: f64,
+    backward: f64,
+    adam: f64,
+    refine: f64,
+}
+
+/// Runs `transcode train`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let wall = Instant::now();
+    if !(args.downscale.is_finite() && args.downscale >= 1.0) {
+        bail!("--downscale {} must be at least 1", args.downscale);
+    }
+    let (views, rec) = load_dataset(&args.dataset, args.downscale)?;
+    let eval_views = match &args.heldout {
+        Some(dir) => load_dataset(dir, args.downscale)?.0,
+        None => views.clone(),
+    };
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    let config = train_config(&args);
+    let ckpt = args.out.join("checkpoint.bin");
+    let mut trainer = if args.resume {
+        Trainer::resume(&ckpt, views, config)
+            .with_context(|| format!("cannot resume from {}", ckpt.display()))?
+    } else {
+        let splats = initial_splats(&args, &rec, &views)?;
+        Trainer::new(splats, views, config).context("cannot set up training")?
+    };
+    let background = match args.background {
+        BackgroundArg::White => Vec3::ONE,
+        BackgroundArg::Black | BackgroundArg::Random => Vec3::ZERO,
+    };
+    if !args.quiet {
+        eprintln!(
+            "training on {} views ({}×{}), {} splats, scene extent {:.3}",
+            trainer.views().len(),
+            trainer.views()[0].camera.intrinsics.width,
+            trainer.views()[0].camera.intrinsics.height,
+            trainer.splats().len(),
+            trainer.extent()
+        );
+    }
+
+    let bar = progress_bar(args.iterations, trainer.iteration(), args.quiet);
+    let mut evals: Vec<EvalPoint> = Vec::new();
+    let mut ema: Option<(f64, f64)> = None;
+    let mut pending_eval = false;
+    let mut pending_ckpt = false;
+    // The trainer pauses at each evaluation or checkpoint point so that both happen outside its
+    // timed steps.
+    let report = loop {
+        let stop_at = next_stop(
+            trainer.iteration(),
+            args.iterations,
+            args.eval_every,
+            args.checkpoint_every,
+        );
+        let r = trainer.run_until(stop_at, |p| {
+            let (l, q) = ema.map_or((p.step.loss, p.step.psnr), |(l, q)| {
+                (0.95 * l + 0.05 * p.step.loss, 0.95 * q + 0.05 * p.step.psnr)
+            });
+            ema = Some((l, q));
+            bar.set_position(u64::from(p.step.iteration));
+            if p.step.iteration % 10 == 0 {
+                bar.set_message(format!(
+                    "loss {l:.4}  PSNR {q:.2} dB  {} splats",
+                    p.step.splats
+                ));
+            }
+        });
+        let it = r.iterations;
+        pending_eval |= args.eval_every > 0 && it.is_multiple_of(args.eval_every);
+        pending_ckpt |= args.checkpoint_every > 0 && it.is_multiple_of(args.checkpoint_every);
+        let done = it >= args.iterations || r.stopped_by_budget;
+        if pending_eval || done {
+            let e = evaluate(trainer.splats(), &eval_views, background);
+            let line = format!(
+                "iteration {it}: {:.2} dB PSNR, SSIM {:.4} on {} views after {:.1} s, {} splats",
+                e.psnr,
+                e.ssim,
+                eval_views.len(),
+                r.elapsed_s,
+                r.splats
+            );
+            if bar.is_hidden() {
+                eprintln!("{line}");
+            } else {
+                bar.println(line);
+            }
+            evals.push(EvalPoint {
+                iteration: it,
+                elapsed_s: r.elapsed_s,
+                splats: r.splats,
+                psnr: e.psnr,
+                ssim: e.ssim,
+            });
+            pending_eval = false;
+        }
+        if pending_ckpt || done {
+            trainer
+                .save_checkpoint(&ckpt)
+                .context("cannot write the checkpoint")?;
+            pending_ckpt = false;
+        }
+        if done {
+            break r;
+        }
+    };
+    bar.finish_and_clear();
+
+    let ply = args.out.join("splats.ply");
+    splat_core::ply::write_splats(&ply, trainer.splats())
+        .with_context(|| format!("cannot write {}", ply.display()))?;
+    let history_path = args.out.join("history.json");
+    write_history(
+        &history_path,
+        &args,
+        &report,
+        &evals,
+        eval_views.len(),
+        trainer.views().len(),
+        wall.elapsed(),
+    )?;
+    let last: Option<&EvalPoint> = evals.last();
+    summary(&report, last, &ply, &history_path, wall.elapsed());
+    Ok(())
+}
+
+/// The next iteration at which to pause: the next multiple of either interval, or the end.
+fn next_stop(done: u32, total: u32, eval_every: u32, ckpt_every: u32) -> u32 {
+    let next = |k: u32| {
+        if k == 0 {
+            total
+        } else {
+            (done / k + 1).saturating_mul(k)
+        }
+    };
+    next(eval_every).min(next(ckpt_every)).min(total)
+}
+
+/// The trainer configuration the arguments ask for.
+fn train_config(args: &Args) -> TrainConfig {
+    let densify = !args.no_densify && !args.freeze_positions;
+    let mut c = TrainConfig {
+        iterations: args.iterations,
+        seed: args.seed,
+        sh_degree: Some(args.sh_degree),
+        densify: densify.then(|| DensifyConfig {
+            max_splats: args.max_splats,
+            // Inria densifies until 15k of 30k steps: keep the same half-way stop in shorter runs.
+            stop: DensifyConfig::default().stop.min(args.iterations / 2),
+            ..DensifyConfig::default()
+        }),
+        background: match args.background {
+            BackgroundArg::Black => Background::Fixed([0.0; 3]),
+            BackgroundArg::White => Background::Fixed([1.0; 3]),
+            BackgroundArg::Random => Background::Random,
+        },
+        time_budget: args.time_budget.map(Duration::from_secs_f64),
+        history_every: 10,
+        ..TrainConfig::default()
+    };
+    c.frozen.positions = args.freeze_positions;
+    c
+}
+
+/// Reads the COLMAP model and the images of `dir`, downscaled by `factor`.
+fn load_dataset(dir: &Path, factor: f64) -> anyhow::Result<(Vec<View>, colmap_io::Reconstruction)> {
+    let sparse = dir.join("sparse").join("0");
+    let rec = colmap_io::read_model(&sparse)
+        .with_context(|| format!("cannot read the COLMAP model in {}", sparse.display()))?;
+    if rec.images.is_empty() {
+        bail!("{} has no registered images", sparse.display());
+    }
+    let mut views = Vec::with_capacity(rec.images.len());
+    for (&id, image) in &rec.images {
+        let camera = rec
+            .camera_of(id)
+            .with_context(|| format!("image {id} ({}) in {}", image.name, sparse.display()))?;
+        let path = dir.join("images").join(&image.name);
+        views.push(load_view(&path, &image.name, camera, factor)?);
+    }
+    Ok((views, rec))
+}
+
+/// Inria's initial splats: isotropic kNN scales, identity rotation, opacity 0.1, SH DC from the
+/// colour and higher bands zero.
+fn initial_splats(
+    args: &Args,
+    rec: &colmap_io::Reconstruction,
+    views: &[View],
+) -> anyhow::Result<Splats> {
+    let (points, colors): (Vec<Vec3>, Vec<[f32; 3]>) = match args.init {
+        Init::Points3d => {
+            if rec.points3d.is_empty() {
+                bail!("the dataset has no 3D points: use --init random");
+            }
+            rec.points3d
+                .values()
+                .map(|p| (p.xyz.as_vec3(), p.rgb.map(|c| f32::from(c) / 255.0)))
+                .unzip()
+        }
+        Init::Random => {
+            let (lo, hi) = if rec.points3d.len() >= 2 {
+                rec.points3d
+                    .values()
+                    .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| {
+                        (lo.min(p.xyz.as_vec3()), hi.max(p.xyz.as_vec3()))
+                    })
+            } else {
+                let c: Vec<Vec3> = views.iter().map(|v| v.camera.center().as_vec3()).collect();
+                c.iter()
+                    .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| {
+                        (lo.min(*p), hi.max(*p))
+                    })
+            };
+            let mut rng = rand_pcg::Pcg64::seed_from_u64(args.seed);
+            (0..args.random_points)
+                .map(|_| {
+                    let t = Vec3::new(rng.random(), rng.random(), rng.random());
+                    (
+                        lo + (hi - lo) * t,
+                        [rng.random(), rng.random(), rng.random()],
+                    )
+                })
+                .unzip()
+        }
+    };
+    let log_scales = splat_train::init::scales_from_knn(&points);
+    let mut s = Splats::new(args.sh_degree);
+    for ((p, c), ls) in points.iter().zip(&colors).zip(log_scales) {
+        s.push(
+            *p,
+            ls,
+            [1.0, 0.0, 0.0, 0.0],
+            logit(0.1),
+            &[rgb_to_sh_dc(*c)],
+        );
+    }
+    Ok(s)
+}
+
+fn progress_bar(total: u32, done: u32, quiet: bool) -> ProgressBar {
+    if quiet {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::new(u64::from(total));
+    if let Ok(style) = ProgressStyle::with_template(
+        "{elapsed_precise} [{bar:30}] {pos}/{len} ({per_sec}, eta {eta}) {msg}",
+    ) {
+        bar.set_style(style.progress_chars("=> "));
+    }
+    bar.set_position(u64::from(done));
+    bar
+}
+
+#[allow(clippy::too_many_arguments)]
+fn write_history(
+    path: &Path,
+    args: &Args,
+    report: &TrainReport,
+    evals: &[EvalPoint],
+    eval_views: usize,
+    views: usize,
+    wall: Duration,
+) -> anyhow::Result<()> {
+    let t = &report.timings;
+    let h = History {
+        dataset: args.dataset.display().to_string(),
+        heldout: args.heldout.as_ref().map(|p| p.display().to_string()),
+        views,
+        eval_views,
+        iterations: report.iterations,
+        elapsed_s: report.elapsed_s,
+        wall_s: wall.as_secs_f64(),
+        splats: report.splats,
+        non_finite: report.non_finite,
+        refine: report.refine,
+        timings_s: Timings {
+            forward: t.forward.as_secs_f64(),
+            loss: t.loss.as_secs_f64(),
+            backward: t.backward.as_secs_f64(),
+            adam: t.adam.as_secs_f64(),
+            refine: t.refine.as_secs_f64(),
+        },
+        steps: &report.history,
+        evaluations: evals,
+    };
+    let json = serde_json::to_vec_pretty(&h).context("cannot encode the history")?;
+    write_atomic(path, &json).with_context(|| format!("cannot write {}", path.display()))
+}
+
+fn summary(
+    report: &TrainReport,
+    last: Option<&EvalPoint>,
+    ply: &Path,
+    history: &Path,
+    wall: Duration,
+) {
+    let per_s = if report.elapsed_s > 0.0 {
+        f64::from(report.timings.steps as u32) / report.elapsed_s
+    } else {
+        0.0
+    };
+    println!(
+        "trained {} iterations in {:.1} s ({per_s:.1} it/s this session; {:.1} s wall), {} splats{}",
+        report.iterations,
+        report.elapsed_s,
+        wall.as_secs_f64(),
+        report.splats,
+        if report.stopped_by_budget {
+            ", stopped by the time budget"
+        } else {
+            ""
+        }
+    );
+    if let Some(e) = last {
+        println!("evaluation: PSNR {:.2} dB, SSIM {:.4}", e.psnr, e.ssim);
+    }
+    let r = &report.refine;
+    println!(
+        "densification: {} cloned, {} split, {} pruned",
+        r.cloned, r.split, r.pruned
+    );
+    let nf = &report.non_finite;
+    if nf.skipped_steps + nf.zeroed_gradients + nf.reset_splats + nf.removed_splats > 0 {
+        println!(
+            "non-finite values handled: {} steps skipped, {} gradients zeroed, {} splats reset, {} removed",
+            nf.skipped_steps, nf.zeroed_gradients, nf.reset_splats, nf.removed_splats
+        );
+    }
+    println!("wrote {} and {}", ply.display(), history.display());
 }
