@@ -17,6 +17,10 @@ pub struct RenderStats {
     pub culled_non_finite: usize,
     /// (tile, splat) pairs composited.
     pub pairs: usize,
+    /// (pixel, splat) pairs whose Gaussian was evaluated.
+    pub pixel_evaluations: u64,
+    /// (pixel, splat) pairs that contributed (passed the alpha and transmittance tests).
+    pub contributions: u64,
 }
 
 /// A reusable CPU rasteriser: buffers grow to the largest view seen and are then reused, so the
@@ -114,12 +118,14 @@ impl Rasterizer {
         self.project_all(splats, &v);
         self.bins
             .build(&self.proj, &self.rects, &self.visible, v.tiles_x, v.tiles_y);
+        let (evaluations, contributions) = self.composite(cam, v.tiles_x, v.tiles_y);
         self.stats = RenderStats {
             visible: self.visible.iter().filter(|&&b| b).count(),
             culled_non_finite: self.non_finite.iter().filter(|&&b| b).count(),
             pairs: self.bins.pairs(),
+            pixel_evaluations: evaluations,
+            contributions,
         };
-        self.composite(cam, v.tiles_x, v.tiles_y);
         self.resolve(cam, v.tiles_x, opts.background);
         self.last_view = Some((n, cam.width, cam.height));
         &self.output
@@ -157,7 +163,8 @@ impl Rasterizer {
             );
     }
 
-    fn composite(&mut self, cam: &RenderCamera, tiles_x: u32, tiles_y: u32) {
+    /// Composites every tile; returns the (pixel, splat) evaluations and contributions.
+    fn composite(&mut self, cam: &RenderCamera, tiles_x: u32, tiles_y: u32) -> (u64, u64) {
         let n_px = (tiles_x * tiles_y) as usize * TILE_PIXELS;
         self.px_t.resize(n_px, 1.0);
         self.px_d.resize(n_px, 0.0);
@@ -172,11 +179,12 @@ impl Rasterizer {
             .zip(self.px_rgb.par_chunks_mut(TILE_PIXELS))
             .zip(self.px_last.par_chunks_mut(TILE_PIXELS))
             .enumerate()
-            .for_each(|(tile, (((t, d), rgb), last))| {
+            .map(|(tile, (((t, d), rgb), last))| {
                 let list = &bins.list[bins.offsets[tile]..bins.offsets[tile + 1]];
                 let ext = tile_extent(tile, tiles_x, w, h);
-                composite_tile(list, proj, ext, TileOut { t, d, rgb, last });
-            });
+                composite_tile(list, proj, ext, TileOut { t, d, rgb, last })
+            })
+            .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1))
     }
 
     /// Converts the tile-major buffers into the row-major output images.
@@ -226,8 +234,14 @@ pub(crate) fn tile_major_index(x: usize, y: usize, tiles_x: u32) -> usize {
 }
 
 /// Composites one tile front to back (Inria `renderCUDA`), splat by splat over the pixels each
-/// can reach, stopping once every pixel's transmittance is spent.
-fn composite_tile(list: &[u32], proj: &[Projected], ext: (i32, i32, i32, i32), o: TileOut<'_>) {
+/// can reach, stopping once every pixel's transmittance is spent. Returns the (pixel, splat)
+/// evaluations and contributions.
+fn composite_tile(
+    list: &[u32],
+    proj: &[Projected],
+    ext: (i32, i32, i32, i32),
+    o: TileOut<'_>,
+) -> (u64, u64) {
     let (x0, y0, tw, th) = ext;
     o.t.fill(1.0);
     o.d.fill(0.0);
@@ -236,6 +250,7 @@ fn composite_tile(list: &[u32], proj: &[Projected], ext: (i32, i32, i32, i32), o
     let mut done = [false; TILE_PIXELS];
     let n_px = (tw * th) as usize;
     let mut n_done = 0;
+    let (mut evaluations, mut contributions) = (0_u64, 0_u64);
     let ts = TILE_SIZE as usize;
     for (k, &sid) in list.iter().enumerate() {
         let p = &proj[sid as usize];
@@ -249,6 +264,7 @@ fn composite_tile(list: &[u32], proj: &[Projected], ext: (i32, i32, i32, i32), o
             let Some((c0, c1)) = row_span(p, q_max, dy, x0, tw) else {
                 continue;
             };
+            evaluations += (c1 + 1 - c0) as u64;
             for lx in c0..=c1 {
                 let idx = ly * ts + lx;
                 if done[idx] {
@@ -278,10 +294,12 @@ fn composite_tile(list: &[u32], proj: &[Projected], ext: (i32, i32, i32, i32), o
                 o.d[idx] += w * p.depth;
                 o.t[idx] = next_t;
                 o.last[idx] = k as u32 + 1;
+                contributions += 1;
             }
         }
         if n_done == n_px {
             break;
         }
     }
+    (evaluations, contributions)
 }
