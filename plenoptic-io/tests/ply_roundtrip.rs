@@ -451,6 +451,9 @@ fn header_promising_more_than_the_file_holds_is_refused() {
         read_cloud(&p).unwrap_err(),
         Error::Truncated { .. }
     ));
+    // The smallest possible ASCII body (one-character values, no final newline) is accepted.
+    let p = write(dir.path(), "tight.ply", b"ply\nformat ascii 1.0\nelement vertex 2\nproperty uchar x\nproperty uchar y\nproperty uchar z\nend_header\n1 2 3\n4 5 6");
+    assert_eq!(read_cloud(&p).unwrap().positions[1], Vec3::new(4.0, 5.0, 6.0));
     let p = write(dir.path(), "rows.ply", b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nend_header\n1 2 3\n4 5 6 7 8 9 1 2 3\n");
     let e = read_cloud(&p).unwrap_err().to_string();
     assert!(

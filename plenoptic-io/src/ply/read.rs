@@ -83,29 +83,146 @@ impl VertexData {
     }
 }
 
-/// Stores point `j` of `out` from the property values given by `value(property index)`.
+/// Where [`store_row`] takes one row's values from: parsed values (general path) or a binary
+/// record in the mapped file (fast path).
+trait Row {
+    /// The value of scalar property `p`.
+    fn value(&self, p: usize) -> f64;
+
+    /// Colour property `p` normalised to [0, 1].
+    #[inline(always)]
+    fn color(&self, plan: &VertexPlan, p: usize) -> f32 {
+        color_from_stored(self.value(p), plan.types[p])
+    }
+
+    /// The row's per-camera colours, in camera order.
+    #[inline(always)]
+    fn cameras(&self, plan: &VertexPlan, out: &mut [[f32; 3]]) {
+        for (dst, ix) in out.iter_mut().zip(&plan.cameras) {
+            *dst = ix.map(|i| self.color(plan, i));
+        }
+    }
+}
+
+impl Row for [f64] {
+    #[inline(always)]
+    fn value(&self, p: usize) -> f64 {
+        self[p]
+    }
+}
+
+/// Stores point `j` of `out` from `row`.
 /// The one place where file values become positions, colours, UVs (both paths call it).
 #[inline(always)]
-fn store_row(plan: &VertexPlan, out: &mut Out<'_>, j: usize, value: impl Fn(usize) -> f64) {
+fn store_row<R: Row + ?Sized>(plan: &VertexPlan, out: &mut Out<'_>, j: usize, row: &R) {
     let p = plan.position;
-    out.positions[j] = Vec3::new(value(p[0]) as f32, value(p[1]) as f32, value(p[2]) as f32);
+    let v = |i: usize| row.value(i) as f32;
+    out.positions[j] = Vec3::new(v(p[0]), v(p[1]), v(p[2]));
     if let (Some(normals), Some(n)) = (out.normals.as_deref_mut(), plan.normal) {
-        normals[j] = Vec3::new(value(n[0]) as f32, value(n[1]) as f32, value(n[2]) as f32);
+        normals[j] = Vec3::new(v(n[0]), v(n[1]), v(n[2]));
     }
-    let color = |ix: &[usize; 3]| ix.map(|i| color_from_stored(value(i), plan.types[i]));
-    if let (Some(colors), Some(m)) = (out.colors.as_deref_mut(), plan.main.as_ref()) {
-        colors[j] = color(m);
+    if let (Some(colors), Some(m)) = (out.colors.as_deref_mut(), plan.main) {
+        colors[j] = m.map(|i| row.color(plan, i));
     }
     let k = plan.cameras.len();
-    for (c, ix) in plan.cameras.iter().enumerate() {
-        out.cameras[j * k + c] = color(ix);
+    if k > 0 {
+        row.cameras(plan, &mut out.cameras[j * k..(j + 1) * k]);
     }
     if let (Some(uvs), Some(uv)) = (out.uvs.as_deref_mut(), plan.uv) {
         // PLY s/t follow OpenGL (origin bottom-left); the Mesh convention is top-left.
-        uvs[j] = Vec2::new(value(uv[0]) as f32, 1.0 - value(uv[1]) as f32);
+        uvs[j] = Vec2::new(v(uv[0]), 1.0 - v(uv[1]));
     }
     for (e, (_, i)) in plan.extras.iter().enumerate() {
-        out.extras[e][j] = value(*i);
+        out.extras[e][j] = row.value(*i);
+    }
+}
+
+/// What the fast path knows about a fixed-size record layout.
+struct FixedLayout<'a> {
+    plan: &'a VertexPlan,
+    /// Byte offset of every property in the record.
+    offsets: Vec<usize>,
+    big_endian: bool,
+    /// `color_from_stored` of every uchar level, so uchar colours cost a table look-up.
+    uchar_colors: [f32; 256],
+    /// Offset of the camera colours when they are all uchar and packed as r0 g0 b0 r1 g1 b1 …
+    /// (the 8iVSLF layout): then a point's colours are one contiguous run of bytes.
+    camera_block: Option<usize>,
+}
+
+impl<'a> FixedLayout<'a> {
+    fn new(plan: &'a VertexPlan, element: &Element, big_endian: bool) -> Self {
+        let mut offsets = Vec::with_capacity(element.properties.len());
+        let mut at = 0;
+        for p in &element.properties {
+            offsets.push(at);
+            if let PropertyKind::Scalar(t) = p.kind {
+                at += t.size();
+            }
+        }
+        let camera_block = plan
+            .cameras
+            .first()
+            .map(|first| offsets[first[0]])
+            .filter(|&base| {
+                plan.cameras.iter().enumerate().all(|(k, ix)| {
+                    ix.iter().enumerate().all(|(c, &i)| {
+                        plan.types[i] == ScalarType::U8 && offsets[i] == base + 3 * k + c
+                    })
+                })
+            });
+        FixedLayout {
+            plan,
+            offsets,
+            big_endian,
+            uchar_colors: std::array::from_fn(|v| color_from_stored(v as f64, ScalarType::U8)),
+            camera_block,
+        }
+    }
+}
+
+/// One binary record seen through its layout.
+struct Record<'a> {
+    bytes: &'a [u8],
+    layout: &'a FixedLayout<'a>,
+}
+
+impl Row for Record<'_> {
+    #[inline(always)]
+    fn value(&self, p: usize) -> f64 {
+        read_binary(
+            &self.bytes[self.layout.offsets[p]..],
+            self.layout.plan.types[p],
+            self.layout.big_endian,
+        )
+    }
+
+    #[inline(always)]
+    fn color(&self, plan: &VertexPlan, p: usize) -> f32 {
+        if plan.types[p] == ScalarType::U8 {
+            self.layout.uchar_colors[usize::from(self.bytes[self.layout.offsets[p]])]
+        } else {
+            color_from_stored(self.value(p), plan.types[p])
+        }
+    }
+
+    #[inline(always)]
+    fn cameras(&self, plan: &VertexPlan, out: &mut [[f32; 3]]) {
+        let Some(base) = self.layout.camera_block else {
+            for (dst, ix) in out.iter_mut().zip(&plan.cameras) {
+                *dst = ix.map(|i| self.color(plan, i));
+            }
+            return;
+        };
+        let lut = &self.layout.uchar_colors;
+        let block = &self.bytes[base..base + 3 * out.len()];
+        for (dst, src) in out.iter_mut().zip(block.chunks_exact(3)) {
+            *dst = [
+                lut[usize::from(src[0])],
+                lut[usize::from(src[1])],
+                lut[usize::from(src[2])],
+            ];
+        }
     }
 }
 
@@ -178,6 +295,8 @@ pub(crate) struct Body {
 
 /// Refuses a header whose elements cannot fit in the bytes after it, before anything is allocated.
 pub(crate) fn check_sizes(path: &Path, header: &Header, available: u64) -> Result<(), Error> {
+    // The last ASCII row may lack its final newline.
+    let slack = u64::from(header.format == PlyFormat::Ascii);
     let mut needed = 0u64;
     for e in &header.elements {
         let row = match header.format {
@@ -186,7 +305,7 @@ pub(crate) fn check_sizes(path: &Path, header: &Header, available: u64) -> Resul
             _ => e.min_row_bytes(header.format),
         };
         needed = needed.saturating_add(e.count.saturating_mul(row));
-        if needed > available {
+        if needed > available + slack {
             return Err(Error::Truncated {
                 path: path.to_path_buf(),
                 element: e.name.clone(),
@@ -324,7 +443,7 @@ impl Cursor<'_> {
                 .position(|&b| b == b'\n')
                 .map_or(self.bytes.len(), |i| self.pos + i);
             let raw = &self.bytes[self.pos..end];
-            self.pos = (end + 1).min(self.bytes.len()).max(end);
+            self.pos = (end + 1).min(self.bytes.len());
             self.line += 1;
             let text = std::str::from_utf8(raw)
                 .map_err(|_| self.error(element, index, "the line is not valid UTF-8".into()))?;
@@ -474,23 +593,21 @@ fn decode_fixed(
     big: bool,
     data: &mut VertexData,
 ) {
-    let mut offsets = Vec::with_capacity(element.properties.len());
-    let mut at = 0;
-    for p in &element.properties {
-        offsets.push(at);
-        if let PropertyKind::Scalar(t) = p.kind {
-            at += t.size();
-        }
-    }
-    let k = plan.cameras.len();
-    let outs = data.split(CHUNK_POINTS, k);
+    let layout = FixedLayout::new(plan, element, big);
+    let outs = data.split(CHUNK_POINTS, plan.cameras.len());
     outs.into_par_iter()
         .zip(records.par_chunks(CHUNK_POINTS * stride))
         .for_each(|(mut out, chunk)| {
-            for (j, rec) in chunk.chunks_exact(stride).enumerate() {
-                store_row(plan, &mut out, j, |p| {
-                    read_binary(&rec[offsets[p]..], plan.types[p], big)
-                });
+            for (j, bytes) in chunk.chunks_exact(stride).enumerate() {
+                store_row(
+                    plan,
+                    &mut out,
+                    j,
+                    &Record {
+                        bytes,
+                        layout: &layout,
+                    },
+                );
             }
         });
 }
@@ -511,7 +628,7 @@ fn decode_rows(
     let mut list = Vec::new();
     for j in 0..n {
         cursor.row(element, j as u64, &mut scalars, None, &mut list)?;
-        store_row(plan, out, j, |p| scalars[p]);
+        store_row(plan, out, j, &scalars[..]);
     }
     Ok(())
 }

@@ -167,21 +167,49 @@ pub(crate) fn write_cloud(path: &Path, cloud: &PlenopticCloud) -> Result<(), Err
         format => {
             let big = format == PlyFormat::BinaryBigEndian;
             let stride: usize = sources.iter().map(|(_, t)| t.size()).sum();
+            let mut fields = Vec::with_capacity(sources.len());
+            let mut at = 0;
+            for &(source, ty) in &sources {
+                fields.push((source, ty, at));
+                at += ty.size();
+            }
+            // uchar camera colours packed as r0 g0 b0 r1 … (the 8iVSLF layout) are written as one run.
+            let camera_block = fields
+                .iter()
+                .find(|(s, _, _)| matches!(s, Source::Camera(0, 0)))
+                .map(|&(_, _, base)| base)
+                .filter(|&base| {
+                    fields.iter().all(|&(s, ty, off)| match s {
+                        Source::Camera(cam, c) => ty == ScalarType::U8 && off == base + 3 * cam + c,
+                        _ => true,
+                    })
+                });
+            if camera_block.is_some() {
+                fields.retain(|(s, _, _)| !matches!(s, Source::Camera(..)));
+            }
             let mut body = vec![0u8; n * stride];
             body.par_chunks_mut((CHUNK_POINTS * stride).max(1))
                 .enumerate()
                 .for_each(|(c, chunk)| {
                     for (j, rec) in chunk.chunks_exact_mut(stride).enumerate() {
                         let i = c * CHUNK_POINTS + j;
-                        let mut at = 0;
-                        for &(source, ty) in &sources {
+                        for &(source, ty, off) in &fields {
                             write_binary(
-                                &mut rec[at..at + ty.size()],
+                                &mut rec[off..off + ty.size()],
                                 value(i, source, ty),
                                 ty,
                                 big,
                             );
-                            at += ty.size();
+                        }
+                        if let Some(base) = camera_block {
+                            let colors = &cloud.camera_colors[i * k..(i + 1) * k];
+                            for (dst, color) in
+                                rec[base..base + 3 * k].chunks_exact_mut(3).zip(colors)
+                            {
+                                for (d, &v) in dst.iter_mut().zip(color) {
+                                    *d = color_to_stored(v, ScalarType::U8) as u8;
+                                }
+                            }
                         }
                     }
                 });
