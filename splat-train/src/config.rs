@@ -97,6 +97,16 @@ impl Default for DensifyConfig {
     }
 }
 
+/// Coarse-to-fine warm-up: the first steps train on views reduced by an integer factor, which
+/// costs a fraction of a full step (the 3DGS paper, §7.1, warms up at 1/4 resolution).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Warmup {
+    /// Reduction factor of the image sides (≥ 2).
+    pub factor: u32,
+    /// Steps 1..=until train on the reduced views.
+    pub until: u32,
+}
+
 /// Background colour composited behind the splats.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub enum Background {
@@ -137,6 +147,8 @@ pub struct TrainConfig {
     pub alpha_loss_weight: f32,
     /// Record a history entry every this many iterations (and at the last).
     pub history_every: u32,
+    /// Optional coarse-to-fine warm-up.
+    pub warmup: Option<Warmup>,
 }
 
 impl Default for TrainConfig {
@@ -156,6 +168,7 @@ impl Default for TrainConfig {
             time_budget: None,
             alpha_loss_weight: 0.0,
             history_every: 10,
+            warmup: None,
         }
     }
 }
@@ -235,6 +248,14 @@ impl TrainConfig {
                     "densify.max_splats must be at least 1".into(),
                 ));
             }
+        }
+        if let Some(w) = self.warmup
+            && w.factor < 2
+        {
+            return Err(Error::Config(format!(
+                "warmup.factor = {} must be at least 2",
+                w.factor
+            )));
         }
         if self.history_every == 0 {
             return Err(Error::Config("history_every must be at least 1".into()));

@@ -21,7 +21,7 @@ pub mod strategy;
 mod trainer;
 mod view;
 
-pub use config::{Background, DensifyConfig, Frozen, LearningRates, TrainConfig};
+pub use config::{Background, DensifyConfig, Frozen, LearningRates, TrainConfig, Warmup};
 pub use error::Error;
 pub use eval::{Evaluation, ViewScore, evaluate, evaluate_with};
 pub use strategy::{DensifyStrategy, InriaDensify, RefineContext, RefineReport};

@@ -141,15 +141,14 @@ pub(crate) struct RunState {
 #[derive(Debug)]
 pub struct Trainer {
     pub(crate) config: TrainConfig,
-    views: Vec<View>,
-    cameras: Vec<RenderCamera>,
+    /// Full-resolution views, then the reduced copies of the warm-up, if any.
+    levels: Vec<Level>,
     pub(crate) state: ParamState,
     pub(crate) strategy: Option<Box<dyn DensifyStrategy>>,
     pub(crate) run: RunState,
     grads: SplatGrads,
     rasterizer: Rasterizer,
     loss: Option<Loss>,
-    targets: Vec<Option<SsimTarget>>,
     composite: Vec<f32>,
     d_alpha: Vec<f32>,
     extent: f32,
@@ -213,10 +212,6 @@ impl Trainer {
                 problem,
             })?;
         }
-        let cameras: Vec<RenderCamera> = views
-            .iter()
-            .map(|v| RenderCamera::from(&v.camera))
-            .collect();
         let centres: Vec<glam::DVec3> = views.iter().map(|v| v.camera.center()).collect();
         let extent = camera_extent(&centres) as f32;
         let max_sh_degree = config
@@ -226,7 +221,6 @@ impl Trainer {
         let mut sorted: Vec<f32> = splats.log_scales.iter().map(|s| s.max_element()).collect();
         sorted.sort_by(f32::total_cmp);
         let reset_log_scale = sorted[sorted.len() / 2];
-        let n_views = views.len();
         if let Some(s) = strategy.as_mut() {
             s.import_state(&[], splats.len()).map_err(Error::Config)?;
         }
@@ -244,14 +238,12 @@ impl Trainer {
         let mut t = Self {
             grads: SplatGrads::zeros_like(&splats),
             state: ParamState::new(splats),
+            levels: vec![Level::new(views)],
             config,
-            views,
-            cameras,
             strategy,
             run,
             rasterizer: Rasterizer::new(),
             loss: None,
-            targets: vec![None; n_views],
             composite: Vec::new(),
             d_alpha: Vec::new(),
             extent,
@@ -259,6 +251,14 @@ impl Trainer {
             timings: Timings::default(),
         };
         t.composite_fixed_background();
+        if let Some(w) = t.config.warmup {
+            let coarse = t.levels[0]
+                .views
+                .iter()
+                .map(|v| downsample_view(v, w.factor))
+                .collect();
+            t.levels.push(Level::new(coarse));
+        }
         Ok(t)
     }
 
@@ -266,7 +266,7 @@ impl Trainer {
     /// of every step is the photo as it would look over that background.
     fn composite_fixed_background(&mut self) {
         if let Background::Fixed(bg) = self.config.background {
-            for v in &mut self.views {
+            for v in &mut self.levels[0].views {
                 if let Some(mask) = &v.mask {
                     for (px, &a) in v.image.chunks_exact_mut(3).zip(mask) {
                         for c in 0..3 {
@@ -287,7 +287,7 @@ impl Trainer {
     /// The training views (masked views composited over a fixed background).
     #[must_use]
     pub fn views(&self) -> &[View] {
-        &self.views
+        &self.levels[0].views
     }
 
     /// Steps done so far.
@@ -341,7 +341,7 @@ impl Trainer {
     /// `viewpoint_stack`).
     fn next_view(&mut self) -> usize {
         if self.run.cursor >= self.run.order.len() {
-            let n = self.views.len();
+            let n = self.levels[0].views.len();
             self.run.order = (0..n as u32).collect();
             for i in (1..n).rev() {
                 let j = self.run.rng.random_range(0..=i);
@@ -368,7 +368,10 @@ impl Trainer {
             ),
             antialiased: self.config.antialiased,
         };
-        let cam = self.cameras[vi];
+        let coarse = self.config.warmup.is_some_and(|w| iteration <= w.until);
+        let li = usize::from(coarse && self.levels.len() > 1);
+        let level = &mut self.levels[li];
+        let cam = level.cameras[vi];
         let (w, h) = (cam.width, cam.height);
         if self
             .loss
@@ -382,7 +385,7 @@ impl Trainer {
         };
 
         // Target: the photo, or the photo over this step's random background.
-        let view = &self.views[vi];
+        let view = &level.views[vi];
         let random_bg = matches!(self.config.background, Background::Random);
         let (target_img, fresh_target) = match (&view.mask, random_bg) {
             (Some(mask), true) => {
@@ -400,8 +403,8 @@ impl Trainer {
                 (&self.composite[..], Some(loss.target(&self.composite)))
             }
             _ => {
-                if self.targets[vi].is_none() {
-                    self.targets[vi] = Some(loss.target(&view.image));
+                if level.targets[vi].is_none() {
+                    level.targets[vi] = Some(loss.target(&view.image));
                 }
                 (&view.image[..], None)
             }
@@ -410,7 +413,7 @@ impl Trainer {
         let t0 = Instant::now();
         let out = self.rasterizer.forward(&self.state.splats, &cam, &opts);
         let t1 = Instant::now();
-        let Some(target) = fresh_target.as_ref().or(self.targets[vi].as_ref()) else {
+        let Some(target) = fresh_target.as_ref().or(level.targets[vi].as_ref()) else {
             unreachable!("the SSIM target was just computed")
         };
         let value = loss.evaluate(&out.rgb, target_img, target, self.config.ssim_weight);
@@ -723,6 +726,76 @@ impl Trainer {
     }
 }
 
+/// Views at one resolution with their rasteriser cameras and cached SSIM statistics.
+#[derive(Debug)]
+struct Level {
+    views: Vec<View>,
+    cameras: Vec<RenderCamera>,
+    targets: Vec<Option<SsimTarget>>,
+}
+
+impl Level {
+    fn new(views: Vec<View>) -> Self {
+        let cameras = views
+            .iter()
+            .map(|v| RenderCamera::from(&v.camera))
+            .collect();
+        let targets = vec![None; views.len()];
+        Self {
+            views,
+            cameras,
+            targets,
+        }
+    }
+}
+
+/// `view` reduced by an integer `factor`: each output pixel is the mean of a factor × factor
+/// block (a remainder at the right and bottom is dropped), and the intrinsics are divided by the
+/// factor, which keeps pixel centres aligned (centre of block = factor · (i + ½)).
+fn downsample_view(view: &View, factor: u32) -> View {
+    let k = view.camera.intrinsics;
+    let f = factor.max(1) as usize;
+    let (w, h) = (k.width as usize, k.height as usize);
+    let (cw, ch) = ((w / f).max(1), (h / f).max(1));
+    let norm = 1.0 / (f * f) as f32;
+    let block = |data: &[f32], channels: usize| -> Vec<f32> {
+        let mut out = vec![0.0f32; cw * ch * channels];
+        for y in 0..ch {
+            for x in 0..cw {
+                let o = &mut out[(y * cw + x) * channels..(y * cw + x + 1) * channels];
+                for yy in y * f..((y + 1) * f).min(h) {
+                    for xx in x * f..((x + 1) * f).min(w) {
+                        let i = (yy * w + xx) * channels;
+                        for c in 0..channels {
+                            o[c] += data[i + c];
+                        }
+                    }
+                }
+                for v in o.iter_mut() {
+                    *v *= norm;
+                }
+            }
+        }
+        out
+    };
+    let inv = 1.0 / f as f64;
+    let intrinsics = camera_model::Intrinsics {
+        width: cw as u32,
+        height: ch as u32,
+        fx: k.fx * inv,
+        fy: k.fy * inv,
+        cx: k.cx * inv,
+        cy: k.cy * inv,
+        skew: k.skew * inv,
+    };
+    View {
+        name: view.name.clone(),
+        camera: camera_model::Camera::new(intrinsics, view.camera.pose),
+        image: block(&view.image, 3),
+        mask: view.mask.as_ref().map(|m| block(m, 1)),
+    }
+}
+
 /// Whether every parameter of splat `i` is finite.
 fn splat_is_finite(s: &Splats, i: usize) -> bool {
     let k = s.coeffs_per_splat();
@@ -767,4 +840,29 @@ fn zero_non_finite_grads(g: &mut SplatGrads) -> u64 {
         }
     }
     count
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use camera_model::{Camera, Intrinsics, Pose};
+    use glam::DVec3;
+
+    #[test]
+    fn downsampling_averages_blocks_and_keeps_projection() {
+        let k = Intrinsics::centered(5, 4, 10.0, 12.0);
+        let pose = Pose::look_at(DVec3::new(0.0, 0.0, -5.0), DVec3::ZERO, DVec3::Y);
+        let image: Vec<f32> = (0..3 * 20).map(|i| i as f32).collect();
+        let mask: Vec<f32> = (0..20).map(|i| i as f32).collect();
+        let v = View { name: "v".into(), camera: Camera::new(k, pose), image, mask: Some(mask) };
+        let d = downsample_view(&v, 2);
+        assert_eq!((d.camera.intrinsics.width, d.camera.intrinsics.height), (2, 2));
+        // Block (0,0) holds pixels 0, 1, 5, 6; block (1,1) pixels 12, 13, 17, 18.
+        assert_eq!(d.mask.as_ref().unwrap(), &vec![3.0, 5.0, 13.0, 15.0]);
+        assert_eq!(d.image[0], (0.0 + 3.0 + 15.0 + 18.0) / 4.0);
+        let p = DVec3::new(0.3, -0.2, 0.4);
+        let fine = v.camera.project(p).unwrap();
+        let coarse = d.camera.project(p).unwrap();
+        assert!((fine / 2.0 - coarse).length() < 1e-12);
+    }
 }

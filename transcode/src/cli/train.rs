@@ -10,8 +10,8 @@ use rand::{RngExt, SeedableRng};
 use serde::Serialize;
 use splat_core::{Splats, logit, rgb_to_sh_dc};
 use splat_train::{
-    Background, DensifyConfig, HistoryEntry, TrainConfig, TrainReport, Trainer, View, evaluate,
-    load_view,
+    Background, DensifyConfig, HistoryEntry, TrainConfig, TrainReport, Trainer, View, Warmup,
+    evaluate, load_view,
 };
 
 use transcode::atomic::write_atomic;
@@ -92,6 +92,12 @@ pub struct Args {
     /// Stop after this many seconds of training.
     #[arg(long)]
     pub time_budget: Option<f64>,
+    /// Warm up on views reduced by this integer factor (≥ 2; 1 = no warm-up).
+    #[arg(long, default_value_t = 1)]
+    pub warmup_factor: u32,
+    /// Number of warm-up steps at the reduced size.
+    #[arg(long, default_value_t = 0)]
+    pub warmup_steps: u32,
     /// Do not show a progress bar.
     #[arg(long)]
     pub quiet: bool,
@@ -292,6 +298,12 @@ fn train_config(args: &Args) -> TrainConfig {
         ..TrainConfig::default()
     };
     c.frozen.positions = args.freeze_positions;
+    if args.warmup_factor >= 2 && args.warmup_steps > 0 {
+        c.warmup = Some(Warmup {
+            factor: args.warmup_factor,
+            until: args.warmup_steps,
+        });
+    }
     c
 }
 
