@@ -89,6 +89,15 @@ impl SynthConfig {
     }
 }
 
+/// Sums over the samples that fell into one voxel.
+struct Voxel {
+    position: Vec3,
+    normal: Vec3,
+    main: [f32; 3],
+    colors: Vec<[f32; 3]>,
+    count: f32,
+}
+
 /// One surface sample in mesh units.
 struct Sample {
     position: Vec3,
@@ -174,29 +183,29 @@ pub fn synth_from_mesh(mesh: &Mesh, config: &SynthConfig) -> Result<PlenopticClo
     // Voxelise and merge.
     let n_cam = config.cameras;
     let mut index: HashMap<[i32; 3], usize> = HashMap::new();
-    let mut acc: Vec<(Vec3, Vec3, [f32; 3], Vec<[f32; 3]>, f32)> = Vec::new();
+    let mut acc: Vec<Voxel> = Vec::new();
     for (s, (main, colors, normal)) in samples.iter().zip(shaded) {
         let v = ((s.position - lo).as_dvec3() * scale).round();
         let key = [v.x as i32, v.y as i32, v.z as i32];
         let slot = *index.entry(key).or_insert_with(|| {
-            acc.push((
-                v.as_vec3(),
-                Vec3::ZERO,
-                [0.0; 3],
-                vec![[0.0; 3]; n_cam],
-                0.0,
-            ));
+            acc.push(Voxel {
+                position: v.as_vec3(),
+                normal: Vec3::ZERO,
+                main: [0.0; 3],
+                colors: vec![[0.0; 3]; n_cam],
+                count: 0.0,
+            });
             acc.len() - 1
         });
         let a = &mut acc[slot];
-        a.1 += normal;
+        a.normal += normal;
         for k in 0..3 {
-            a.2[k] += main[k];
-            for (sum, c) in a.3.iter_mut().zip(&colors) {
+            a.main[k] += main[k];
+            for (sum, c) in a.colors.iter_mut().zip(&colors) {
                 sum[k] += c[k];
             }
         }
-        a.4 += 1.0;
+        a.count += 1.0;
     }
     let mut cloud = PlenopticCloud {
         num_cameras: n_cam,
@@ -215,7 +224,14 @@ pub fn synth_from_mesh(mesh: &Mesh, config: &SynthConfig) -> Result<PlenopticClo
         ..Default::default()
     };
     let mut normals = Vec::with_capacity(acc.len());
-    for (p, n, main, colors, count) in acc {
+    for Voxel {
+        position: p,
+        normal: n,
+        main,
+        colors,
+        count,
+    } in acc
+    {
         cloud.positions.push(p);
         normals.push(n.normalize_or(Vec3::Y));
         cloud.colors.push(to_u8_grid(main.map(|c| c / count)));
@@ -246,7 +262,7 @@ fn sees(cam: &Camera, map: &ViewImage, p: Vec3, n: Vec3) -> bool {
     // angle θ to the view that changes depth by footprint·tanθ. Allow two pixels' worth, capped.
     let footprint = depth / cam.intrinsics.fx;
     let view = (cam.center() - pd).normalize();
-    let cos = f64::from(n.as_dvec3().dot(view).abs()).max(0.2);
+    let cos = n.as_dvec3().dot(view).abs().max(0.2);
     let slack = 2.0 * footprint * (1.0 - cos * cos).sqrt() / cos + 1e-4 * depth;
     depth <= surface + slack
 }

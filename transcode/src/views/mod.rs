@@ -163,7 +163,7 @@ pub enum Error {
     },
     /// Writing the COLMAP dataset failed.
     #[error("cannot write the COLMAP dataset: {0}")]
-    Colmap(#[from] colmap_io::Error),
+    Colmap(Box<colmap_io::Error>),
     /// An image could not be encoded.
     #[error("cannot encode {path}: {message}")]
     Encode {
@@ -172,6 +172,13 @@ pub enum Error {
         /// What the encoder said.
         message: String,
     },
+}
+
+impl From<colmap_io::Error> for Error {
+    /// Boxed: colmap-io's error is large and would make every `Result` of this module large.
+    fn from(e: colmap_io::Error) -> Self {
+        Self::Colmap(Box::new(e))
+    }
 }
 
 /// Renders a cloud or a mesh (see [`render_cloud`] and [`render_mesh`]).
@@ -400,8 +407,8 @@ fn downsample(big: &ViewImage, k: u32) -> ViewImage {
                 for sy in 0..k as usize {
                     for sx in 0..k as usize {
                         let j = (y * k as usize + sy) * big.width as usize + x * k as usize + sx;
-                        for ch in 0..3 {
-                            c[ch] += big.rgb[3 * j + ch];
+                        for (sum, v) in c.iter_mut().zip(&big.rgb[3 * j..3 * j + 3]) {
+                            *sum += v;
                         }
                         a += big.alpha[j];
                         if big.depth[j] > 0.0 {
@@ -410,8 +417,8 @@ fn downsample(big: &ViewImage, k: u32) -> ViewImage {
                         }
                     }
                 }
-                for ch in 0..3 {
-                    rgb_row[3 * x + ch] = c[ch] / n;
+                for (out, sum) in rgb_row[3 * x..3 * x + 3].iter_mut().zip(c) {
+                    *out = sum / n;
                 }
                 alpha_row[x] = a / n;
                 depth_row[x] = if covered > 0 { d / covered as f32 } else { 0.0 };
