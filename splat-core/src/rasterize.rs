@@ -233,9 +233,12 @@ pub(crate) fn tile_major_index(x: usize, y: usize, tiles_x: u32) -> usize {
     tile * TILE_PIXELS + (y % ts) * ts + x % ts
 }
 
-/// Composites one tile front to back (Inria `renderCUDA`), splat by splat over the pixels each
-/// can reach, stopping once every pixel's transmittance is spent. Returns the (pixel, splat)
-/// evaluations and contributions.
+/// Pixels processed together: half a tile row, so the per-lane loops vectorise.
+pub(crate) const LANES: usize = 8;
+
+/// Composites one tile front to back (Inria `renderCUDA`), splat by splat over the rows and
+/// 8-pixel half-rows each can reach, stopping once every pixel's transmittance is spent.
+/// Returns the (pixel, splat) evaluations and contributions.
 fn composite_tile(
     list: &[u32],
     proj: &[Projected],
@@ -243,15 +246,21 @@ fn composite_tile(
     o: TileOut<'_>,
 ) -> (u64, u64) {
     let (x0, y0, tw, th) = ext;
-    o.t.fill(1.0);
-    o.d.fill(0.0);
-    o.rgb.fill([0.0; 3]);
-    o.last.fill(0);
-    let mut done = [false; TILE_PIXELS];
-    let n_px = (tw * th) as usize;
+    let ts = TILE_SIZE as usize;
+    let mut t = [1.0_f32; TILE_PIXELS];
+    let mut cr = [0.0_f32; TILE_PIXELS];
+    let mut cg = [0.0_f32; TILE_PIXELS];
+    let mut cb = [0.0_f32; TILE_PIXELS];
+    let mut d = [0.0_f32; TILE_PIXELS];
+    let mut last = [0_u32; TILE_PIXELS];
+    // Pixels outside the image start as done, so only real pixels are counted.
+    let mut done = [true; TILE_PIXELS];
+    for ly in 0..th as usize {
+        done[ly * ts..ly * ts + tw as usize].fill(false);
+    }
+    let n_real = (tw * th) as usize;
     let mut n_done = 0;
     let (mut evaluations, mut contributions) = (0_u64, 0_u64);
-    let ts = TILE_SIZE as usize;
     for (k, &sid) in list.iter().enumerate() {
         let p = &proj[sid as usize];
         let [a, b, c] = p.conic;
@@ -259,47 +268,91 @@ fn composite_tile(
         let Some((r0, r1)) = row_range(p, q_max, y0, th) else {
             continue;
         };
+        let tag = k as u32 + 1;
         for ly in r0..=r1 {
             let dy = p.xy[1] - (y0 + ly as i32) as f32;
             let Some((c0, c1)) = row_span(p, q_max, dy, x0, tw) else {
                 continue;
             };
-            evaluations += (c1 + 1 - c0) as u64;
-            for lx in c0..=c1 {
-                let idx = ly * ts + lx;
-                if done[idx] {
-                    continue;
+            for half in (c0 / LANES)..=(c1 / LANES) {
+                let base = ly * ts + half * LANES;
+                evaluations += LANES as u64;
+                let mut finished = 0;
+                let mut contributed = 0;
+                for l in 0..LANES {
+                    let idx = base + l;
+                    let dx = p.xy[0] - (x0 + (half * LANES + l) as i32) as f32;
+                    let power = -0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy;
+                    let alpha = (p.opacity * fast_exp(power)).min(MAX_ALPHA);
+                    let ti = t[idx];
+                    let next_t = ti * (1.0 - alpha);
+                    let valid = !done[idx] && power <= 0.0 && alpha >= MIN_ALPHA;
+                    let finish = valid && next_t < MIN_TRANSMITTANCE;
+                    let add = valid && !finish;
+                    let w = if add { alpha * ti } else { 0.0 };
+                    cr[idx] += w * p.color[0];
+                    cg[idx] += w * p.color[1];
+                    cb[idx] += w * p.color[2];
+                    d[idx] += w * p.depth;
+                    t[idx] = if add { next_t } else { ti };
+                    last[idx] = if add { tag } else { last[idx] };
+                    done[idx] |= finish;
+                    finished += u32::from(finish);
+                    contributed += u32::from(add);
                 }
-                let dx = p.xy[0] - (x0 + lx as i32) as f32;
-                let power = -0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy;
-                if power > 0.0 {
-                    continue;
-                }
-                let alpha = (p.opacity * power.exp()).min(MAX_ALPHA);
-                if alpha < MIN_ALPHA {
-                    continue;
-                }
-                let t = o.t[idx];
-                let next_t = t * (1.0 - alpha);
-                if next_t < MIN_TRANSMITTANCE {
-                    done[idx] = true;
-                    n_done += 1;
-                    continue;
-                }
-                let w = alpha * t;
-                let rgb = &mut o.rgb[idx];
-                rgb[0] += w * p.color[0];
-                rgb[1] += w * p.color[1];
-                rgb[2] += w * p.color[2];
-                o.d[idx] += w * p.depth;
-                o.t[idx] = next_t;
-                o.last[idx] = k as u32 + 1;
-                contributions += 1;
+                n_done += finished as usize;
+                contributions += u64::from(contributed);
             }
         }
-        if n_done == n_px {
+        if n_done == n_real {
             break;
         }
     }
+    o.t.copy_from_slice(&t);
+    o.d.copy_from_slice(&d);
+    o.last.copy_from_slice(&last);
+    for (i, px) in o.rgb.iter_mut().enumerate() {
+        *px = [cr[i], cg[i], cb[i]];
+    }
     (evaluations, contributions)
+}
+
+/// e^x for the Gaussian falloff: 2^(x·log₂e) with Cephes' `exp2f` polynomial (relative error
+/// below 6e-7 on [−10, 0], where alphas reach 1/255), written branch-free so the per-lane loops vectorise. Inputs below −87 give 0.
+/// The forward and backward passes both use it, so they see identical alphas.
+#[inline(always)]
+pub(crate) fn fast_exp(x: f32) -> f32 {
+    let t = (x * std::f32::consts::LOG2_E).max(-126.0);
+    let n = (t + 0.5).floor();
+    let f = t - n;
+    let p = ((((1.535_336_2e-4 * f + 1.339_887_4e-3) * f + 9.618_437e-3) * f + 5.550_332_5e-2) * f
+        + 2.402_265e-1)
+        * f
+        + 6.931_472e-1;
+    let scale = f32::from_bits(((n as i32 + 127) as u32) << 23);
+    let r = (1.0 + p * f) * scale;
+    if x < -87.0 { 0.0 } else { r }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::fast_exp;
+
+    #[test]
+    fn fast_exp_is_accurate_over_the_falloff_range() {
+        // Alpha can reach 1/255 only for x ≥ −ln 255 ≈ −5.5; beyond, the rounding of x·log₂e
+        // (relative 6e-8 of |x·log₂e|) dominates but the values are negligible.
+        for (lo, tol) in [(-10.0, 6e-7), (-87.0, 1e-5)] {
+            let mut worst = 0.0_f64;
+            for i in 0..=200_000 {
+                let x = (lo * f64::from(i) / 200_000.0) as f32;
+                let got = f64::from(fast_exp(x));
+                let want = f64::from(x).exp();
+                worst = worst.max((got - want).abs() / want);
+            }
+            assert!(worst < tol, "worst relative error {worst} on [{lo}, 0]");
+        }
+        assert_eq!(fast_exp(-100.0), 0.0);
+        assert_eq!(fast_exp(0.0), 1.0);
+    }
 }

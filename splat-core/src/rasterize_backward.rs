@@ -12,7 +12,7 @@ use rayon::prelude::*;
 
 use crate::constants::{MAX_ALPHA, MIN_ALPHA};
 use crate::project::{ProjectedGrad, ViewConsts, project, project_backward};
-use crate::rasterize::{DEPTH_MIN_ALPHA, tile_extent, tile_major_index};
+use crate::rasterize::{DEPTH_MIN_ALPHA, LANES, fast_exp, tile_extent, tile_major_index};
 use crate::tiles::{TILE_PIXELS, TILE_SIZE, quad_bound, row_range, row_span};
 use crate::{Rasterizer, RenderCamera, RenderOptions, SplatGrads, Splats};
 
@@ -194,64 +194,81 @@ impl Rasterizer {
         }
         for kk in (0..max_last as usize).rev() {
             let p = &self.proj[list[kk] as usize];
-            let mut g = ProjectedGrad::default();
             let [a, b, c] = p.conic;
             let q_max = quad_bound(p.opacity);
+            let kk32 = kk as u32;
+            // Per-lane partial sums, added up in a fixed order once the splat is done.
+            let mut s_col = [[0.0_f32; LANES]; 3];
+            let mut s_dep = [0.0_f32; LANES];
+            let mut s_op = [0.0_f32; LANES];
+            let mut s_xy = [[0.0_f32; LANES]; 2];
+            let mut s_con = [[0.0_f32; LANES]; 3];
             if let Some((r0, r1)) = row_range(p, q_max, y0, th) {
                 for ly in r0..=r1 {
                     let dy = p.xy[1] - (y0 + ly as i32) as f32;
                     let Some((c0, c1)) = row_span(p, q_max, dy, x0, tw) else {
                         continue;
                     };
-                    for lx in c0..=c1 {
-                        let idx = ly * ts + lx;
-                        if kk as u32 >= last[idx] {
-                            continue;
-                        }
-                        let dx = p.xy[0] - (x0 + lx as i32) as f32;
-                        let power = -0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy;
-                        if power > 0.0 {
-                            continue;
-                        }
-                        let gauss = power.exp();
-                        let raw = p.opacity * gauss;
-                        let alpha = raw.min(MAX_ALPHA);
-                        if alpha < MIN_ALPHA {
-                            continue;
-                        }
-                        let one_m = 1.0 - alpha;
-                        let t_i = t_cur[idx] / one_m;
-                        let w = alpha * t_i;
-                        let gr = g_rgb[idx];
-                        let gdp = g_d[idx];
-                        g.color[0] += w * gr[0];
-                        g.color[1] += w * gr[1];
-                        g.color[2] += w * gr[2];
-                        g.depth += w * gdp;
-                        let ac = &mut acc[idx];
-                        let d_alpha = t_i
-                            * ((p.color[0] - ac[0]) * gr[0]
-                                + (p.color[1] - ac[1]) * gr[1]
-                                + (p.color[2] - ac[2]) * gr[2]
-                                + (p.depth - ac[3]) * gdp)
-                            + k_bg[idx] / one_m;
-                        ac[0] = alpha * p.color[0] + one_m * ac[0];
-                        ac[1] = alpha * p.color[1] + one_m * ac[1];
-                        ac[2] = alpha * p.color[2] + one_m * ac[2];
-                        ac[3] = alpha * p.depth + one_m * ac[3];
-                        t_cur[idx] = t_i;
-                        if raw < MAX_ALPHA {
-                            g.opacity += gauss * d_alpha;
-                            let d_pow = raw * d_alpha;
-                            g.xy[0] -= d_pow * (a * dx + b * dy);
-                            g.xy[1] -= d_pow * (b * dx + c * dy);
-                            g.conic[0] -= 0.5 * d_pow * dx * dx;
-                            g.conic[1] -= d_pow * dx * dy;
-                            g.conic[2] -= 0.5 * d_pow * dy * dy;
+                    for half in (c0 / LANES)..=(c1 / LANES) {
+                        let base = ly * ts + half * LANES;
+                        for l in 0..LANES {
+                            let idx = base + l;
+                            let dx = p.xy[0] - (x0 + (half * LANES + l) as i32) as f32;
+                            let power = -0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy;
+                            let gauss = fast_exp(power);
+                            let raw = p.opacity * gauss;
+                            let alpha = raw.min(MAX_ALPHA);
+                            let valid = kk32 < last[idx] && power <= 0.0 && alpha >= MIN_ALPHA;
+                            let one_m = 1.0 - alpha;
+                            let t_i = t_cur[idx] / one_m;
+                            let w = alpha * t_i;
+                            let gr = g_rgb[idx];
+                            let gdp = g_d[idx];
+                            let ac = acc[idx];
+                            let d_alpha = t_i
+                                * ((p.color[0] - ac[0]) * gr[0]
+                                    + (p.color[1] - ac[1]) * gr[1]
+                                    + (p.color[2] - ac[2]) * gr[2]
+                                    + (p.depth - ac[3]) * gdp)
+                                + k_bg[idx] / one_m;
+                            let wv = if valid { w } else { 0.0 };
+                            s_col[0][l] += wv * gr[0];
+                            s_col[1][l] += wv * gr[1];
+                            s_col[2][l] += wv * gr[2];
+                            s_dep[l] += wv * gdp;
+                            let next = [
+                                alpha * p.color[0] + one_m * ac[0],
+                                alpha * p.color[1] + one_m * ac[1],
+                                alpha * p.color[2] + one_m * ac[2],
+                                alpha * p.depth + one_m * ac[3],
+                            ];
+                            acc[idx] = if valid { next } else { ac };
+                            t_cur[idx] = if valid { t_i } else { t_cur[idx] };
+                            // Where o·G is clamped at 0.99, alpha does not depend on o or G.
+                            let da = if valid && raw < MAX_ALPHA {
+                                d_alpha
+                            } else {
+                                0.0
+                            };
+                            s_op[l] += gauss * da;
+                            let d_pow = raw * da;
+                            s_xy[0][l] -= d_pow * (a * dx + b * dy);
+                            s_xy[1][l] -= d_pow * (b * dx + c * dy);
+                            s_con[0][l] -= 0.5 * d_pow * dx * dx;
+                            s_con[1][l] -= d_pow * dx * dy;
+                            s_con[2][l] -= 0.5 * d_pow * dy * dy;
                         }
                     }
                 }
             }
+            let sum = |v: &[f32; LANES]| v.iter().sum::<f32>();
+            let g = ProjectedGrad {
+                xy: [sum(&s_xy[0]), sum(&s_xy[1])],
+                conic: [sum(&s_con[0]), sum(&s_con[1]), sum(&s_con[2])],
+                opacity: sum(&s_op),
+                color: [sum(&s_col[0]), sum(&s_col[1]), sum(&s_col[2])],
+                depth: sum(&s_dep),
+            };
             out[kk] = g;
         }
     }
