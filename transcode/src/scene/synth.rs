@@ -327,3 +327,94 @@ fn sample_surface(mesh: &Mesh, count: usize, seed: u64) -> Result<Vec<Sample>, E
         })
         .collect())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn square(z: f32) -> Mesh {
+        Mesh {
+            positions: vec![
+                Vec3::new(-1.0, -1.0, z),
+                Vec3::new(1.0, -1.0, z),
+                Vec3::new(1.0, 1.0, z),
+                Vec3::new(-1.0, 1.0, z),
+            ],
+            triangles: vec![[0, 1, 2], [0, 2, 3]],
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn depth_map_visibility_sees_the_surface_not_what_is_behind() {
+        let mesh = square(0.0);
+        let cam = Camera::new(
+            Intrinsics::from_fov_y(128, 128, 40.0),
+            Pose::look_at(DVec3::new(0.3, 0.2, 5.0), DVec3::ZERO, WORLD_UP),
+        );
+        let map = views::render_mesh(&mesh, &cam, &ViewOptions::default()).unwrap();
+        for p in [
+            Vec3::new(0.1, 0.2, 0.0),
+            Vec3::new(-0.7, 0.5, 0.0),
+            Vec3::new(0.9, -0.9, 0.0),
+        ] {
+            assert!(sees(&cam, &map, p, Vec3::Z), "{p} on the square");
+            assert!(
+                !sees(&cam, &map, p - 0.2 * Vec3::Z, Vec3::Z),
+                "{p} behind the square"
+            );
+        }
+        // Off the square (background in the map) nothing is seen.
+        assert!(!sees(&cam, &map, Vec3::new(1.5, 0.0, 0.0), Vec3::Z));
+    }
+
+    #[test]
+    fn samples_are_uniform_over_area() {
+        // Two triangles of areas 1 and 3: about a quarter of the samples on the first.
+        let mesh = Mesh {
+            positions: vec![
+                Vec3::ZERO,
+                Vec3::new(2.0, 0.0, 0.0),
+                Vec3::new(0.0, 1.0, 0.0),
+                Vec3::new(10.0, 0.0, 0.0),
+                Vec3::new(13.0, 0.0, 0.0),
+                Vec3::new(10.0, 2.0, 0.0),
+            ],
+            triangles: vec![[0, 1, 2], [3, 4, 5]],
+            ..Default::default()
+        };
+        let s = sample_surface(&mesh, 20_000, 7).unwrap();
+        let first = s.iter().filter(|p| p.position.x < 5.0).count() as f64 / 20_000.0;
+        assert!((first - 0.25).abs() < 0.02, "{first}");
+        // Inside the triangle: x/2 + y ≤ 1 on the first.
+        assert!(
+            s.iter()
+                .filter(|p| p.position.x < 5.0)
+                .all(|p| p.position.x / 2.0 + p.position.y <= 1.0 + 1e-5)
+        );
+    }
+
+    #[test]
+    fn empty_or_degenerate_meshes_are_refused() {
+        let mut mesh = square(0.0);
+        mesh.triangles.clear();
+        assert!(matches!(
+            synth_from_mesh(&mesh, &SynthConfig::default()),
+            Err(Error::EmptyMesh(_))
+        ));
+        let mut flat = square(0.0);
+        flat.positions = vec![Vec3::ONE; 4];
+        assert!(matches!(
+            synth_from_mesh(&flat, &SynthConfig::default()),
+            Err(Error::EmptyMesh(_))
+        ));
+        let bad = SynthConfig {
+            points: 0,
+            ..SynthConfig::default()
+        };
+        assert!(matches!(
+            synth_from_mesh(&square(0.0), &bad),
+            Err(Error::InvalidConfig(_))
+        ));
+    }
+}

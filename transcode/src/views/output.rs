@@ -35,14 +35,14 @@ pub fn write_view_images(
     image: &ViewImage,
     dir: &Path,
     stem: &str,
-    depth: BitDepth,
+    bit_depth: BitDepth,
 ) -> Result<ViewFiles, Error> {
     let files = ViewFiles {
         rgb: dir.join(format!("{stem}.png")),
         alpha: dir.join(format!("{stem}_alpha.png")),
         depth: dir.join(format!("{stem}_depth.exr")),
     };
-    write_rgb_png(&files.rgb, image, depth)?;
+    write_rgb_png(&files.rgb, image, bit_depth)?;
     write_alpha_png(&files.alpha, image)?;
     write_depth_exr(&files.depth, image)?;
     Ok(files)
@@ -54,8 +54,8 @@ fn quantise(v: f32, max: f32) -> f32 {
 }
 
 /// Writes the colour of a view as an RGB PNG, atomically.
-pub fn write_rgb_png(path: &Path, image: &ViewImage, depth: BitDepth) -> Result<(), Error> {
-    let png = encode_png_rgb(path, image, depth)?;
+pub fn write_rgb_png(path: &Path, image: &ViewImage, bit_depth: BitDepth) -> Result<(), Error> {
+    let png = encode_png_rgb(path, image, bit_depth)?;
     write_atomic(path, &png).map_err(|source| Error::Io {
         path: path.to_path_buf(),
         source,
@@ -66,10 +66,10 @@ pub fn write_rgb_png(path: &Path, image: &ViewImage, depth: BitDepth) -> Result<
 pub(crate) fn encode_png_rgb(
     path: &Path,
     image: &ViewImage,
-    depth: BitDepth,
+    bit_depth: BitDepth,
 ) -> Result<Vec<u8>, Error> {
     check_len(path, image.rgb.len(), 3 * pixels(image))?;
-    let bytes: Vec<u8> = match depth {
+    let bytes: Vec<u8> = match bit_depth {
         BitDepth::Eight => image
             .rgb
             .iter()
@@ -81,7 +81,7 @@ pub(crate) fn encode_png_rgb(
             .flat_map(|&v| (quantise(v, 65535.0) as u16).to_be_bytes())
             .collect(),
     };
-    let color = match depth {
+    let color = match bit_depth {
         BitDepth::Eight => ExtendedColorType::Rgb8,
         BitDepth::Sixteen => ExtendedColorType::Rgb16,
     };
