@@ -44,11 +44,19 @@ fn pipeline_on_a_small_plenoptic_cloud() {
     let outcome = transcode::pipeline::run(&input, &out, &cfg, true).unwrap();
 
     // Dataset: 16 images and a COLMAP model in both encodings, with the input points.
-    let images = std::fs::read_dir(out.join("dataset/images")).unwrap().count();
+    let images = std::fs::read_dir(out.join("dataset/images"))
+        .unwrap()
+        .count();
     assert_eq!(images, 16);
     for f in ["cameras", "images", "points3D"] {
-        assert!(out.join(format!("dataset/sparse/0/{f}.txt")).is_file(), "{f}.txt");
-        assert!(out.join(format!("dataset/sparse/0/{f}.bin")).is_file(), "{f}.bin");
+        assert!(
+            out.join(format!("dataset/sparse/0/{f}.txt")).is_file(),
+            "{f}.txt"
+        );
+        assert!(
+            out.join(format!("dataset/sparse/0/{f}.bin")).is_file(),
+            "{f}.bin"
+        );
     }
     assert!(out.join("dataset/sparse/0/points3D.ply").is_file());
 
@@ -79,7 +87,11 @@ fn pipeline_on_a_small_plenoptic_cloud() {
     assert!(m.alpha_iou > 0.97, "alpha IoU {}", m.alpha_iou);
     assert!(m.hole_alpha < 0.05, "holes {}", m.hole_alpha);
     let sparse = &outcome.report.runs[1].metrics;
-    assert!(sparse.psnr_black > 15.0, "sparse PSNR on black {}", sparse.psnr_black);
+    assert!(
+        sparse.psnr_black > 15.0,
+        "sparse PSNR on black {}",
+        sparse.psnr_black
+    );
     // Frozen surface splats sit on the input points.
     let d = m.surface.as_ref().unwrap();
     assert!(d.mean < 1e-3 && d.floater_share == 0.0, "{d:?}");

@@ -401,11 +401,16 @@ impl Config {
             );
         }
         if !(0.0..0.9).contains(&r.margin) {
-            return bad("rig.margin", format!("must be in [0, 0.9), got {}", r.margin));
+            return bad(
+                "rig.margin",
+                format!("must be in [0, 0.9), got {}", r.margin),
+            );
         }
         if r.heldout_cameras > 0
             && (r.heldout_distances.is_empty()
-                || r.heldout_distances.iter().any(|d| !(*d > 0.3 && *d < 100.0)))
+                || r.heldout_distances
+                    .iter()
+                    .any(|d| !(*d > 0.3 && *d < 100.0)))
         {
             return bad(
                 "rig.heldout_distances",
@@ -425,7 +430,10 @@ impl Config {
         if i.fit_directions < 16 {
             return bad(
                 "init.fit_directions",
-                format!("must be at least 16 (degree 3 has 16 coefficients), got {}", i.fit_directions),
+                format!(
+                    "must be at least 16 (degree 3 has 16 coefficients), got {}",
+                    i.fit_directions
+                ),
             );
         }
         if !(i.ridge >= 0.0 && i.ridge.is_finite()) {
@@ -505,8 +513,9 @@ mod tests {
 
     #[test]
     fn partial_file_keeps_other_defaults() {
-        let c = Config::from_toml("[rig]\ncameras = 12\n[init]\nsh_degree = 2\nmode = \"sparse\"\n")
-            .unwrap();
+        let c =
+            Config::from_toml("[rig]\ncameras = 12\n[init]\nsh_degree = 2\nmode = \"sparse\"\n")
+                .unwrap();
         assert_eq!(c.rig.cameras, 12);
         assert_eq!(c.rig.width, RigConfig::default().width);
         assert_eq!(c.init.sh_degree, ShDegree::Fixed(2));
@@ -529,11 +538,16 @@ mod tests {
         let p = dir.path().join("c.toml");
         std::fs::write(&p, "[training]\niterations = 0\n").unwrap();
         let e = Config::load(&p).unwrap_err().to_string();
-        assert!(e.contains("c.toml") && e.contains("training.iterations"), "{e}");
+        assert!(
+            e.contains("c.toml") && e.contains("training.iterations"),
+            "{e}"
+        );
         std::fs::write(&p, "[rig\n").unwrap();
         let e = Config::load(&p).unwrap_err().to_string();
         assert!(e.contains("c.toml"), "{e}");
-        let e = Config::load(&dir.path().join("missing.toml")).unwrap_err().to_string();
+        let e = Config::load(&dir.path().join("missing.toml"))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("missing.toml"), "{e}");
     }
 

@@ -23,8 +23,8 @@ pub enum EvalError {
     Colmap {
         /// The model folder.
         path: PathBuf,
-        /// The cause.
-        source: colmap_io::Error,
+        /// The cause (boxed: COLMAP errors are large).
+        source: Box<colmap_io::Error>,
     },
     /// An image or mask could not be read.
     #[error("cannot read {path}: {message}")]
@@ -60,13 +60,13 @@ pub fn load_reference_views(dir: &Path) -> Result<Vec<ReferenceView>, EvalError>
     let sparse = dir.join("sparse/0");
     let rec = colmap_io::read_model(&sparse).map_err(|source| EvalError::Colmap {
         path: sparse.clone(),
-        source,
+        source: Box::new(source),
     })?;
     let mut views = Vec::with_capacity(rec.images.len());
     for (id, image) in &rec.images {
         let camera = rec.camera_of(*id).map_err(|source| EvalError::Colmap {
             path: sparse.clone(),
-            source,
+            source: Box::new(source),
         })?;
         let path = dir.join("images").join(&image.name);
         let img = read_image(&path)?;
@@ -395,7 +395,13 @@ pub fn surface_distance(
     }
     let mean = d.iter().map(|x| x.0 * x.1).sum::<f64>() / total;
     // Adding 0.0 turns the empty sum's −0.0 into 0.0.
-    let beyond = d.iter().filter(|x| x.0 > threshold).map(|x| x.1).sum::<f64>() / total + 0.0;
+    let beyond = d
+        .iter()
+        .filter(|x| x.0 > threshold)
+        .map(|x| x.1)
+        .sum::<f64>()
+        / total
+        + 0.0;
     d.sort_by(|a, b| a.0.total_cmp(&b.0));
     let mut acc = 0.0;
     let mut p95 = d.last().map_or(0.0, |x| x.0);
@@ -462,7 +468,10 @@ mod tests {
             rgb: vec![0.2, 0.4, 0.6, 0.0, 0.0, 0.0],
             alpha: vec![1.0, 0.0],
         };
-        assert_eq!(v.on_background(Vec3::ONE), vec![0.2, 0.4, 0.6, 1.0, 1.0, 1.0]);
+        assert_eq!(
+            v.on_background(Vec3::ONE),
+            vec![0.2, 0.4, 0.6, 1.0, 1.0, 1.0]
+        );
         assert_eq!(v.on_background(Vec3::ZERO), v.rgb);
     }
 }

@@ -29,7 +29,7 @@ use crate::views::{self, ViewImage};
 pub enum PipelineError {
     /// The input could not be read.
     #[error("cannot load the input: {0}")]
-    Load(#[from] plenoptic_io::Error),
+    Load(Box<plenoptic_io::Error>),
     /// The input holds nothing to render.
     #[error("the input {0} holds no points or triangles")]
     EmptyInput(PathBuf),
@@ -41,7 +41,7 @@ pub enum PipelineError {
     Rig(#[from] camera_model::Error),
     /// The reference views could not be rendered or written.
     #[error("reference views: {0}")]
-    Views(#[from] views::Error),
+    Views(Box<views::Error>),
     /// The dataset could not be written.
     #[error("cannot write the COLMAP dataset in {path}: {message}")]
     Dataset {
@@ -52,17 +52,17 @@ pub enum PipelineError {
     },
     /// Initialisation failed.
     #[error("initialisation: {0}")]
-    Init(#[from] init::InitError),
+    Init(Box<init::InitError>),
     /// The trainer refused its inputs.
     #[error("training: {0}")]
-    Train(#[from] splat_train::Error),
+    Train(Box<splat_train::Error>),
     /// The model could not be written.
     #[error("cannot write the model {path}: {source}")]
     Model {
         /// The file.
         path: PathBuf,
         /// The cause.
-        source: splat_core::Error,
+        source: Box<splat_core::Error>,
     },
     /// A file or folder could not be written or removed.
     #[error("cannot write {path}: {source}")]
@@ -73,6 +73,18 @@ pub enum PipelineError {
         source: std::io::Error,
     },
 }
+
+/// Boxes the large error types of the stages into [`PipelineError`].
+macro_rules! boxed_from {
+    ($($variant:ident: $ty:ty),*) => {$(
+        impl From<$ty> for PipelineError {
+            fn from(e: $ty) -> Self {
+                Self::$variant(Box::new(e))
+            }
+        }
+    )*};
+}
+boxed_from!(Load: plenoptic_io::Error, Views: views::Error, Init: init::InitError, Train: splat_train::Error);
 
 fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> PipelineError + '_ {
     move |source| PipelineError::Io {
@@ -218,13 +230,11 @@ pub fn run(input: &Path, out: &Path, cfg: &Config, quiet: bool) -> Result<Outcom
     let mut timings = Vec::new();
     let mut stage = Instant::now();
     let mut lap = |name: &str, timings: &mut Vec<StageTiming>| {
-        let s = stage.elapsed().as_secs_f64();
         timings.push(StageTiming {
             stage: name.to_string(),
-            seconds: s,
+            seconds: stage.elapsed().as_secs_f64(),
         });
         stage = Instant::now();
-        s
     };
 
     say(format!("[1/6] loading {}", input.display()));
@@ -260,19 +270,29 @@ pub fn run(input: &Path, out: &Path, cfg: &Config, quiet: bool) -> Result<Outcom
         depth: false,
     };
     let bar = progress_bar(rig.train.len() as u64, quiet, "views");
-    let train_images =
-        views::write_dataset(&dataset_dir, &model, &rig.train, &opts, &dataset_opts, &|| {
+    let train_images = views::write_dataset(
+        &dataset_dir,
+        &model,
+        &rig.train,
+        &opts,
+        &dataset_opts,
+        &|| {
             bar.inc(1);
-        })?;
+        },
+    )?;
     bar.finish_and_clear();
     lap("render training views + write dataset", &mut timings);
     let heldout_images = views::render_views(&model, &rig.heldout, &opts)?;
     lap("render held-out views", &mut timings);
-    say(format!("      dataset written to {}", dataset_dir.display()));
+    say(format!(
+        "      dataset written to {}",
+        dataset_dir.display()
+    ));
+    // Mesh samples: K of them when `--splats K` is given, so that K means splats for meshes too.
     let surface = SurfacePoints::from_model(
         &model,
-        init::mesh_points(&cfg.init).0,
-        init::mesh_points(&cfg.init).1,
+        cfg.init.mesh_points,
+        cfg.init.splats.unwrap_or(cfg.init.mesh_samples),
         cfg.training.seed,
     );
 
@@ -281,7 +301,7 @@ pub fn run(input: &Path, out: &Path, cfg: &Config, quiet: bool) -> Result<Outcom
         .iter()
         .zip(&train_images)
         .enumerate()
-        .map(|(i, (c, img))| training_view(views::dataset_image_name(i), c.clone(), img))
+        .map(|(i, (c, img))| training_view(views::dataset_image_name(i), *c, img))
         .collect();
     drop(train_images);
     let heldout: Vec<ReferenceView> = rig
@@ -291,7 +311,7 @@ pub fn run(input: &Path, out: &Path, cfg: &Config, quiet: bool) -> Result<Outcom
         .enumerate()
         .map(|(i, (c, img))| ReferenceView {
             name: format!("heldout_{i:03}"),
-            camera: c.clone(),
+            camera: *c,
             rgb: img.rgb,
             alpha: img.alpha,
         })
@@ -421,17 +441,20 @@ fn init_train_eval(
     let (trained, train_report) = train(splats, train_views.to_vec(), tc, quiet)?;
     lap("train", &mut timings);
 
-    say(format!("[5/6] writing {} and evaluating", model_path.display()));
-    splat_core::ply::write_splats(model_path, &trained).map_err(|source| {
-        PipelineError::Model {
-            path: model_path.to_path_buf(),
-            source,
-        }
+    say(format!(
+        "[5/6] writing {} and evaluating",
+        model_path.display()
+    ));
+    splat_core::ply::write_splats(model_path, &trained).map_err(|source| PipelineError::Model {
+        path: model_path.to_path_buf(),
+        source: Box::new(source),
     })?;
     if splat_file {
         let p = model_path.with_extension("splat");
-        splat_core::export::write_splat(&p, &trained)
-            .map_err(|source| PipelineError::Model { path: p, source })?;
+        splat_core::export::write_splat(&p, &trained).map_err(|source| PipelineError::Model {
+            path: p,
+            source: Box::new(source),
+        })?;
     }
     lap("write model", &mut timings);
     let (metrics, renders): (Metrics, Vec<RenderedView>) = evaluate(

@@ -131,7 +131,11 @@ pub fn write_report(dir: &Path, report: &Report, pictures: &[ViewPictures]) -> i
 /// The HTML page.
 pub fn render_html(report: &Report, pictures: &[ViewPictures]) -> io::Result<String> {
     let mut h = String::new();
-    let names: Vec<String> = report.runs.iter().map(|r| format!("{} init", r.init.mode)).collect();
+    let names: Vec<String> = report
+        .runs
+        .iter()
+        .map(|r| format!("{} init", r.init.mode))
+        .collect();
     let _ = write!(
         h,
         "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\
@@ -145,7 +149,10 @@ pub fn render_html(report: &Report, pictures: &[ViewPictures]) -> io::Result<Str
         esc(&report.input.path.display().to_string()),
         esc(&report.input.kind),
         if report.input.triangles > 0 {
-            format!("{} vertices and {} triangles", report.input.points, report.input.triangles)
+            format!(
+                "{} vertices and {} triangles",
+                report.input.points, report.input.triangles
+            )
         } else {
             format!("{} points", report.input.points)
         },
@@ -169,11 +176,23 @@ pub fn render_html(report: &Report, pictures: &[ViewPictures]) -> io::Result<Str
     ));
     for p in pictures {
         let _ = write!(h, "<h3>{}</h3>\n<div class=\"row\">", esc(&p.name));
-        figure(&mut h, "reference", &png_data_uri(&p.reference, p.width, p.height)?);
+        figure(
+            &mut h,
+            "reference",
+            &png_data_uri(&p.reference, p.width, p.height)?,
+        );
         for (render, name) in p.renders.iter().zip(&names) {
-            figure(&mut h, &format!("splats ({name})"), &png_data_uri(render, p.width, p.height)?);
+            figure(
+                &mut h,
+                &format!("splats ({name})"),
+                &png_data_uri(render, p.width, p.height)?,
+            );
             let heat = heat_map(&p.reference, render);
-            figure(&mut h, &format!("error ({name})"), &png_data_uri(&heat, p.width, p.height)?);
+            figure(
+                &mut h,
+                &format!("error ({name})"),
+                &png_data_uri(&heat, p.width, p.height)?,
+            );
         }
         h.push_str("</div>\n");
     }
@@ -202,13 +221,21 @@ fn metrics_table(h: &mut String, report: &Report, names: &[String]) {
     h.push_str("</tr>\n");
     type Row = (&'static str, fn(&RunReport) -> String);
     let rows: [Row; 17] = [
-        ("PSNR, black background (dB)", |r| format!("{:.2}", r.metrics.psnr_black)),
-        ("PSNR, white background (dB)", |r| format!("{:.2}", r.metrics.psnr_white)),
+        ("PSNR, black background (dB)", |r| {
+            format!("{:.2}", r.metrics.psnr_black)
+        }),
+        ("PSNR, white background (dB)", |r| {
+            format!("{:.2}", r.metrics.psnr_white)
+        }),
         ("SSIM, black", |r| format!("{:.4}", r.metrics.ssim_black)),
         ("SSIM, white", |r| format!("{:.4}", r.metrics.ssim_white)),
         ("alpha IoU", |r| format!("{:.4}", r.metrics.alpha_iou)),
-        ("holes: missing alpha inside the mask", |r| format!("{:.4}", r.metrics.hole_alpha)),
-        ("free-space alpha outside the mask", |r| format!("{:.4}", r.metrics.free_alpha)),
+        ("holes: missing alpha inside the mask", |r| {
+            format!("{:.4}", r.metrics.hole_alpha)
+        }),
+        ("free-space alpha outside the mask", |r| {
+            format!("{:.4}", r.metrics.free_alpha)
+        }),
         ("splats", |r| r.metrics.splats.to_string()),
         ("SH degree", |r| r.init.sh_degree.to_string()),
         ("distance to surface, mean (spacings)", |r| {
@@ -253,22 +280,27 @@ fn surface(r: &RunReport, f: fn(&crate::eval::SurfaceDistance) -> f64) -> String
 fn timings_table(h: &mut String, report: &Report, names: &[String]) {
     h.push_str("<h2>Time per stage</h2>\n<table><tr><th>stage</th><th>seconds</th></tr>\n");
     for t in &report.timings {
-        let _ = write!(h, "<tr><td>{}</td><td>{:.2}</td></tr>\n", esc(&t.stage), t.seconds);
+        let _ = writeln!(
+            h,
+            "<tr><td>{}</td><td>{:.2}</td></tr>",
+            esc(&t.stage),
+            t.seconds
+        );
     }
     for (r, n) in report.runs.iter().zip(names) {
         for t in &r.timings {
-            let _ = write!(
+            let _ = writeln!(
                 h,
-                "<tr><td>{} ({})</td><td>{:.2}</td></tr>\n",
+                "<tr><td>{} ({})</td><td>{:.2}</td></tr>",
                 esc(&t.stage),
                 esc(n),
                 t.seconds
             );
         }
     }
-    let _ = write!(
+    let _ = writeln!(
         h,
-        "<tr><th>total</th><th>{:.2}</th></tr></table>\n",
+        "<tr><th>total</th><th>{:.2}</th></tr></table>",
         report.total_seconds
     );
 }
@@ -302,8 +334,16 @@ fn curve_svg(report: &Report, names: &[String]) -> String {
         return "<p>(no training history)</p>\n".into();
     }
     let t_max = points.iter().map(|p| p.0).fold(0.0, f64::max).max(1e-3);
-    let p_min = points.iter().map(|p| p.1).fold(f64::INFINITY, f64::min).floor();
-    let p_max = points.iter().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max).ceil();
+    let p_min = points
+        .iter()
+        .map(|p| p.1)
+        .fold(f64::INFINITY, f64::min)
+        .floor();
+    let p_max = points
+        .iter()
+        .map(|p| p.1)
+        .fold(f64::NEG_INFINITY, f64::max)
+        .ceil();
     let p_max = if p_max <= p_min { p_min + 1.0 } else { p_max };
     let x = |t: f64| left + (w - left - right) * t / t_max;
     let y = |p: f64| top + (h - top - bottom) * (1.0 - (p - p_min) / (p_max - p_min));
@@ -372,7 +412,11 @@ pub fn heat_map(reference: &[f32], render: &[f32]) -> Vec<f32> {
         .flat_map(|(a, b)| {
             let e = ((a[0] - b[0]).abs() + (a[1] - b[1]).abs() + (a[2] - b[2]).abs()) / 3.0;
             let t = (e / HEAT_MAX_ERROR).clamp(0.0, 1.0) * 3.0;
-            [t.min(1.0), (t - 1.0).clamp(0.0, 1.0), (t - 2.0).clamp(0.0, 1.0)]
+            [
+                t.min(1.0),
+                (t - 1.0).clamp(0.0, 1.0),
+                (t - 2.0).clamp(0.0, 1.0),
+            ]
         })
         .collect()
 }
@@ -480,7 +524,10 @@ mod tests {
 
     #[test]
     fn heat_map_ramp() {
-        let h = heat_map(&[0.0, 0.0, 0.0, 1.0, 1.0, 1.0], &[0.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+        let h = heat_map(
+            &[0.0, 0.0, 0.0, 1.0, 1.0, 1.0],
+            &[0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        );
         assert_eq!(&h[..3], &[0.0, 0.0, 0.0]);
         assert_eq!(&h[3..], &[1.0, 1.0, 1.0]);
     }

@@ -21,7 +21,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let config = match &args.check {
         Some(path) => Config::load(path).map_err(flat)?,
         None if args.defaults => Config::default(),
-        None => anyhow::bail!("say --defaults to print the defaults or --check FILE to check a file"),
+        None => {
+            anyhow::bail!("say --defaults to print the defaults or --check FILE to check a file")
+        }
     };
     print!("{}", config.to_toml());
     Ok(())

@@ -25,7 +25,8 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     require_file(&args.input, "input")?;
     let config = args.overrides.resolve(Config::default())?;
-    let outcome = transcode::pipeline::run(&args.input, &args.out, &config, args.quiet).map_err(flat)?;
+    let outcome =
+        transcode::pipeline::run(&args.input, &args.out, &config, args.quiet).map_err(flat)?;
     print_outcome(&outcome);
     Ok(())
 }

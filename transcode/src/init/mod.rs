@@ -21,7 +21,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 use splat_core::Splats;
 
-use crate::config::{InitConfig, InitMode, MeshPoints, Sampling, ShDegree};
+use crate::config::{InitConfig, InitMode, Sampling, ShDegree};
 
 pub mod surface;
 pub use surface::{SurfacePoints, sample_mesh};
@@ -37,8 +37,8 @@ pub enum InitError {
     Colmap {
         /// The model folder.
         path: PathBuf,
-        /// The cause.
-        source: colmap_io::Error,
+        /// The cause (boxed: COLMAP errors are large).
+        source: Box<colmap_io::Error>,
     },
     /// The COLMAP model has no 3D points.
     #[error("the COLMAP model in {0} has no 3D points")]
@@ -151,7 +151,9 @@ pub fn voxel_subsample(points: &[Vec3], k: usize) -> Vec<usize> {
         let mut m: std::collections::HashMap<[i32; 3], Vec<usize>> = Default::default();
         for (i, p) in points.iter().enumerate() {
             let c = ((*p - lo) / h).floor();
-            m.entry([c.x as i32, c.y as i32, c.z as i32]).or_default().push(i);
+            m.entry([c.x as i32, c.y as i32, c.z as i32])
+                .or_default()
+                .push(i);
         }
         m
     };
@@ -537,25 +539,15 @@ pub fn initialise(
     }
 }
 
-/// Which mesh points carry splats by default when the config says so.
-#[must_use]
-pub fn mesh_points(cfg: &InitConfig) -> (MeshPoints, usize) {
-    (cfg.mesh_points, cfg.splats.unwrap_or(cfg.mesh_samples))
-}
-
 fn read_points3d(dir: &Path) -> Result<(Vec<Vec3>, Vec<[f32; 3]>), InitError> {
     let rec = colmap_io::read_model(dir).map_err(|source| InitError::Colmap {
         path: dir.to_path_buf(),
-        source,
+        source: Box::new(source),
     })?;
     if rec.points3d.is_empty() {
         return Err(InitError::NoColmapPoints(dir.to_path_buf()));
     }
-    let positions = rec
-        .points3d
-        .values()
-        .map(|p| p.xyz.as_vec3())
-        .collect();
+    let positions = rec.points3d.values().map(|p| p.xyz.as_vec3()).collect();
     let colors = rec
         .points3d
         .values()
@@ -651,7 +643,8 @@ mod tests {
                 10,
             );
             for c in 0..3 {
-                let r: f32 = b.iter().zip(&coeffs).map(|(bk, a)| bk * a[c]).sum::<f32>() + 0.5 - y[c];
+                let r: f32 =
+                    b.iter().zip(&coeffs).map(|(bk, a)| bk * a[c]).sum::<f32>() + 0.5 - y[c];
                 for k in 0..16 {
                     grad[k][c] += f64::from(b[k] * r);
                 }
@@ -675,11 +668,17 @@ mod tests {
                 ShFit::new(degree as u32, cfg.fit_directions, cfg.ridge).fit_all(&p, 10);
             *e = rms_against_interpolation(&p, degree as u32, &coeffs);
             // The fit's own residual predicts the error on unseen directions.
-            assert!((*e - fit_rms).abs() < 0.01, "degree {degree}: {e} vs {fit_rms}");
+            assert!(
+                (*e - fit_rms).abs() < 0.01,
+                "degree {degree}: {e} vs {fit_rms}"
+            );
         }
         eprintln!("SH fit RMS error by degree: {errs:?}");
         assert!(errs[3] < 0.05, "{errs:?}");
-        assert!(errs[0] > errs[1] && errs[1] > errs[2] && errs[2] > errs[3], "{errs:?}");
+        assert!(
+            errs[0] > errs[1] && errs[1] > errs[2] && errs[2] > errs[3],
+            "{errs:?}"
+        );
     }
 
     #[test]
@@ -780,6 +779,10 @@ mod tests {
         let (s, summary) = initialise(&sp, &cfg, 10, 3).unwrap();
         assert_eq!(s.len(), 500);
         assert_eq!(summary.source, "random");
-        assert!(s.means.iter().all(|m| m.x >= 0.0 && m.x <= 9.0 && m.z == 0.0));
+        assert!(
+            s.means
+                .iter()
+                .all(|m| m.x >= 0.0 && m.x <= 9.0 && m.z == 0.0)
+        );
     }
 }

@@ -212,19 +212,20 @@ fn at_spots(mesh: &Mesh, spots: &[(usize, [f32; 3])]) -> SurfacePoints {
         out.positions.push(b[0] * p[0] + b[1] * p[1] + b[2] * p[2]);
         let face = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
         let n = match &mesh.normals {
-            Some(vn) if vn.len() == mesh.positions.len() => {
-                (b[0] * vn[tri[0] as usize] + b[1] * vn[tri[1] as usize] + b[2] * vn[tri[2] as usize])
-                    .try_normalize()
-                    .unwrap_or(face)
-            }
+            Some(vn) if vn.len() == mesh.positions.len() => (b[0] * vn[tri[0] as usize]
+                + b[1] * vn[tri[1] as usize]
+                + b[2] * vn[tri[2] as usize])
+                .try_normalize()
+                .unwrap_or(face),
             _ => face,
         };
         normals.push(n);
         out.colors.push(albedo_at(mesh, t, b));
         for k in 0..ncam {
             let c = tri.map(|v| mesh.camera_colors[v as usize * ncam + k]);
-            out.camera_colors
-                .push(std::array::from_fn(|ch| b[0] * c[0][ch] + b[1] * c[1][ch] + b[2] * c[2][ch]));
+            out.camera_colors.push(std::array::from_fn(|ch| {
+                b[0] * c[0][ch] + b[1] * c[1][ch] + b[2] * c[2][ch]
+            }));
         }
     }
     out.normals = Some(normals);
@@ -259,8 +260,18 @@ mod tests {
         // Uniform over the 2×1 rectangle: the left half holds about half of the points.
         let left = s.positions.iter().filter(|p| p.x < 1.0).count() as f64 / 4000.0;
         assert!((left - 0.5).abs() < 0.04, "{left}");
-        assert!(s.normals.as_ref().unwrap().iter().all(|n| (n.z.abs() - 1.0).abs() < 1e-6));
-        assert!(s.colors.iter().all(|c| (c[0] - 1.0).abs() < 1e-5 && c[1] == 0.0 && c[2] == 0.0));
+        assert!(
+            s.normals
+                .as_ref()
+                .unwrap()
+                .iter()
+                .all(|n| (n.z.abs() - 1.0).abs() < 1e-6)
+        );
+        assert!(
+            s.colors
+                .iter()
+                .all(|c| (c[0] - 1.0).abs() < 1e-5 && c[1] == 0.0 && c[2] == 0.0)
+        );
         assert!(!s.is_plenoptic());
     }
 
