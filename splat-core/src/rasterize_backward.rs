@@ -12,7 +12,9 @@ use rayon::prelude::*;
 
 use crate::constants::{MAX_ALPHA, MIN_ALPHA};
 use crate::project::{ProjectedGrad, ViewConsts, project, project_backward};
-use crate::rasterize::{DEPTH_MIN_ALPHA, LANES, fast_exp, tile_extent, tile_major_index};
+use crate::rasterize::{
+    DEPTH_MIN_ALPHA, LANES, fast_exp, lanes_mut, tile_extent, tile_major_index,
+};
 use crate::tiles::{TILE_PIXELS, TILE_SIZE, quad_bound, row_range, row_span};
 use crate::{Rasterizer, RenderCamera, RenderOptions, SplatGrads, Splats};
 
@@ -211,26 +213,35 @@ impl Rasterizer {
                     };
                     for half in (c0 / LANES)..=(c1 / LANES) {
                         let base = ly * ts + half * LANES;
-                        for l in 0..LANES {
-                            let idx = base + l;
-                            let dx = p.xy[0] - (x0 + (half * LANES + l) as i32) as f32;
+                        let lastl: &mut [u32; LANES] = lanes_mut(&mut last, base);
+                        let tl: &mut [f32; LANES] = lanes_mut(&mut t_cur, base);
+                        let accl: &mut [[f32; 4]; LANES] = lanes_mut(&mut acc, base);
+                        let grl: &mut [[f32; 3]; LANES] = lanes_mut(&mut g_rgb, base);
+                        let gdl: &mut [f32; LANES] = lanes_mut(&mut g_d, base);
+                        let kl: &mut [f32; LANES] = lanes_mut(&mut k_bg, base);
+                        let xb = p.xy[0] - (x0 + (half * LANES) as i32) as f32;
+                        let l0 = c0.max(half * LANES) - half * LANES;
+                        let l1 = c1.min(half * LANES + LANES - 1) - half * LANES;
+                        for l in l0..=l1 {
+                            let dx = xb - l as f32;
                             let power = -0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy;
                             let gauss = fast_exp(power);
                             let raw = p.opacity * gauss;
                             let alpha = raw.min(MAX_ALPHA);
-                            let valid = kk32 < last[idx] && power <= 0.0 && alpha >= MIN_ALPHA;
+                            let valid = (kk32 < lastl[l]) & (power <= 0.0) & (alpha >= MIN_ALPHA);
                             let one_m = 1.0 - alpha;
-                            let t_i = t_cur[idx] / one_m;
+                            let inv = 1.0 / one_m;
+                            let t_i = tl[l] * inv;
                             let w = alpha * t_i;
-                            let gr = g_rgb[idx];
-                            let gdp = g_d[idx];
-                            let ac = acc[idx];
+                            let gr = grl[l];
+                            let gdp = gdl[l];
+                            let ac = accl[l];
                             let d_alpha = t_i
                                 * ((p.color[0] - ac[0]) * gr[0]
                                     + (p.color[1] - ac[1]) * gr[1]
                                     + (p.color[2] - ac[2]) * gr[2]
                                     + (p.depth - ac[3]) * gdp)
-                                + k_bg[idx] / one_m;
+                                + kl[l] * inv;
                             let wv = if valid { w } else { 0.0 };
                             s_col[0][l] += wv * gr[0];
                             s_col[1][l] += wv * gr[1];
@@ -242,10 +253,10 @@ impl Rasterizer {
                                 alpha * p.color[2] + one_m * ac[2],
                                 alpha * p.depth + one_m * ac[3],
                             ];
-                            acc[idx] = if valid { next } else { ac };
-                            t_cur[idx] = if valid { t_i } else { t_cur[idx] };
+                            accl[l] = if valid { next } else { ac };
+                            tl[l] = if valid { t_i } else { tl[l] };
                             // Where o·G is clamped at 0.99, alpha does not depend on o or G.
-                            let da = if valid && raw < MAX_ALPHA {
+                            let da = if valid & (raw < MAX_ALPHA) {
                                 d_alpha
                             } else {
                                 0.0
