@@ -29,7 +29,11 @@ fn torus_scene(n: usize) -> Splats {
         let nrm = Vec3::new(u.cos() * v.cos(), u.sin() * v.cos(), v.sin());
         pts.push(Vec3::new(u.cos() * big, u.sin() * big, 0.0) + nrm * r);
         normals.push(nrm);
-        colors.push([0.5 + 0.4 * (3.0 * u).sin(), 0.5 + 0.4 * v.cos(), 0.5 + 0.3 * nrm.z]);
+        colors.push([
+            0.5 + 0.4 * (3.0 * u).sin(),
+            0.5 + 0.4 * v.cos(),
+            0.5 + 0.3 * nrm.z,
+        ]);
         scales.push(Vec3::new(spacing * 0.8, spacing * 0.8, spacing * 0.1));
     }
     let mut s = Splats::from_points(&pts, &colors, &scales, Some(&normals), 0.8, 3)
