@@ -21,6 +21,11 @@ pub(crate) fn read_gltf(path: &Path) -> Result<Mesh, Error> {
             std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"),
         ));
     }
+    if let Some(version) = asset_version(path).filter(|v| !v.starts_with("2.")) {
+        return Err(err(format!(
+            "glTF version {version} is not supported (glTF 2.0 only)"
+        )));
+    }
     // gltf has had panics on malformed input (gltf-rs/gltf#359); turn any into an error.
     let imported = std::panic::catch_unwind(|| gltf::import(path))
         .map_err(|_| err("the glTF importer failed on malformed input".into()))?;
@@ -65,6 +70,32 @@ pub(crate) fn read_gltf(path: &Path) -> Result<Mesh, Error> {
     mesh.uvs = builder.uvs;
     mesh.colors = builder.colors;
     Ok(mesh)
+}
+
+/// The `asset.version` of a .gltf or .glb file, or `None` when it cannot be read (the importer
+/// then reports the problem). A GLB container of version 1 is glTF 1.0.
+fn asset_version(path: &Path) -> Option<String> {
+    let bytes = std::fs::read(path).ok()?;
+    let json = if bytes.starts_with(b"glTF") {
+        let word =
+            |at: usize| Some(u32::from_le_bytes(bytes.get(at..at + 4)?.try_into().ok()?) as usize);
+        if word(4)? != 2 {
+            return Some(format!(
+                "{} (binary container version {})",
+                if word(4)? == 1 { "1.0" } else { "?" },
+                word(4)?
+            ));
+        }
+        bytes.get(20..20 + word(12)?)?
+    } else {
+        &bytes[..]
+    };
+    let value: serde_json::Value = serde_json::from_slice(json).ok()?;
+    value
+        .get("asset")?
+        .get("version")?
+        .as_str()
+        .map(str::to_string)
 }
 
 /// Names the first external buffer or image that does not exist next to the glTF file (the
