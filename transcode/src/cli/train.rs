@@ -266,11 +266,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 /// The next iteration at which to pause: the next multiple of either interval, or the end.
 fn next_stop(done: u32, total: u32, eval_every: u32, ckpt_every: u32) -> u32 {
     let next = |k: u32| {
-        if k == 0 {
-            total
-        } else {
-            (done / k + 1).saturating_mul(k)
-        }
+        done.checked_div(k)
+            .map_or(total, |q| (q + 1).saturating_mul(k))
     };
     next(eval_every).min(next(ckpt_every)).min(total)
 }
