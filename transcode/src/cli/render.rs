@@ -1,10 +1,110 @@
-//! PLACEHOLDER: owned by the helper implementing this subcommand; replace this whole file.
+//! `transcode render SPLATS.ply --colmap DIR --out OUTDIR [--background R,G,B] [--images NAME,...]`:
+//! renders a 3DGS PLY from the cameras of a COLMAP model to PNG files named like its images.
 
-/// Arguments (to be defined by the subcommand's owner).
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+use indicatif::{ProgressBar, ProgressStyle};
+use splat_core::{Rasterizer, RenderCamera, RenderOptions};
+
+/// Arguments of `transcode render`.
 #[derive(Debug, clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// The 3DGS PLY to render (Inria layout; any property order, float or double).
+    pub splats: PathBuf,
+    /// COLMAP model folder (with cameras/images files), or a dataset root holding sparse/0.
+    #[arg(long)]
+    pub colmap: PathBuf,
+    /// Output folder for the PNG files.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Background colour in [0, 1], as R,G,B.
+    #[arg(long, value_delimiter = ',', num_args = 3, default_values_t = [0.0, 0.0, 0.0])]
+    pub background: Vec<f32>,
+    /// Render only these images (names as in the model), comma-separated.
+    #[arg(long, value_delimiter = ',')]
+    pub images: Option<Vec<String>>,
+    /// Highest SH degree to evaluate (default: the model's).
+    #[arg(long)]
+    pub sh_degree: Option<u32>,
+    /// Use gsplat's antialiased mode (opacity compensation).
+    #[arg(long)]
+    pub antialiased: bool,
+}
 
-/// Runs the subcommand.
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("this subcommand is not built yet")
+/// The model folder: `DIR` itself if it holds a model, else `DIR/sparse/0`.
+fn model_dir(dir: &Path) -> PathBuf {
+    let nested = dir.join("sparse").join("0");
+    if colmap_io::detect_format(dir).is_none() && colmap_io::detect_format(&nested).is_some() {
+        nested
+    } else {
+        dir.to_path_buf()
+    }
+}
+
+/// Renders every selected image of the model and writes it as PNG.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let splats = splat_core::ply::read_splats(&args.splats)?;
+    let model = model_dir(&args.colmap);
+    let rec = colmap_io::read_model(&model)
+        .with_context(|| format!("reading the COLMAP model in {}", model.display()))?;
+    let mut selected: Vec<u32> = rec.images.keys().copied().collect();
+    if let Some(names) = &args.images {
+        let missing: Vec<&String> = names
+            .iter()
+            .filter(|n| !rec.images.values().any(|i| &i.name == *n))
+            .collect();
+        if !missing.is_empty() {
+            bail!("images not in the model {}: {missing:?}", model.display());
+        }
+        selected.retain(|id| names.contains(&rec.images[id].name));
+    }
+    let bg = glam::Vec3::from_slice(&args.background);
+    if !(0.0..=1.0).contains(&bg.min_element()) || bg.max_element() > 1.0 {
+        bail!("--background components must lie in [0, 1], got {bg}");
+    }
+    let opts = RenderOptions {
+        background: bg,
+        active_sh_degree: args.sh_degree.unwrap_or(splats.sh_degree),
+        antialiased: args.antialiased,
+    };
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    let bar = ProgressBar::new(selected.len() as u64).with_style(
+        ProgressStyle::with_template("{bar:40} {pos}/{len} {msg} ({elapsed}, eta {eta})")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let mut r = Rasterizer::new();
+    for id in selected {
+        let image = &rec.images[&id];
+        bar.set_message(image.name.clone());
+        let camera = rec
+            .camera_of(id)
+            .with_context(|| format!("camera of image {}", image.name))?;
+        let cam = RenderCamera::from(&camera);
+        let out = r.forward(&splats, &cam, &opts);
+        let pixels: Vec<u8> = out
+            .rgb
+            .iter()
+            .map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
+            .collect();
+        let path = args.out.join(&image.name).with_extension("png");
+        if let Some(parent) = path.parent() {
+            std::fs::create_dir_all(parent)
+                .with_context(|| format!("creating {}", parent.display()))?;
+        }
+        let mut png = Vec::new();
+        image::ImageEncoder::write_image(
+            image::codecs::png::PngEncoder::new(&mut png),
+            &pixels,
+            cam.width,
+            cam.height,
+            image::ExtendedColorType::Rgb8,
+        )
+        .with_context(|| format!("encoding {}", path.display()))?;
+        colmap_io::write_atomic(&path, &png)?;
+        bar.inc(1);
+    }
+    bar.finish_with_message(format!("wrote {}", args.out.display()));
+    Ok(())
 }
