@@ -429,6 +429,29 @@ mod tests {
     }
 
     #[test]
+    fn oversized_render_is_refused_before_allocating() {
+        let cam = camera(
+            DVec3::new(0.0, 0.0, 100.0),
+            DVec3::ZERO,
+            16_384,
+            16_384,
+            30.0,
+        );
+        let cloud = cloud_of(vec![Vec3::ZERO], vec![[1.0; 3]]);
+        let err = render_cloud(&cloud, &cam, &ViewOptions::default()).unwrap_err();
+        assert!(matches!(err, Error::InvalidCamera(_)), "{err}");
+        let small = camera(DVec3::new(0.0, 0.0, 100.0), DVec3::ZERO, 4096, 4096, 30.0);
+        let opts = ViewOptions {
+            supersample: 4,
+            ..Default::default()
+        };
+        assert!(matches!(
+            render_cloud(&cloud, &small, &opts),
+            Err(Error::InvalidCamera(_))
+        ));
+    }
+
+    #[test]
     fn inconsistent_cloud_is_refused() {
         let cam = camera(DVec3::new(0.0, 0.0, 100.0), DVec3::ZERO, 8, 8, 30.0);
         let cloud = cloud_of(vec![Vec3::ZERO, Vec3::ONE], vec![[1.0; 3]]);

@@ -225,6 +225,10 @@ pub fn render_views(
 /// The largest image side the renderer accepts (per axis, after supersampling).
 const MAX_SIDE: u32 = 32_768;
 
+/// The most pixels one render may have (after supersampling): 2^27 pixels already take 1 GiB of
+/// z-buffer and 2.5 GiB of colour, alpha and depth.
+const MAX_PIXELS: u64 = 1 << 27;
+
 /// A camera in single precision, with the pixel-ray directions as linear functions of the pixel.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct ViewCamera {
@@ -255,6 +259,12 @@ impl ViewCamera {
         if k.width == 0 || k.height == 0 || k.width > MAX_SIDE || k.height > MAX_SIDE {
             return Err(Error::InvalidCamera(format!(
                 "image size {}×{} is outside 1..={MAX_SIDE}",
+                k.width, k.height
+            )));
+        }
+        if u64::from(k.width) * u64::from(k.height) > MAX_PIXELS {
+            return Err(Error::InvalidCamera(format!(
+                "image size {}×{} exceeds the renderer's limit of {MAX_PIXELS} pixels (lower the resolution or supersampling)",
                 k.width, k.height
             )));
         }
