@@ -433,3 +433,24 @@ fn ten_thousand_steps_on_hard_cases_stay_finite() {
     assert!(r.history.iter().all(|h| h.loss.is_finite()));
     eprintln!("non-finite events: {:?}", r.non_finite);
 }
+
+/// The trainer's reductions use fixed partitions and orders, and splat-core's are reduced
+/// deterministically too: the run is bit-identical whatever the thread count.
+#[test]
+fn results_do_not_depend_on_thread_count() {
+    let (init, views) = masked_views();
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let mut t = Trainer::new(init.clone(), views.clone(), densify_config(60)).unwrap();
+            t.run(|_| {});
+            t.splats().clone()
+        })
+    };
+    let one = run(1);
+    assert!(run(2) == one, "2 threads differ from 1");
+    assert!(run(5) == one, "5 threads differ from 1");
+}
