@@ -13,9 +13,6 @@ pub struct CaptureCamera {
     pub matrix: Option<[f64; 16]>,
 }
 
-/// The colour type of a PLY colour property (how values map to [0, 1]).
-pub type ColorType = ScalarType;
-
 /// How a cloud was laid out in its PLY file, so that it can be written back bit-exactly.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PlyLayout {

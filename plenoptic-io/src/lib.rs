@@ -5,6 +5,9 @@
 //! - [`read_mesh`]: OBJ (tobj), glTF 2.0 / GLB (gltf) and PLY meshes.
 //! - [`load`]: either of the above, chosen from the file.
 //! - [`view_color`]: the PccAppRenderer view-dependent colour interpolation.
+//! - [`summary`]: counts, bounds, rig and colour statistics of a model (`transcode info`).
+//!
+//! Formats, conventions and error policy: `docs/formats-input.md`.
 
 mod atomic;
 mod cloud;
@@ -16,7 +19,7 @@ pub mod ply;
 pub mod summary;
 pub mod view_color;
 
-pub use cloud::{CaptureCamera, ColorType, ExtraProperty, PlenopticCloud, PlyLayout};
+pub use cloud::{CaptureCamera, ExtraProperty, PlenopticCloud, PlyLayout};
 pub use error::Error;
 pub use mesh::{Material, Mesh, Texture};
 pub use ply::{PlyFormat, ScalarType};

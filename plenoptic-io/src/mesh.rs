@@ -71,7 +71,7 @@ impl Mesh {
 /// some exporters) become `/`, relative names are taken from the model's folder, and when that
 /// file does not exist the bare file name next to the model is tried.
 #[must_use]
-pub fn resolve_relative(model: &std::path::Path, name: &str) -> std::path::PathBuf {
+pub(crate) fn resolve_relative(model: &std::path::Path, name: &str) -> std::path::PathBuf {
     let cleaned = name.trim().replace('\\', "/");
     let dir = model.parent().unwrap_or_else(|| std::path::Path::new(""));
     let candidate = dir.join(cleaned.trim_start_matches("./"));

@@ -451,9 +451,30 @@ fn header_promising_more_than_the_file_holds_is_refused() {
         read_cloud(&p).unwrap_err(),
         Error::Truncated { .. }
     ));
+    // Found by cargo-fuzz: a fixed-size vertex element after a face element whose lists use more
+    // than the minimum the up-front check assumes; the records must be bounds-checked too.
+    let mut text = b"ply\nformat binary_little_endian 1.0\nelement face 2\nproperty list uchar int vertex_indices\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nend_header\n".to_vec();
+    text.push(3);
+    text.extend([0u8; 12]);
+    text.push(3);
+    text.extend([0u8; 12]);
+    text.extend([0u8; 14]);
+    let p = write(dir.path(), "lists.ply", &text);
+    match read_cloud(&p).unwrap_err() {
+        Error::Truncated {
+            element,
+            needed,
+            available,
+            ..
+        } => assert_eq!((element.as_str(), needed, available), ("vertex", 36, 14)),
+        e => panic!("{e}"),
+    }
     // The smallest possible ASCII body (one-character values, no final newline) is accepted.
     let p = write(dir.path(), "tight.ply", b"ply\nformat ascii 1.0\nelement vertex 2\nproperty uchar x\nproperty uchar y\nproperty uchar z\nend_header\n1 2 3\n4 5 6");
-    assert_eq!(read_cloud(&p).unwrap().positions[1], Vec3::new(4.0, 5.0, 6.0));
+    assert_eq!(
+        read_cloud(&p).unwrap().positions[1],
+        Vec3::new(4.0, 5.0, 6.0)
+    );
     let p = write(dir.path(), "rows.ply", b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nend_header\n1 2 3\n4 5 6 7 8 9 1 2 3\n");
     let e = read_cloud(&p).unwrap_err().to_string();
     assert!(

@@ -253,6 +253,9 @@ pub fn parse_header(path: &Path, bytes: &[u8]) -> Result<Header, Error> {
         };
         match keyword {
             "format" => {
+                if format.is_some() {
+                    return Err(err(line_no, "a second 'format' line".into()));
+                }
                 let kind = words.next().unwrap_or("");
                 format = Some(match kind {
                     "ascii" => PlyFormat::Ascii,
@@ -282,6 +285,9 @@ pub fn parse_header(path: &Path, bytes: &[u8]) -> Result<Header, Error> {
                         format!("element count {count:?} is not a non-negative integer"),
                     )
                 })?;
+                if elements.iter().any(|e| e.name == name) {
+                    return Err(err(line_no, format!("element '{name}' is declared twice")));
+                }
                 elements.push(Element {
                     name: name.to_string(),
                     count,

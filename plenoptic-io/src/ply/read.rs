@@ -541,10 +541,10 @@ pub(crate) fn read_body(
             })?;
             let mut data = VertexData::zeroed(&plan, n);
             if let Some(stride) = stride {
-                // check_sizes guarantees the records are present.
-                let records = &bytes[cursor.pos..cursor.pos + n * stride];
+                // check_sizes bounds the minimum; list elements before this one may have used more.
+                let records = records(path, bytes, cursor.pos, element, stride)?;
                 decode_fixed(&plan, element, records, stride, big, &mut data);
-                cursor.pos += n * stride;
+                cursor.pos += records.len();
             } else {
                 decode_rows(&plan, element, &mut cursor, &mut data)?;
             }
@@ -552,7 +552,7 @@ pub(crate) fn read_body(
         } else if want == Want::Triangles && element.name == "face" {
             read_faces(path, element, &mut cursor, &mut triangles)?;
         } else if let Some(stride) = stride {
-            cursor.pos += element.count as usize * stride;
+            cursor.pos += records(path, bytes, cursor.pos, element, stride)?.len();
         } else {
             let mut scalars = vec![0.0; element.properties.len()];
             let mut list = Vec::new();
@@ -582,6 +582,28 @@ pub(crate) fn read_body(
         vertices,
         triangles,
     })
+}
+
+/// The bytes of the `element.count` fixed-size records starting at `pos`, or `Error::Truncated`.
+fn records<'a>(
+    path: &Path,
+    bytes: &'a [u8],
+    pos: usize,
+    element: &Element,
+    stride: usize,
+) -> Result<&'a [u8], Error> {
+    let needed = element.count.saturating_mul(stride as u64);
+    let available = bytes.len().saturating_sub(pos) as u64;
+    if needed > available {
+        return Err(Error::Truncated {
+            path: path.to_path_buf(),
+            element: element.name.clone(),
+            count: element.count,
+            needed,
+            available,
+        });
+    }
+    Ok(&bytes[pos..pos + needed as usize])
 }
 
 /// The zero-copy fast path: every record has the same size, so records decode independently in parallel.
