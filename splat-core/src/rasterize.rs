@@ -233,7 +233,8 @@ pub(crate) fn tile_major_index(x: usize, y: usize, tiles_x: u32) -> usize {
     tile * TILE_PIXELS + (y % ts) * ts + x % ts
 }
 
-/// Pixels processed together: half a tile row, so the per-lane loops vectorise.
+/// Pixels per inner loop: half a tile row, seen through fixed-size lane views (no per-lane
+/// bounds checks); the lane bodies are branch-free so they map one to one onto SIMD lanes.
 pub(crate) const LANES: usize = 8;
 
 /// Composites one tile front to back (Inria `renderCUDA`), splat by splat over the rows and
@@ -341,13 +342,13 @@ pub(crate) fn lanes_mut<T>(buf: &mut [T], base: usize) -> &mut [T; LANES] {
 }
 
 /// e^x for the Gaussian falloff: 2^(x·log₂e) with Cephes' `exp2f` polynomial (relative error
-/// below 6e-7 on [−10, 0], where alphas reach 1/255), written branch-free so the per-lane loops vectorise. Inputs below −87 give 0.
+/// below 6e-7 on [−10, 0], where alphas reach 1/255), written branch-free (no library calls) for the per-lane loops. Inputs below −87 give 0.
 /// The forward and backward passes both use it, so they see identical alphas.
 #[inline(always)]
 pub(crate) fn fast_exp(x: f32) -> f32 {
     let t = (x * std::f32::consts::LOG2_E).max(-126.0);
-    // Round to nearest by adding and removing 1.5·2²³ (plain SSE2 adds: `floor` would be a
-    // library call on the x86-64 baseline and stop the loop from vectorising).
+    // Round to nearest by adding and removing 1.5·2²³ (plain adds: `floor` is a library call
+    // on the x86-64 baseline).
     const ROUND: f32 = 12_582_912.0;
     let n = (t + ROUND) - ROUND;
     let f = t - n;
