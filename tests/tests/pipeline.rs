@@ -97,6 +97,19 @@ fn pipeline_on_a_small_plenoptic_cloud() {
     assert!(d.mean < 1e-3 && d.floater_share == 0.0, "{d:?}");
     assert_eq!(main.init.sh_degree, outcome.report.runs[1].init.sh_degree);
 
+    // `transcode eval`'s path: the training views read back from the dataset folder (PNG, masks,
+    // COLMAP cameras) score the model at least as well as the held-out views do.
+    let refs = transcode::eval::load_reference_views(&out.join("dataset")).unwrap();
+    assert_eq!(refs.len(), 16);
+    let opts = transcode::eval::EvalOptions::from(&cfg.eval);
+    let (train_metrics, _) = transcode::eval::evaluate(&splats, &refs, None, &opts);
+    assert!(
+        train_metrics.psnr_black > m.psnr_black - 1.0 && train_metrics.alpha_iou > 0.97,
+        "training views: {} dB, IoU {}",
+        train_metrics.psnr_black,
+        train_metrics.alpha_iou
+    );
+
     // Report: JSON with both runs, self-contained HTML with pictures and the plot.
     let json: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("report/report.json")).unwrap()).unwrap();

@@ -284,12 +284,15 @@ impl ShFit {
         for k in 1..n {
             normal[(k, k)] += ridge;
         }
-        // The normal matrix is symmetric positive definite (C0 > 0 on the diagonal, ridge on the
-        // rest, and the Fibonacci directions are not all on one SH nodal set).
-        let inv = normal
-            .cholesky()
-            .map(|c| c.inverse())
-            .unwrap_or_else(|| nalgebra::DMatrix::identity(n, n));
+        // The normal matrix is symmetric positive definite when the directions determine every
+        // coefficient (enough Fibonacci directions, or a ridge); otherwise the pseudo-inverse
+        // gives the minimum-norm least-squares fit.
+        let inv = match normal.clone().cholesky() {
+            Some(c) => c.inverse(),
+            None => normal
+                .pseudo_inverse(1e-12)
+                .unwrap_or_else(|_| nalgebra::DMatrix::zeros(n, n)),
+        };
         let solve_m = inv * b.transpose() / m as f64;
         let solve = (0..n)
             .flat_map(|k| (0..m).map(move |j| (k, j)))
