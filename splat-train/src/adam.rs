@@ -80,8 +80,10 @@ impl Moments {
             "Adam size mismatch"
         );
         let t = i32::try_from(step.max(1)).unwrap_or(i32::MAX);
-        let bc1 = 1.0 - f64::from(hp.beta1).powi(t);
-        let bc2_sqrt = (1.0 - f64::from(hp.beta2).powi(t)).sqrt();
+        // Bias corrections in f64 (β^t underflows gracefully), the per-value update in f32 as
+        // PyTorch does.
+        let inv_bc1 = (1.0 / (1.0 - f64::from(hp.beta1).powi(t))) as f32;
+        let inv_bc2_sqrt = (1.0 / (1.0 - f64::from(hp.beta2).powi(t)).sqrt()) as f32;
         let (b1, b2, eps) = (hp.beta1, hp.beta2, hp.eps);
         const CHUNK: usize = 8192;
         params
@@ -103,9 +105,7 @@ impl Moments {
                     m[i] = b1 * m[i] + (1.0 - b1) * g[i];
                     v[i] = b2 * v[i] + (1.0 - b2) * g[i] * g[i];
                     // PyTorch: p −= lr/bc1 · m / (√v/√bc2 + eps).
-                    let step_size = f64::from(rate) / bc1;
-                    let denom = f64::from(v[i].sqrt()) / bc2_sqrt + f64::from(eps);
-                    p[i] -= (step_size * f64::from(m[i]) / denom) as f32;
+                    p[i] -= rate * inv_bc1 * m[i] / (v[i].sqrt() * inv_bc2_sqrt + eps);
                 }
             });
     }
