@@ -438,12 +438,12 @@ fn summary(
     wall: Duration,
 ) {
     let per_s = if report.elapsed_s > 0.0 {
-        f64::from(report.timings.steps as u32) / report.elapsed_s
+        f64::from(report.iterations) / report.elapsed_s
     } else {
         0.0
     };
     println!(
-        "trained {} iterations in {:.1} s ({per_s:.1} it/s this session; {:.1} s wall), {} splats{}",
+        "trained {} iterations in {:.1} s ({per_s:.1} it/s; {:.1} s wall this session), {} splats{}",
         report.iterations,
         report.elapsed_s,
         wall.as_secs_f64(),
