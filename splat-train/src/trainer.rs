@@ -854,9 +854,17 @@ mod tests {
         let pose = Pose::look_at(DVec3::new(0.0, 0.0, -5.0), DVec3::ZERO, DVec3::Y);
         let image: Vec<f32> = (0..3 * 20).map(|i| i as f32).collect();
         let mask: Vec<f32> = (0..20).map(|i| i as f32).collect();
-        let v = View { name: "v".into(), camera: Camera::new(k, pose), image, mask: Some(mask) };
+        let v = View {
+            name: "v".into(),
+            camera: Camera::new(k, pose),
+            image,
+            mask: Some(mask),
+        };
         let d = downsample_view(&v, 2);
-        assert_eq!((d.camera.intrinsics.width, d.camera.intrinsics.height), (2, 2));
+        assert_eq!(
+            (d.camera.intrinsics.width, d.camera.intrinsics.height),
+            (2, 2)
+        );
         // Block (0,0) holds pixels 0, 1, 5, 6; block (1,1) pixels 12, 13, 17, 18.
         assert_eq!(d.mask.as_ref().unwrap(), &vec![3.0, 5.0, 13.0, 15.0]);
         assert_eq!(d.image[0], (0.0 + 3.0 + 15.0 + 18.0) / 4.0);
