@@ -173,6 +173,7 @@ impl Rasterizer {
         let bins = &self.bins;
         let proj = &self.proj;
         let (w, h) = (cam.width, cam.height);
+        let avx2 = has_avx2();
         self.px_t
             .par_chunks_mut(TILE_PIXELS)
             .zip(self.px_d.par_chunks_mut(TILE_PIXELS))
@@ -182,7 +183,7 @@ impl Rasterizer {
             .map(|(tile, (((t, d), rgb), last))| {
                 let list = &bins.list[bins.offsets[tile]..bins.offsets[tile + 1]];
                 let ext = tile_extent(tile, tiles_x, w, h);
-                composite_tile(list, proj, ext, TileOut { t, d, rgb, last })
+                composite_tile(list, proj, ext, TileOut { t, d, rgb, last }, avx2)
             })
             .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1))
     }
@@ -234,13 +235,63 @@ pub(crate) fn tile_major_index(x: usize, y: usize, tiles_x: u32) -> usize {
 }
 
 /// Pixels per inner loop: half a tile row, seen through fixed-size lane views (no per-lane
-/// bounds checks); the lane bodies are branch-free so they map one to one onto SIMD lanes.
+/// bounds checks); the lane bodies are branch-free (masks, no early exits) so they map one to
+/// one onto SIMD lanes.
 pub(crate) const LANES: usize = 8;
+
+/// Whether the AVX2 instantiations of the tile loops can run on this CPU (detected at run time,
+/// so the binary still runs on any x86-64; always false elsewhere).
+#[inline]
+pub(crate) fn has_avx2() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx2")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// Composites one tile front to back: the AVX2 instantiation where the CPU has it, else the
+/// portable one. Both compute the same IEEE operations in the same order (no FMA contraction),
+/// so the images are bit-identical either way.
+fn composite_tile(
+    list: &[u32],
+    proj: &[Projected],
+    ext: (i32, i32, i32, i32),
+    o: TileOut<'_>,
+    avx2: bool,
+) -> (u64, u64) {
+    #[cfg(target_arch = "x86_64")]
+    if avx2 {
+        // SAFETY: `avx2` comes from `has_avx2()`, so the CPU supports the enabled features.
+        return unsafe { composite_tile_avx2(list, proj, ext, o) };
+    }
+    let _ = avx2;
+    composite_tile_impl::<false>(list, proj, ext, o)
+}
+
+/// [`composite_tile_impl`] compiled with AVX2 so LLVM turns each 8-lane half-row into one
+/// 256-bit vector op per step.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn composite_tile_avx2(
+    list: &[u32],
+    proj: &[Projected],
+    ext: (i32, i32, i32, i32),
+    o: TileOut<'_>,
+) -> (u64, u64) {
+    composite_tile_impl::<true>(list, proj, ext, o)
+}
 
 /// Composites one tile front to back (Inria `renderCUDA`), splat by splat over the rows and
 /// 8-pixel half-rows each can reach, stopping once every pixel's transmittance is spent.
-/// Returns the (pixel, splat) evaluations and contributions.
-fn composite_tile(
+/// With `FULL` every half-row runs all 8 lanes with the span as a mask (for SIMD); without, only
+/// the lanes of the span (cheaper for scalar code). Returns the (pixel, splat) evaluations and
+/// contributions.
+#[inline(always)]
+fn composite_tile_impl<const FULL: bool>(
     list: &[u32],
     proj: &[Projected],
     ext: (i32, i32, i32, i32),
@@ -277,8 +328,6 @@ fn composite_tile(
             };
             for half in (c0 / LANES)..=(c1 / LANES) {
                 let base = ly * ts + half * LANES;
-                // Only the lanes of the span: the loop stays scalar on the x86-64 baseline, so
-                // lanes outside it would be pure cost.
                 let (l0, l1) = (
                     c0.max(half * LANES) - half * LANES,
                     c1.min(half * LANES + LANES - 1) - half * LANES,
@@ -295,13 +344,15 @@ fn composite_tile(
                 let mut finished = 0;
                 let mut contributed = 0;
                 let xb = p.xy[0] - (x0 + (half * LANES) as i32) as f32;
-                for l in l0..=l1 {
+                let (lo, hi) = if FULL { (0, LANES) } else { (l0, l1 + 1) };
+                for l in lo..hi {
+                    let in_span = !FULL | ((l >= l0) & (l <= l1));
                     let dx = xb - l as f32;
                     let power = -0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy;
                     let alpha = (p.opacity * fast_exp(power)).min(MAX_ALPHA);
                     let ti = tl[l];
                     let next_t = ti * (1.0 - alpha);
-                    let valid = !donel[l] & (power <= 0.0) & (alpha >= MIN_ALPHA);
+                    let valid = in_span & !donel[l] & (power <= 0.0) & (alpha >= MIN_ALPHA);
                     let finish = valid & (next_t < MIN_TRANSMITTANCE);
                     let add = valid & !finish;
                     let w = if add { alpha * ti } else { 0.0 };
@@ -350,13 +401,22 @@ pub(crate) fn fast_exp(x: f32) -> f32 {
     // Round to nearest by adding and removing 1.5·2²³ (plain adds: `floor` is a library call
     // on the x86-64 baseline).
     const ROUND: f32 = 12_582_912.0;
-    let n = (t + ROUND) - ROUND;
+    let shifted = t + ROUND;
+    let n = shifted - ROUND;
     let f = t - n;
     let p = ((((1.535_336_2e-4 * f + 1.339_887_4e-3) * f + 9.618_437e-3) * f + 5.550_332_5e-2) * f
         + 2.402_265e-1)
         * f
         + 6.931_472e-1;
-    let scale = f32::from_bits(((n as i32 + 127) as u32) << 23);
+    // 2ⁿ from the bits of `shifted`, whose low mantissa bits hold n (two's complement): a
+    // saturating `n as i32` would not vectorise. Exact for the clamped range n ∈ [−126, 128).
+    let scale = f32::from_bits(
+        shifted
+            .to_bits()
+            .wrapping_sub(ROUND.to_bits())
+            .wrapping_add(127)
+            << 23,
+    );
     let r = (1.0 + p * f) * scale;
     if x < -87.0 { 0.0 } else { r }
 }

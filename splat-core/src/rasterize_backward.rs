@@ -13,7 +13,7 @@ use rayon::prelude::*;
 use crate::constants::{MAX_ALPHA, MIN_ALPHA};
 use crate::project::{ProjectedGrad, ViewConsts, project, project_backward};
 use crate::rasterize::{
-    DEPTH_MIN_ALPHA, LANES, fast_exp, lanes_mut, tile_extent, tile_major_index,
+    DEPTH_MIN_ALPHA, LANES, fast_exp, has_avx2, lanes_mut, tile_extent, tile_major_index,
 };
 use crate::tiles::{TILE_PIXELS, TILE_SIZE, quad_bound, row_range, row_span};
 use crate::{Rasterizer, RenderCamera, RenderOptions, SplatGrads, Splats};
@@ -96,12 +96,13 @@ impl Rasterizer {
         let slots = SharedSlots(self.pair_grads.as_mut_ptr());
         let n_tiles = (v.tiles_x * v.tiles_y) as usize;
         let this = &*self;
+        let avx2 = has_avx2();
         (0..n_tiles).into_par_iter().for_each(|tile| {
             let (s, e) = (this.bins.offsets[tile], this.bins.offsets[tile + 1]);
             // SAFETY: [s, e) is this tile's own range of `pair_grads` (see `SharedSlots`), in
             // bounds because offsets end at `pairs()`, the vector's length.
             let out = unsafe { std::slice::from_raw_parts_mut(slots.get().add(s), e - s) };
-            this.backward_tile(tile, &this.bins.list[s..e], cam, &pg, out);
+            this.backward_tile(tile, &this.bins.list[s..e], cam, &pg, out, avx2);
         });
 
         // Sum the pair records per splat in tile order (deterministic).
@@ -142,7 +143,45 @@ impl Rasterizer {
             });
     }
 
+    /// Walks one tile back to front: the AVX2 instantiation where the CPU has it, else the
+    /// portable one (the same IEEE operations in the same order, so bit-identical gradients).
     fn backward_tile(
+        &self,
+        tile: usize,
+        list: &[u32],
+        cam: &RenderCamera,
+        pg: &PixelGrads<'_>,
+        out: &mut [ProjectedGrad],
+        avx2: bool,
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        if avx2 {
+            // SAFETY: `avx2` comes from `has_avx2()`, so the CPU supports the enabled features.
+            return unsafe { self.backward_tile_avx2(tile, list, cam, pg, out) };
+        }
+        let _ = avx2;
+        self.backward_tile_impl::<false>(tile, list, cam, pg, out);
+    }
+
+    /// [`Self::backward_tile_impl`] compiled with AVX2 so LLVM vectorises the 8-lane half-rows.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn backward_tile_avx2(
+        &self,
+        tile: usize,
+        list: &[u32],
+        cam: &RenderCamera,
+        pg: &PixelGrads<'_>,
+        out: &mut [ProjectedGrad],
+    ) {
+        self.backward_tile_impl::<true>(tile, list, cam, pg, out);
+    }
+
+    /// The tile walk; with `FULL` every half-row runs all 8 lanes with the span as a mask (for
+    /// SIMD), without only the lanes of the span (cheaper for scalar code). Per-pixel state is
+    /// kept as one array per component so each lane view is a plain vector.
+    #[inline(always)]
+    fn backward_tile_impl<const FULL: bool>(
         &self,
         tile: usize,
         list: &[u32],
@@ -155,11 +194,11 @@ impl Rasterizer {
         let base = tile * TILE_PIXELS;
         // Per-pixel state: loss gradients, the background/alpha coefficient, running T and the
         // back-to-front accumulated colour and depth of the splats behind.
-        let mut g_rgb = [[0.0_f32; 3]; TILE_PIXELS];
+        let mut g_rgb = [[0.0_f32; TILE_PIXELS]; 3];
         let mut g_d = [0.0_f32; TILE_PIXELS];
         let mut k_bg = [0.0_f32; TILE_PIXELS];
         let mut t_cur = [0.0_f32; TILE_PIXELS];
-        let mut acc = [[0.0_f32; 4]; TILE_PIXELS];
+        let mut acc = [[0.0_f32; TILE_PIXELS]; 4];
         let mut last = [0_u32; TILE_PIXELS];
         let mut max_last = 0;
         for ly in 0..th as usize {
@@ -182,7 +221,9 @@ impl Rasterizer {
                     g_a -= dd[p] * self.px_d[k] / (a * a);
                 }
                 let bg_dot = g[0] * pg.bg.x + g[1] * pg.bg.y + g[2] * pg.bg.z;
-                g_rgb[idx] = g;
+                for ch in 0..3 {
+                    g_rgb[ch][idx] = g[ch];
+                }
                 g_d[idx] = gd;
                 // ∂C/∂αᵢ has −T_N·bg/(1 − αᵢ); ∂A/∂αᵢ = T_N/(1 − αᵢ).
                 k_bg[idx] = (g_a - bg_dot) * t_n;
@@ -194,6 +235,8 @@ impl Rasterizer {
         for slot in out.iter_mut().skip(max_last as usize) {
             *slot = ProjectedGrad::default();
         }
+        let [g_r, g_g, g_b] = &mut g_rgb;
+        let [acc_r, acc_g, acc_b, acc_d] = &mut acc;
         for kk in (0..max_last as usize).rev() {
             let p = &self.proj[list[kk] as usize];
             let [a, b, c] = p.conic;
@@ -213,29 +256,37 @@ impl Rasterizer {
                     };
                     for half in (c0 / LANES)..=(c1 / LANES) {
                         let base = ly * ts + half * LANES;
-                        let lastl: &mut [u32; LANES] = lanes_mut(&mut last, base);
+                        let lastl: &[u32; LANES] = lanes_mut(&mut last, base);
                         let tl: &mut [f32; LANES] = lanes_mut(&mut t_cur, base);
-                        let accl: &mut [[f32; 4]; LANES] = lanes_mut(&mut acc, base);
-                        let grl: &mut [[f32; 3]; LANES] = lanes_mut(&mut g_rgb, base);
-                        let gdl: &mut [f32; LANES] = lanes_mut(&mut g_d, base);
-                        let kl: &mut [f32; LANES] = lanes_mut(&mut k_bg, base);
+                        let arl: &mut [f32; LANES] = lanes_mut(acc_r, base);
+                        let agl: &mut [f32; LANES] = lanes_mut(acc_g, base);
+                        let abl: &mut [f32; LANES] = lanes_mut(acc_b, base);
+                        let adl: &mut [f32; LANES] = lanes_mut(acc_d, base);
+                        let grl: &[f32; LANES] = lanes_mut(g_r, base);
+                        let ggl: &[f32; LANES] = lanes_mut(g_g, base);
+                        let gbl: &[f32; LANES] = lanes_mut(g_b, base);
+                        let gdl: &[f32; LANES] = lanes_mut(&mut g_d, base);
+                        let kl: &[f32; LANES] = lanes_mut(&mut k_bg, base);
                         let xb = p.xy[0] - (x0 + (half * LANES) as i32) as f32;
                         let l0 = c0.max(half * LANES) - half * LANES;
                         let l1 = c1.min(half * LANES + LANES - 1) - half * LANES;
-                        for l in l0..=l1 {
+                        let (lo, hi) = if FULL { (0, LANES) } else { (l0, l1 + 1) };
+                        for l in lo..hi {
+                            let in_span = !FULL | ((l >= l0) & (l <= l1));
                             let dx = xb - l as f32;
                             let power = -0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy;
                             let gauss = fast_exp(power);
                             let raw = p.opacity * gauss;
                             let alpha = raw.min(MAX_ALPHA);
-                            let valid = (kk32 < lastl[l]) & (power <= 0.0) & (alpha >= MIN_ALPHA);
+                            let valid =
+                                in_span & (kk32 < lastl[l]) & (power <= 0.0) & (alpha >= MIN_ALPHA);
                             let one_m = 1.0 - alpha;
                             let inv = 1.0 / one_m;
                             let t_i = tl[l] * inv;
                             let w = alpha * t_i;
-                            let gr = grl[l];
+                            let gr = [grl[l], ggl[l], gbl[l]];
                             let gdp = gdl[l];
-                            let ac = accl[l];
+                            let ac = [arl[l], agl[l], abl[l], adl[l]];
                             let d_alpha = t_i
                                 * ((p.color[0] - ac[0]) * gr[0]
                                     + (p.color[1] - ac[1]) * gr[1]
@@ -247,13 +298,26 @@ impl Rasterizer {
                             s_col[1][l] += wv * gr[1];
                             s_col[2][l] += wv * gr[2];
                             s_dep[l] += wv * gdp;
-                            let next = [
-                                alpha * p.color[0] + one_m * ac[0],
-                                alpha * p.color[1] + one_m * ac[1],
-                                alpha * p.color[2] + one_m * ac[2],
-                                alpha * p.depth + one_m * ac[3],
-                            ];
-                            accl[l] = if valid { next } else { ac };
+                            arl[l] = if valid {
+                                alpha * p.color[0] + one_m * ac[0]
+                            } else {
+                                ac[0]
+                            };
+                            agl[l] = if valid {
+                                alpha * p.color[1] + one_m * ac[1]
+                            } else {
+                                ac[1]
+                            };
+                            abl[l] = if valid {
+                                alpha * p.color[2] + one_m * ac[2]
+                            } else {
+                                ac[2]
+                            };
+                            adl[l] = if valid {
+                                alpha * p.depth + one_m * ac[3]
+                            } else {
+                                ac[3]
+                            };
                             tl[l] = if valid { t_i } else { tl[l] };
                             // Where o·G is clamped at 0.99, alpha does not depend on o or G.
                             let da = if valid & (raw < MAX_ALPHA) {
