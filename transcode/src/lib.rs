@@ -5,10 +5,10 @@
 //! and defaults; the `transcode` binary is its command-line face.
 
 pub mod atomic;
-pub mod views;
-pub mod scene;
 pub mod config;
-pub mod init;
 pub mod eval;
-pub mod report;
+pub mod init;
 pub mod pipeline;
+pub mod report;
+pub mod scene;
+pub mod views;
