@@ -9,6 +9,7 @@ use crate::error::Error;
 
 /// Learning rates per parameter group.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct LearningRates {
     /// Initial position rate, multiplied by the scene extent (Inria `position_lr_init`).
     pub position_init: f32,
@@ -45,6 +46,7 @@ impl Default for LearningRates {
 
 /// Attribute groups held fixed during training: a frozen group is never written.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(default)]
 pub struct Frozen {
     /// Means.
     pub positions: bool,
@@ -60,6 +62,7 @@ pub struct Frozen {
 
 /// Inria's adaptive density control (`densify_and_prune`, `reset_opacity`).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct DensifyConfig {
     /// Densify every this many iterations (Inria `densification_interval`).
     pub interval: u32,

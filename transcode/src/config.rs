@@ -285,8 +285,12 @@ pub struct TrainingConfig {
     pub history_every: u32,
     /// Learning rates per parameter group.
     pub lr: splat_train::LearningRates,
-    /// Adaptive density control, used by sparse init (and surface init when asked).
+    /// Adaptive density control, used by sparse init (and surface init when asked). The schedule
+    /// (`start`, `interval`, `stop`, `opacity_reset_interval`) is Inria's, meant for 30,000 steps.
     pub densify: splat_train::DensifyConfig,
+    /// Scale the densification schedule to the run's step budget (`pipeline::scale_densify`);
+    /// `false` uses `densify` as written.
+    pub scale_densify: bool,
 }
 
 impl Default for TrainingConfig {
@@ -303,6 +307,7 @@ impl Default for TrainingConfig {
             history_every: 25,
             lr: t.lr,
             densify: t.densify.unwrap_or_default(),
+            scale_densify: true,
         }
     }
 }
@@ -520,6 +525,33 @@ mod tests {
         assert_eq!(c.rig.width, RigConfig::default().width);
         assert_eq!(c.init.sh_degree, ShDegree::Fixed(2));
         assert_eq!(c.init.mode, InitMode::Sparse);
+    }
+
+    #[test]
+    fn partial_trainer_tables_keep_the_trainers_defaults() {
+        // `[training.lr]` and `[training.densify]` are splat-train's own structures: a table
+        // naming one field must keep Inria's defaults for the others.
+        let c = Config::from_toml(
+            "[training.lr]\nopacity = 0.02\n[training.densify]\nstart = 50\ninterval = 25\n",
+        )
+        .unwrap();
+        let lr = splat_train::LearningRates::default();
+        assert_eq!(c.training.lr.opacity, 0.02);
+        assert_eq!(c.training.lr.position_init, lr.position_init);
+        assert_eq!(c.training.lr.sh_dc, lr.sh_dc);
+        assert_eq!(c.training.lr.scale, lr.scale);
+        let d = splat_train::DensifyConfig::default();
+        assert_eq!(
+            (c.training.densify.start, c.training.densify.interval),
+            (50, 25)
+        );
+        assert_eq!(c.training.densify.stop, d.stop);
+        assert_eq!(c.training.densify.grad_threshold, d.grad_threshold);
+        assert_eq!(
+            c.training.densify.opacity_reset_interval,
+            d.opacity_reset_interval
+        );
+        c.validate().unwrap();
     }
 
     #[test]
