@@ -22,9 +22,10 @@ pub struct Args {
     /// Number of surface samples (samples sharing a voxel are merged).
     #[arg(long, default_value_t = SynthConfig::default().points)]
     pub points: usize,
-    /// Voxel grid width spanned by the mesh's longest side.
-    #[arg(long, default_value_t = SynthConfig::default().grid)]
-    pub grid: u32,
+    /// Voxel grid width spanned by the mesh's longest side, or `auto`: chosen from the mesh's
+    /// area and `--points` so the voxelised surface is watertight at one-voxel cubes.
+    #[arg(long, default_value = "auto", value_parser = parse_grid)]
+    pub grid: Option<u32>,
     /// Specular weight of the shading model.
     #[arg(long, default_value_t = SynthConfig::default().specular)]
     pub specular: f32,
@@ -70,7 +71,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.out.display(),
         cloud.len(),
         cloud.num_cameras,
-        args.grid
+        cloud.width.map_or(0, |w| w + 1)
     );
     Ok(())
+}
+
+/// `auto` or a grid width.
+fn parse_grid(s: &str) -> Result<Option<u32>, String> {
+    if s.eq_ignore_ascii_case("auto") {
+        return Ok(None);
+    }
+    s.parse::<u32>()
+        .map(Some)
+        .map_err(|e| format!("expected `auto` or a grid width, got {s:?}: {e}"))
 }

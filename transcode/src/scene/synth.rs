@@ -20,8 +20,9 @@ pub struct SynthConfig {
     pub points: usize,
     /// Number of capture cameras (on two rings).
     pub cameras: usize,
-    /// Voxel grid width: the mesh's longest side spans `grid − 1` voxels.
-    pub grid: u32,
+    /// Voxel grid width: the mesh's longest side spans `grid − 1` voxels; `None` (the default)
+    /// chooses it from the mesh's area and `points` ([`auto_grid`]) so the surface is watertight.
+    pub grid: Option<u32>,
     /// Capture-camera distance from the mesh centre, in bounding-sphere radii.
     pub camera_distance: f64,
     /// Specular weight added to every surface.
@@ -39,9 +40,9 @@ pub struct SynthConfig {
 impl Default for SynthConfig {
     fn default() -> Self {
         Self {
-            points: 100_000,
+            points: 300_000,
             cameras: 13,
-            grid: 1024,
+            grid: None,
             camera_distance: 3.0,
             specular: 0.5,
             shininess: 40.0,
@@ -64,8 +65,10 @@ impl SynthConfig {
         if !(1..=64).contains(&self.cameras) {
             return bad(format!("cameras must be in 1..=64, got {}", self.cameras));
         }
-        if !(2..=65_536).contains(&self.grid) {
-            return bad(format!("grid must be in 2..=65536, got {}", self.grid));
+        if let Some(g) = self.grid
+            && !(2..=65_536).contains(&g)
+        {
+            return bad(format!("grid must be in 2..=65536, got {g}"));
         }
         if !(self.camera_distance > 1.0 && self.camera_distance.is_finite()) {
             return bad(format!(
@@ -131,7 +134,11 @@ pub fn synth_from_mesh(mesh: &Mesh, config: &SynthConfig) -> Result<PlenopticClo
             "the mesh's bounding box has extent {extent}"
         )));
     }
-    let scale = f64::from(config.grid - 1) / f64::from(extent);
+    let area: f64 = triangle_areas(mesh).iter().sum();
+    let grid = config
+        .grid
+        .unwrap_or_else(|| auto_grid(area, f64::from(extent), config.points));
+    let scale = f64::from(grid - 1) / f64::from(extent);
     let center = 0.5 * (lo + hi);
     let radius = 0.5 * (hi - lo).length();
 
@@ -220,7 +227,7 @@ pub fn synth_from_mesh(mesh: &Mesh, config: &SynthConfig) -> Result<PlenopticClo
         ),
         frame_to_world_scale: Some(1.0 / scale),
         frame_to_world_translation: Some(lo.as_dvec3()),
-        width: Some(config.grid - 1),
+        width: Some(grid - 1),
         ..Default::default()
     };
     let mut normals = Vec::with_capacity(acc.len());
@@ -267,20 +274,48 @@ fn sees(cam: &Camera, map: &ViewImage, p: Vec3, n: Vec3) -> bool {
     depth <= surface + slack
 }
 
-/// `count` points on the mesh, area-weighted, with interpolated normals and albedo.
-fn sample_surface(mesh: &Mesh, count: usize, seed: u64) -> Result<Vec<Sample>, Error> {
-    let areas: Vec<f64> = mesh
-        .triangles
+/// Mean number of surface samples per voxel face's worth of area (`voxel²`) chosen by
+/// [`auto_grid`]. Samples are area-uniform, so the count in a voxel the surface crosses with area
+/// a is Poisson with mean N·a/A: a voxel crossed by a full face stays empty with probability
+/// e^−12 ≈ 6·10⁻⁶, about one in a 100,000-voxel cloud, and a voxel crossed by less is covered in
+/// the views by its neighbours. (On a sphere, 5 samples a voxel² still rendered without holes and
+/// 3 did not; 12 leaves room for flat faces seen head-on, where an empty voxel is a hole.)
+pub const SAMPLES_PER_VOXEL: f64 = 12.0;
+
+/// The grid width for which `points` area-uniform samples of a surface of area `area` put about
+/// [`SAMPLES_PER_VOXEL`] samples on each voxel² of surface: voxel side v = √(k·area/points), the
+/// longest side `extent` spanning `extent / v` voxels. Rendered with the reference renderer's
+/// default one-voxel cubes, such a cloud has no holes inside its silhouette.
+#[must_use]
+pub fn auto_grid(area: f64, extent: f64, points: usize) -> u32 {
+    let voxel = (SAMPLES_PER_VOXEL * area / points.max(1) as f64).sqrt();
+    let cells = (extent / voxel).floor();
+    if cells.is_finite() {
+        (cells as u32).saturating_add(1).clamp(2, 65_536)
+    } else {
+        2
+    }
+}
+
+/// Area of every triangle (0 for degenerate or non-finite ones).
+fn triangle_areas(mesh: &Mesh) -> Vec<f64> {
+    mesh.triangles
         .iter()
         .map(|t| {
             let [a, b, c] = t.map(|v| mesh.positions[v as usize].as_dvec3());
-            0.5 * (b - a).cross(c - a).length()
+            let area = 0.5 * (b - a).cross(c - a).length();
+            if area.is_finite() { area } else { 0.0 }
         })
-        .collect();
+        .collect()
+}
+
+/// `count` points on the mesh, area-weighted, with interpolated normals and albedo.
+fn sample_surface(mesh: &Mesh, count: usize, seed: u64) -> Result<Vec<Sample>, Error> {
+    let areas = triangle_areas(mesh);
     let mut cdf = Vec::with_capacity(areas.len());
     let mut total = 0.0;
     for a in &areas {
-        total += if a.is_finite() { *a } else { 0.0 };
+        total += *a;
         cdf.push(total);
     }
     if !(total > 0.0 && total.is_finite()) {
@@ -391,6 +426,119 @@ mod tests {
             s.iter()
                 .filter(|p| p.position.x < 5.0)
                 .all(|p| p.position.x / 2.0 + p.position.y <= 1.0 + 1e-5)
+        );
+    }
+
+    /// A UV sphere of radius 1 with `rings` × 2·`rings` quads.
+    fn sphere(rings: u32) -> Mesh {
+        let segs = 2 * rings;
+        let mut positions = Vec::new();
+        for i in 0..=rings {
+            let theta = std::f32::consts::PI * i as f32 / rings as f32;
+            for j in 0..segs {
+                let phi = std::f32::consts::TAU * j as f32 / segs as f32;
+                positions.push(Vec3::new(
+                    theta.sin() * phi.cos(),
+                    theta.cos(),
+                    theta.sin() * phi.sin(),
+                ));
+            }
+        }
+        let at = |i: u32, j: u32| i * segs + j % segs;
+        let mut triangles = Vec::new();
+        for i in 0..rings {
+            for j in 0..segs {
+                triangles.push([at(i, j), at(i + 1, j), at(i + 1, j + 1)]);
+                triangles.push([at(i, j), at(i + 1, j + 1), at(i, j + 1)]);
+            }
+        }
+        Mesh {
+            positions,
+            triangles,
+            ..Default::default()
+        }
+    }
+
+    /// Pixels inside the mesh's silhouette, at least `margin` pixels from its edge, that the
+    /// cloud leaves uncovered at the renderer's default one-voxel cubes, over three views; and
+    /// the number of pixels checked.
+    fn count_holes(mesh: &Mesh, cloud: &PlenopticCloud, margin: i32) -> (usize, usize) {
+        let opts = ViewOptions::default();
+        assert_eq!(opts.point_size, 1.0);
+        let (mut holes, mut checked) = (0, 0);
+        for eye in [
+            DVec3::new(0.0, 0.3, 3.2),
+            DVec3::new(2.5, 1.5, -1.0),
+            DVec3::new(-1.0, -2.8, 1.0),
+        ] {
+            let cam = Camera::new(
+                Intrinsics::from_fov_y(160, 160, 45.0),
+                Pose::look_at(eye, DVec3::ZERO, WORLD_UP),
+            );
+            // The cloud is in voxel units: the same view from the eye in that frame.
+            let (s, t) = (
+                cloud.frame_to_world_scale.unwrap(),
+                cloud.frame_to_world_translation.unwrap(),
+            );
+            let voxel_cam = Camera::new(
+                cam.intrinsics,
+                Pose::look_at((eye - t) / s, -t / s, WORLD_UP),
+            );
+            let reference = views::render_mesh(mesh, &cam, &opts).unwrap();
+            let rendered = views::render_cloud(cloud, &voxel_cam, &opts).unwrap();
+            let inside = |x: i32, y: i32| {
+                (0..160).contains(&x)
+                    && (0..160).contains(&y)
+                    && reference.alpha_at(x as u32, y as u32) > 0.5
+            };
+            for y in 0..160 {
+                for x in 0..160 {
+                    let deep = (-margin..=margin)
+                        .all(|dy| (-margin..=margin).all(|dx| inside(x + dx, y + dy)));
+                    if deep {
+                        checked += 1;
+                        if rendered.alpha_at(x as u32, y as u32) < 0.5 {
+                            holes += 1;
+                        }
+                    }
+                }
+            }
+        }
+        (holes, checked)
+    }
+
+    #[test]
+    fn default_grid_is_watertight_at_one_voxel_cubes() {
+        // A radius-1 sphere (area 4π) with 60,000 samples: auto grid √(12·4π/60,000) ≈ 0.050
+        // voxel, 40 voxels across, ≈ 2.5 pixels a voxel in the views.
+        let mesh = sphere(24);
+        let config = SynthConfig {
+            points: 60_000,
+            visibility_resolution: 128,
+            ..SynthConfig::default()
+        };
+        let area: f64 = triangle_areas(&mesh).iter().sum();
+        let grid = auto_grid(area, 2.0, config.points);
+        assert!((38..=42).contains(&grid), "auto grid {grid}");
+        let cloud = synth_from_mesh(&mesh, &config).unwrap();
+        assert_eq!(cloud.width, Some(grid - 1));
+        // Voxel centres are up to half a voxel off the surface: skip a voxel's width of edge.
+        let (holes, checked) = count_holes(&mesh, &cloud, 3);
+        assert!(checked > 20_000, "{checked} pixels checked");
+        assert_eq!(holes, 0, "{holes} holes in {checked} pixels");
+        // The same samples on a grid four times finer leave most voxels empty: the check sees it.
+        let fine = synth_from_mesh(
+            &mesh,
+            &SynthConfig {
+                grid: Some(4 * grid),
+                ..config
+            },
+        )
+        .unwrap();
+        let (fine_holes, _) = count_holes(&mesh, &fine, 3);
+        assert!(
+            fine_holes > checked / 20,
+            "{fine_holes} holes on the fine grid"
         );
     }
 
