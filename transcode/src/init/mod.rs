@@ -768,6 +768,76 @@ mod tests {
     }
 
     #[test]
+    fn sparse_init_reads_colmap_points3d() {
+        let dir = std::path::PathBuf::from(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../shared/data/colmap/maupertuis/sparse/0"
+        ));
+        // Independent truth: the text file's own data lines (id x y z r g b error track…).
+        let text = std::fs::read_to_string(dir.join("points3D.txt")).unwrap();
+        let mut expected: Vec<([f32; 3], [f32; 3])> = text
+            .lines()
+            .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
+            .map(|l| {
+                let f: Vec<f32> = l
+                    .split_whitespace()
+                    .take(7)
+                    .map(|v| v.parse().unwrap())
+                    .collect();
+                (
+                    [f[1], f[2], f[3]],
+                    [f[4] / 255.0, f[5] / 255.0, f[6] / 255.0],
+                )
+            })
+            .collect();
+        assert_eq!(expected.len(), 1039);
+        let sp = SurfacePoints {
+            positions: grid(10),
+            colors: vec![[0.5; 3]; 100],
+            ..SurfacePoints::default()
+        };
+        let cfg = InitConfig {
+            mode: InitMode::Sparse,
+            points3d: Some(dir),
+            sh_degree: ShDegree::Fixed(0),
+            ..InitConfig::default()
+        };
+        let (s, summary) = initialise(&sp, &cfg, 10, 3).unwrap();
+        assert_eq!(summary.source, "colmap");
+        assert_eq!(s.len(), expected.len());
+        let mut got: Vec<([f32; 3], [f32; 3])> = (0..s.len())
+            .map(|i| {
+                (
+                    s.means[i].to_array(),
+                    splat_core::sh_dc_to_rgb(s.sh_of(i)[0]),
+                )
+            })
+            .collect();
+        let key = |a: &([f32; 3], [f32; 3])| (a.0[0], a.0[1], a.0[2]);
+        expected.sort_by(|a, b| key(a).partial_cmp(&key(b)).unwrap());
+        got.sort_by(|a, b| key(a).partial_cmp(&key(b)).unwrap());
+        for (g, e) in got.iter().zip(&expected) {
+            for k in 0..3 {
+                assert!((g.0[k] - e.0[k]).abs() < 1e-5, "{g:?} {e:?}");
+                assert!((g.1[k] - e.1[k]).abs() < 1e-5, "{g:?} {e:?}");
+            }
+        }
+        // Isotropic splats with Inria's initial opacity.
+        for i in 0..s.len() {
+            let sc = s.scale(i);
+            assert!((sc.x - sc.y).abs() < 1e-6 * sc.x && (sc.x - sc.z).abs() < 1e-6 * sc.x);
+            assert!((s.opacity(i) - cfg.sparse_opacity).abs() < 1e-5);
+        }
+        // A folder without a COLMAP model names the folder.
+        let missing = InitConfig {
+            points3d: Some(std::path::PathBuf::from("/nonexistent/sparse/0")),
+            ..cfg
+        };
+        let e = initialise(&sp, &missing, 10, 3).unwrap_err().to_string();
+        assert!(e.contains("/nonexistent/sparse/0"), "{e}");
+    }
+
+    #[test]
     fn sparse_random_init_fills_the_bounds() {
         let sp = SurfacePoints {
             positions: grid(10),
