@@ -314,6 +314,9 @@ fn composite_tile_impl<const FULL: bool>(
     let mut n_done = 0;
     let (mut evaluations, mut contributions) = (0_u64, 0_u64);
     for (k, &sid) in list.iter().enumerate() {
+        if let Some(&ahead) = list.get(k + PREFETCH_AHEAD) {
+            prefetch(proj, ahead as usize);
+        }
         let p = &proj[sid as usize];
         let [a, b, c] = p.conic;
         let q_max = quad_bound(p.opacity);
@@ -381,6 +384,29 @@ fn composite_tile_impl<const FULL: bool>(
         *px = [cr[i], cg[i], cb[i]];
     }
     (evaluations, contributions)
+}
+
+/// How many list entries ahead the tile loops prefetch the projected record: a tile's list is
+/// in depth order, so its records are scattered over the whole projection buffer (10 MB at 250 k
+/// splats, beyond the L2 cache) and each would otherwise be a cache miss.
+pub(crate) const PREFETCH_AHEAD: usize = 8;
+
+/// Hints the CPU to bring `proj[i]` into the cache (a no-op where there is no prefetch hint or
+/// `i` is out of range).
+#[inline(always)]
+pub(crate) fn prefetch(proj: &[Projected], i: usize) {
+    #[cfg(target_arch = "x86_64")]
+    if let Some(rec) = proj.get(i) {
+        // SAFETY: a prefetch never faults and the pointer is to a live element; SSE is part of
+        // the x86-64 baseline.
+        unsafe {
+            std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(
+                std::ptr::from_ref(rec).cast::<i8>(),
+            );
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = (proj, i);
 }
 
 /// The `LANES` elements of `buf` from `base` as a fixed-size array.

@@ -13,7 +13,8 @@ use rayon::prelude::*;
 use crate::constants::{MAX_ALPHA, MIN_ALPHA};
 use crate::project::{ProjectedGrad, ViewConsts, project, project_backward};
 use crate::rasterize::{
-    DEPTH_MIN_ALPHA, LANES, fast_exp, has_avx2, lanes_mut, tile_extent, tile_major_index,
+    DEPTH_MIN_ALPHA, LANES, PREFETCH_AHEAD, fast_exp, has_avx2, lanes_mut, prefetch, tile_extent,
+    tile_major_index,
 };
 use crate::tiles::{TILE_PIXELS, TILE_SIZE, quad_bound, row_range, row_span};
 use crate::{Rasterizer, RenderCamera, RenderOptions, SplatGrads, Splats};
@@ -238,6 +239,9 @@ impl Rasterizer {
         let [g_r, g_g, g_b] = &mut g_rgb;
         let [acc_r, acc_g, acc_b, acc_d] = &mut acc;
         for kk in (0..max_last as usize).rev() {
+            if let Some(ahead) = kk.checked_sub(PREFETCH_AHEAD) {
+                prefetch(&self.proj, list[ahead] as usize);
+            }
             let p = &self.proj[list[kk] as usize];
             let [a, b, c] = p.conic;
             let q_max = quad_bound(p.opacity);
