@@ -14,7 +14,7 @@ use glam::{DVec3, Vec3};
 use indicatif::{ProgressBar, ProgressStyle};
 use plenoptic_io::Model;
 use splat_core::Splats;
-use splat_train::{Background, TrainConfig, Trainer, View};
+use splat_train::{Background, DensifyConfig, TrainConfig, Trainer, View};
 
 use crate::config::{Config, InitMode};
 use crate::eval::{EvalOptions, Metrics, ReferenceView, RenderedView, evaluate};
@@ -186,6 +186,86 @@ pub fn train_config(cfg: &Config, mode: InitMode, sh_degree: u32) -> TrainConfig
     // Surface splats sit on the input's points: keep them there unless asked (or densifying).
     tc.frozen.positions = surface && !cfg.init.free_positions && tc.densify.is_none();
     tc
+}
+
+/// Length of the run Inria's densification schedule is written for (`iterations` = 30,000).
+const INRIA_ITERATIONS: f64 = 30_000.0;
+
+/// Fewest steps between two densifications: the statistic that selects splats is a splat's
+/// view-space gradient averaged over the steps since the last densification, and with one view
+/// per step fewer than about ten views make it noise.
+const MIN_DENSIFY_INTERVAL: u32 = 10;
+
+/// Inria's densification schedule, written for 30,000 steps, scaled to a run of `steps` steps.
+///
+/// `start`, `interval`, `stop` and `opacity_reset_interval` are multiplied by `steps / 30,000`
+/// (so 30,000 steps keep Inria's 500 / 100 / 15,000 / 3,000). Floors keep the result meaningful
+/// for short runs: the interval is at least [`MIN_DENSIFY_INTERVAL`], `start` at least one
+/// interval, `stop` after the first densification (which comes one interval after `start`), and
+/// opacity resets are at least the steps Adam needs to bring a reset
+/// opacity back: a reset sets opacity 0.01 (logit −4.6) and Adam moves a parameter by about its
+/// learning rate per step, so climbing back to 0.5 takes 4.6 / `opacity_lr` steps (92 at Inria's
+/// 0.05). Resets happen only before `stop`, so a run shorter than about twice that floor
+/// densifies without them; the half of the run after `stop` leaves time to recover from the last.
+/// The gradient and opacity thresholds are not changed.
+#[must_use]
+pub fn scale_densify(d: &DensifyConfig, steps: u32, opacity_lr: f32) -> DensifyConfig {
+    let k = f64::from(steps) / INRIA_ITERATIONS;
+    let scale = |v: u32| (f64::from(v) * k).round() as u32;
+    let interval = scale(d.interval).max(MIN_DENSIFY_INTERVAL);
+    let start = scale(d.start).max(interval);
+    // Inria's reset clamps opacity to 0.01; climbing from its logit back to 0 (opacity 0.5).
+    let reset_logit = (0.99f64 / 0.01).ln();
+    let recovery = (reset_logit / f64::from(opacity_lr.max(1e-6))).ceil() as u32;
+    let reset = if d.opacity_reset_interval == 0 {
+        0
+    } else {
+        scale(d.opacity_reset_interval).max(recovery)
+    };
+    DensifyConfig {
+        interval,
+        start,
+        stop: scale(d.stop).max(start + interval + 1),
+        opacity_reset_interval: reset,
+        ..*d
+    }
+}
+
+/// Steps timed to estimate a time-budgeted run's length before its densification is scheduled.
+const PROBE_STEPS: u32 = 4;
+
+/// The number of steps a run will take: its iteration count, or, with a time budget, the steps
+/// that fit in the budget at the speed of [`PROBE_STEPS`] steps timed on a throw-away trainer
+/// (their time is taken from the budget). Returns the steps and the remaining budget.
+fn step_budget(
+    splats: &Splats,
+    views: &[View],
+    tc: &TrainConfig,
+) -> Result<(u32, Option<Duration>), PipelineError> {
+    let Some(budget) = tc.time_budget else {
+        return Ok((tc.iterations, None));
+    };
+    let probe_cfg = TrainConfig {
+        iterations: PROBE_STEPS,
+        densify: None,
+        time_budget: None,
+        ..tc.clone()
+    };
+    let t0 = Instant::now();
+    let mut probe = Trainer::new(splats.clone(), views.to_vec(), probe_cfg)?;
+    let setup = t0.elapsed();
+    let t1 = Instant::now();
+    probe.run(|_| {});
+    let per_step = t1.elapsed().as_secs_f64() / f64::from(PROBE_STEPS);
+    let spent = t0.elapsed();
+    let left = budget.saturating_sub(spent);
+    let fit = (left.saturating_sub(setup).as_secs_f64() / per_step.max(1e-9)).floor();
+    Ok((
+        tc.iterations
+            .min(fit.min(f64::from(u32::MAX)) as u32)
+            .max(1),
+        Some(left),
+    ))
 }
 
 /// What a finished run produced.
@@ -438,7 +518,13 @@ fn init_train_eval(
             .unwrap_or_default()
     ));
     let tc = train_config(cfg, mode, summary.sh_degree);
-    let (trained, train_report) = train(splats, train_views.to_vec(), tc, quiet)?;
+    let (trained, train_report) = train(
+        splats,
+        train_views.to_vec(),
+        tc,
+        cfg.training.scale_densify,
+        quiet,
+    )?;
     lap("train", &mut timings);
 
     say(format!(
@@ -491,9 +577,24 @@ fn init_train_eval(
 fn train(
     splats: Splats,
     views: Vec<View>,
-    tc: TrainConfig,
+    mut tc: TrainConfig,
+    scale_schedule: bool,
     quiet: bool,
 ) -> Result<(Splats, splat_train::TrainReport), PipelineError> {
+    if scale_schedule && let Some(d) = tc.densify {
+        let (steps, left) = step_budget(&splats, &views, &tc)?;
+        let scaled = scale_densify(&d, steps, tc.lr.opacity);
+        if !quiet {
+            eprintln!(
+                "      densification scaled to ~{steps} steps: from step {} every {} until {}, opacity reset every {}",
+                scaled.start, scaled.interval, scaled.stop, scaled.opacity_reset_interval
+            );
+        }
+        tc.densify = Some(scaled);
+        if left.is_some() {
+            tc.time_budget = left;
+        }
+    }
     let total = u64::from(tc.iterations);
     let mut trainer = Trainer::new(splats, views, tc)?;
     let bar = progress_bar(total, quiet, "steps");
@@ -572,5 +673,47 @@ pub fn input_info(path: &Path, model: &Model) -> InputInfo {
             capture_cameras: m.num_cameras,
             bytes,
         },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn densify_schedule_scales_to_the_step_budget() {
+        let inria = DensifyConfig::default();
+        // 30,000 steps keep Inria's schedule.
+        assert_eq!(scale_densify(&inria, 30_000, 0.05), inria);
+        // 3,000 steps: a tenth of every step count.
+        let d = scale_densify(&inria, 3_000, 0.05);
+        assert_eq!(
+            (d.start, d.interval, d.stop, d.opacity_reset_interval),
+            (50, 10, 1_500, 300)
+        );
+        assert_eq!(d.grad_threshold, inria.grad_threshold);
+        // 300 steps: the interval floor (10), start one interval in, stop at half the run, and
+        // resets no more often than Adam needs to restore a reset opacity: ⌈4.6 / 0.05⌉ = 92.
+        let d = scale_densify(&inria, 300, 0.05);
+        assert_eq!(
+            (d.start, d.interval, d.stop, d.opacity_reset_interval),
+            (10, 10, 150, 92)
+        );
+        // A short run still densifies once: the trainer densifies at multiples of the interval
+        // after `start` and before `stop`.
+        let d = scale_densify(&inria, 5, 0.05);
+        assert_eq!((d.start, d.interval, d.stop), (10, 10, 21));
+        assert_eq!(
+            (d.start + 1..d.stop)
+                .filter(|i| i % d.interval == 0)
+                .count(),
+            1
+        );
+        // Resets stay off when they were off.
+        let none = DensifyConfig {
+            opacity_reset_interval: 0,
+            ..inria
+        };
+        assert_eq!(scale_densify(&none, 300, 0.05).opacity_reset_interval, 0);
     }
 }
