@@ -46,6 +46,8 @@ pub struct Rasterizer {
     pub(crate) last_view: Option<(usize, u32, u32)>,
     pub(crate) pair_grads: Vec<ProjectedGrad>,
     pub(crate) splat_grads: Vec<ProjectedGrad>,
+    /// Run the portable tile loops even where AVX2 is available (tests compare the two).
+    pub(crate) portable_only: bool,
 }
 
 /// Per-pixel compositing state of one tile in the forward pass.
@@ -80,6 +82,11 @@ impl Rasterizer {
     #[must_use]
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// Whether this pass runs the AVX2 instantiations of the tile loops.
+    pub(crate) fn use_avx2(&self) -> bool {
+        !self.portable_only && has_avx2()
     }
 
     /// Returns the counts of the last forward pass.
@@ -173,7 +180,7 @@ impl Rasterizer {
         let bins = &self.bins;
         let proj = &self.proj;
         let (w, h) = (cam.width, cam.height);
-        let avx2 = has_avx2();
+        let avx2 = self.use_avx2();
         self.px_t
             .par_chunks_mut(TILE_PIXELS)
             .zip(self.px_d.par_chunks_mut(TILE_PIXELS))
@@ -265,7 +272,7 @@ fn composite_tile(
 ) -> (u64, u64) {
     #[cfg(target_arch = "x86_64")]
     if avx2 {
-        // SAFETY: `avx2` comes from `has_avx2()`, so the CPU supports the enabled features.
+        // SAFETY: `avx2` is only true when `has_avx2()` is, so the CPU supports the enabled features.
         return unsafe { composite_tile_avx2(list, proj, ext, o) };
     }
     let _ = avx2;
