@@ -342,15 +342,20 @@ fn composite_tile_impl<const FULL: bool>(
                     c0.max(half * LANES) - half * LANES,
                     c1.min(half * LANES + LANES - 1) - half * LANES,
                 );
-                evaluations += (l1 + 1 - l0) as u64;
                 // Fixed-size views: one bounds check per half-row, none per lane.
+                let donel: &mut [bool; LANES] = lanes_mut(&mut done, base);
+                // Half-rows whose pixels are all spent (behind the first surface, or splats
+                // whose tile has not finished elsewhere) would change nothing: skip them.
+                if donel.iter().all(|&x| x) {
+                    continue;
+                }
+                evaluations += (l1 + 1 - l0) as u64;
                 let tl: &mut [f32; LANES] = lanes_mut(&mut t, base);
                 let rl: &mut [f32; LANES] = lanes_mut(&mut cr, base);
                 let gl: &mut [f32; LANES] = lanes_mut(&mut cg, base);
                 let bl: &mut [f32; LANES] = lanes_mut(&mut cb, base);
                 let dl: &mut [f32; LANES] = lanes_mut(&mut d, base);
                 let ll: &mut [u32; LANES] = lanes_mut(&mut last, base);
-                let donel: &mut [bool; LANES] = lanes_mut(&mut done, base);
                 let mut finished = 0;
                 let mut contributed = 0;
                 let xb = p.xy[0] - (x0 + (half * LANES) as i32) as f32;

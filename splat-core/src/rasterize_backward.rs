@@ -261,6 +261,10 @@ impl Rasterizer {
                     for half in (c0 / LANES)..=(c1 / LANES) {
                         let base = ly * ts + half * LANES;
                         let lastl: &[u32; LANES] = lanes_mut(&mut last, base);
+                        // As in the forward pass: no pixel here composited splat `kk`.
+                        if lastl.iter().all(|&n| n <= kk32) {
+                            continue;
+                        }
                         let tl: &mut [f32; LANES] = lanes_mut(&mut t_cur, base);
                         let arl: &mut [f32; LANES] = lanes_mut(acc_r, base);
                         let agl: &mut [f32; LANES] = lanes_mut(acc_g, base);
