@@ -231,12 +231,13 @@ pub fn scale_densify(d: &DensifyConfig, steps: u32, opacity_lr: f32) -> DensifyC
     }
 }
 
-/// Steps timed to estimate a time-budgeted run's length before its densification is scheduled.
+/// Steps timed (after one untimed warm-up step) to estimate a time-budgeted run's length before
+/// its densification is scheduled.
 const PROBE_STEPS: u32 = 4;
 
 /// The number of steps a run will take: its iteration count, or, with a time budget, the steps
 /// that fit in the budget at the speed of [`PROBE_STEPS`] steps timed on a throw-away trainer
-/// (their time is taken from the budget). Returns the steps and the remaining budget.
+/// after a warm-up step (the probe's time is taken from the budget). Returns the steps and the remaining budget.
 fn step_budget(
     splats: &Splats,
     views: &[View],
@@ -246,7 +247,7 @@ fn step_budget(
         return Ok((tc.iterations, None));
     };
     let probe_cfg = TrainConfig {
-        iterations: PROBE_STEPS,
+        iterations: PROBE_STEPS + 1,
         densify: None,
         time_budget: None,
         ..tc.clone()
@@ -254,8 +255,10 @@ fn step_budget(
     let t0 = Instant::now();
     let mut probe = Trainer::new(splats.clone(), views.to_vec(), probe_cfg)?;
     let setup = t0.elapsed();
+    // The first step allocates the loss buffers and targets: time the ones after it.
+    probe.run_until(1, |_| {});
     let t1 = Instant::now();
-    probe.run(|_| {});
+    probe.run_until(PROBE_STEPS + 1, |_| {});
     let per_step = t1.elapsed().as_secs_f64() / f64::from(PROBE_STEPS);
     let spent = t0.elapsed();
     let left = budget.saturating_sub(spent);

@@ -24,8 +24,8 @@ pub struct Args {
     pub points: usize,
     /// Voxel grid width spanned by the mesh's longest side, or `auto`: chosen from the mesh's
     /// area and `--points` so the voxelised surface is watertight at one-voxel cubes.
-    #[arg(long, default_value = "auto", value_parser = parse_grid)]
-    pub grid: Option<u32>,
+    #[arg(long, default_value = "auto")]
+    pub grid: Grid,
     /// Specular weight of the shading model.
     #[arg(long, default_value_t = SynthConfig::default().specular)]
     pub specular: f32,
@@ -50,7 +50,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let config = SynthConfig {
         points: args.points,
         cameras: args.cameras,
-        grid: args.grid,
+        grid: args.grid.0,
         specular: args.specular,
         shininess: args.shininess,
         seed: args.seed,
@@ -76,12 +76,46 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// `auto` or a grid width.
-fn parse_grid(s: &str) -> Result<Option<u32>, String> {
-    if s.eq_ignore_ascii_case("auto") {
-        return Ok(None);
+/// `--grid`: `auto` or a grid width.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Grid(pub Option<u32>);
+
+impl std::str::FromStr for Grid {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        if s.eq_ignore_ascii_case("auto") {
+            return Ok(Self(None));
+        }
+        s.parse::<u32>()
+            .map(|g| Self(Some(g)))
+            .map_err(|e| format!("expected `auto` or a grid width, got {s:?}: {e}"))
     }
-    s.parse::<u32>()
-        .map(Some)
-        .map_err(|e| format!("expected `auto` or a grid width, got {s:?}: {e}"))
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+
+    use super::*;
+
+    #[derive(Debug, Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: Args,
+    }
+
+    #[test]
+    fn grid_flag_is_auto_by_default_or_a_width() {
+        let parse = |extra: &[&str]| {
+            let mut argv = vec!["synth", "--mesh", "m.obj", "--out", "o.ply"];
+            argv.extend_from_slice(extra);
+            Cli::try_parse_from(argv).map(|c| c.args.grid)
+        };
+        assert_eq!(parse(&[]).unwrap(), Grid(None));
+        assert_eq!(parse(&["--grid", "AUTO"]).unwrap(), Grid(None));
+        assert_eq!(parse(&["--grid", "256"]).unwrap(), Grid(Some(256)));
+        let e = parse(&["--grid", "fine"]).unwrap_err().to_string();
+        assert!(e.contains("fine"), "{e}");
+    }
 }
