@@ -119,6 +119,36 @@ fn pipeline_on_a_small_plenoptic_cloud() {
     assert!(html.matches("data:image/png;base64,").count() >= 2 * 5);
     assert!(html.contains("<svg") && html.contains("<polyline"));
     assert!(!html.contains("src=\"http"));
+
+    // Sparse init from a COLMAP points3D: the dataset's own sparse/0 (the input points with their
+    // colours), trained with the densification schedule scaled to the run's 120 steps.
+    let cloud = plenoptic_io::read_cloud(&input).unwrap();
+    let mut sparse_cfg = small_config();
+    sparse_cfg.init.mode = InitMode::Sparse;
+    sparse_cfg.init.points3d = Some(out.join("dataset/sparse/0"));
+    sparse_cfg.training.iterations = 120;
+    let sparse_out = tmp.path().join("sparse");
+    let run = transcode::pipeline::run(&input, &sparse_out, &sparse_cfg, true).unwrap();
+    let r = &run.report.runs[0];
+    assert_eq!(r.init.mode, InitMode::Sparse);
+    assert_eq!(r.init.source, "colmap");
+    assert_eq!(r.init.splats, cloud.len());
+    assert_eq!(r.iterations, 120);
+    eprintln!(
+        "sparse from points3D: PSNR {:.2}/{:.2} dB, IoU {:.4}, {} → {} splats",
+        r.metrics.psnr_black,
+        r.metrics.psnr_white,
+        r.metrics.alpha_iou,
+        r.init.splats,
+        r.metrics.splats
+    );
+    // Coloured points on the surface start far ahead of random ones.
+    assert!(r.metrics.psnr_black > 18.0, "PSNR {}", r.metrics.psnr_black);
+    assert!(
+        r.metrics.alpha_iou > 0.8,
+        "alpha IoU {}",
+        r.metrics.alpha_iou
+    );
 }
 
 #[test]
