@@ -80,7 +80,7 @@ fn pipeline_on_a_small_plenoptic_cloud() {
         outcome.report.runs[1].metrics.psnr_white
     );
     // Measured: surface 26.4 dB on black, 23.4 dB on white (the scene is dark, so soft silhouettes
-    // cost more against white), SSIM 0.91, IoU 0.986, holes 0.016; sparse 19.2 / 17.7 dB.
+    // cost more against white), SSIM 0.91, IoU 0.986, holes 0.016; sparse 19.9 / 18.5 dB.
     assert!(m.psnr_black > 24.0, "PSNR on black {}", m.psnr_black);
     assert!(m.psnr_white > 21.0, "PSNR on white {}", m.psnr_white);
     assert!(m.ssim_black > 0.88, "SSIM {}", m.ssim_black);
@@ -142,12 +142,20 @@ fn pipeline_on_a_small_plenoptic_cloud() {
         r.init.splats,
         r.metrics.splats
     );
-    // Coloured points on the surface start far ahead of random ones.
-    assert!(r.metrics.psnr_black > 18.0, "PSNR {}", r.metrics.psnr_black);
+    // Measured: 24.2 / 20.4 dB, IoU 0.967, 3,086 → 10,641 splats. Coloured points on the surface
+    // start far ahead of random ones, and the scaled schedule densifies within 120 steps (Inria's
+    // own starts at step 500).
+    assert!(r.metrics.psnr_black > 21.0, "PSNR {}", r.metrics.psnr_black);
     assert!(
-        r.metrics.alpha_iou > 0.8,
+        r.metrics.alpha_iou > 0.93,
         "alpha IoU {}",
         r.metrics.alpha_iou
+    );
+    assert!(
+        r.metrics.splats > 2 * r.init.splats,
+        "{} → {} splats",
+        r.init.splats,
+        r.metrics.splats
     );
 }
 
