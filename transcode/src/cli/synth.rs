@@ -5,7 +5,7 @@ use std::time::Duration;
 
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
-use transcode::scene::{SynthConfig, synth_from_mesh};
+use transcode::scene::{AUTO_GRID, SynthConfig, synth_from_mesh};
 
 /// Arguments of `transcode synth`.
 #[derive(Debug, clap::Args)]
@@ -50,7 +50,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let config = SynthConfig {
         points: args.points,
         cameras: args.cameras,
-        grid: args.grid.0,
+        grid: args.grid.0.unwrap_or(AUTO_GRID),
         specular: args.specular,
         shininess: args.shininess,
         seed: args.seed,

@@ -15,7 +15,7 @@ mod demo;
 mod synth;
 
 pub use demo::{DemoConfig, demo_scene};
-pub use synth::{SynthConfig, synth_from_mesh};
+pub use synth::{AUTO_GRID, SynthConfig, auto_grid, synth_from_mesh};
 
 use camera_model::Pose;
 use camera_model::rig::{Ring, WORLD_UP, rings};

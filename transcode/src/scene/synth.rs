@@ -20,9 +20,10 @@ pub struct SynthConfig {
     pub points: usize,
     /// Number of capture cameras (on two rings).
     pub cameras: usize,
-    /// Voxel grid width: the mesh's longest side spans `grid − 1` voxels; `None` (the default)
-    /// chooses it from the mesh's area and `points` ([`auto_grid`]) so the surface is watertight.
-    pub grid: Option<u32>,
+    /// Voxel grid width: the mesh's longest side spans `grid − 1` voxels; [`AUTO_GRID`] (0, the
+    /// default) chooses it from the mesh's area and `points` ([`auto_grid`]) so the surface is
+    /// watertight.
+    pub grid: u32,
     /// Capture-camera distance from the mesh centre, in bounding-sphere radii.
     pub camera_distance: f64,
     /// Specular weight added to every surface.
@@ -42,7 +43,7 @@ impl Default for SynthConfig {
         Self {
             points: 300_000,
             cameras: 13,
-            grid: None,
+            grid: AUTO_GRID,
             camera_distance: 3.0,
             specular: 0.5,
             shininess: 40.0,
@@ -65,10 +66,11 @@ impl SynthConfig {
         if !(1..=64).contains(&self.cameras) {
             return bad(format!("cameras must be in 1..=64, got {}", self.cameras));
         }
-        if let Some(g) = self.grid
-            && !(2..=65_536).contains(&g)
-        {
-            return bad(format!("grid must be in 2..=65536, got {g}"));
+        if self.grid != AUTO_GRID && !(2..=65_536).contains(&self.grid) {
+            return bad(format!(
+                "grid must be 0 (auto) or in 2..=65536, got {}",
+                self.grid
+            ));
         }
         if !(self.camera_distance > 1.0 && self.camera_distance.is_finite()) {
             return bad(format!(
@@ -135,9 +137,11 @@ pub fn synth_from_mesh(mesh: &Mesh, config: &SynthConfig) -> Result<PlenopticClo
         )));
     }
     let area: f64 = triangle_areas(mesh).iter().sum();
-    let grid = config
-        .grid
-        .unwrap_or_else(|| auto_grid(area, f64::from(extent), config.points));
+    let grid = if config.grid == AUTO_GRID {
+        auto_grid(area, f64::from(extent), config.points)
+    } else {
+        config.grid
+    };
     let scale = f64::from(grid - 1) / f64::from(extent);
     let center = 0.5 * (lo + hi);
     let radius = 0.5 * (hi - lo).length();
@@ -273,6 +277,9 @@ fn sees(cam: &Camera, map: &ViewImage, p: Vec3, n: Vec3) -> bool {
     let slack = 2.0 * footprint * (1.0 - cos * cos).sqrt() / cos + 1e-4 * depth;
     depth <= surface + slack
 }
+
+/// [`SynthConfig::grid`] value that asks for [`auto_grid`].
+pub const AUTO_GRID: u32 = 0;
 
 /// Mean number of surface samples per voxel face's worth of area (`voxel²`) chosen by
 /// [`auto_grid`]. Samples are area-uniform, so the count in a voxel the surface crosses with area
@@ -530,7 +537,7 @@ mod tests {
         let fine = synth_from_mesh(
             &mesh,
             &SynthConfig {
-                grid: Some(4 * grid),
+                grid: 4 * grid,
                 ..config
             },
         )
