@@ -49,16 +49,17 @@ impl RenderCamera {
 
 impl From<&camera_model::Camera> for RenderCamera {
     fn from(c: &camera_model::Camera) -> Self {
-        let k = &c.intrinsics;
+        // 3DGS rasterisers have no skew term; rendered rigs and COLMAP's pinhole models have none.
+        let f = c.to_f32();
         Self {
-            width: k.width,
-            height: k.height,
-            fx: k.fx as f32,
-            fy: k.fy as f32,
-            cx: k.cx as f32,
-            cy: k.cy as f32,
-            rotation: c.pose.rotation_matrix().as_mat3(),
-            translation: c.pose.translation.as_vec3(),
+            width: f.width,
+            height: f.height,
+            fx: f.fx,
+            fy: f.fy,
+            cx: f.cx,
+            cy: f.cy,
+            rotation: f.rotation,
+            translation: f.translation,
         }
     }
 }

@@ -30,8 +30,8 @@ pub use rig::{bounding_sphere, fibonacci_rig};
 
 use std::path::PathBuf;
 
-use camera_model::{Camera, Intrinsics};
-use glam::{Mat3, Vec3};
+use camera_model::{Camera, CameraF32, Intrinsics};
+use glam::Vec3;
 use plenoptic_io::Model;
 use rayon::prelude::*;
 
@@ -229,20 +229,12 @@ const MAX_SIDE: u32 = 32_768;
 /// z-buffer and 2.5 GiB of colour, alpha and depth.
 const MAX_PIXELS: u64 = 1 << 27;
 
-/// A camera in single precision, with the pixel-ray directions as linear functions of the pixel.
+/// A camera in single precision (camera-model's [`CameraF32`], reachable through `Deref`), with
+/// the pixel-ray directions as linear functions of the pixel.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct ViewCamera {
-    pub width: u32,
-    pub height: u32,
-    pub fx: f32,
-    pub fy: f32,
-    pub cx: f32,
-    pub cy: f32,
-    pub skew: f32,
-    /// World→camera rotation.
-    pub rotation: Mat3,
-    /// World→camera translation.
-    pub translation: Vec3,
+    /// The camera's intrinsics and world→camera pose in single precision.
+    cam: CameraF32,
     /// Camera centre in world coordinates.
     pub center: Vec3,
     /// World direction (camera z = 1) of the ray through pixel position (u, v) is
@@ -250,6 +242,14 @@ pub(crate) struct ViewCamera {
     pub ray_base: Vec3,
     pub ray_du: Vec3,
     pub ray_dv: Vec3,
+}
+
+impl std::ops::Deref for ViewCamera {
+    type Target = CameraF32;
+
+    fn deref(&self) -> &CameraF32 {
+        &self.cam
+    }
 }
 
 impl ViewCamera {
@@ -287,15 +287,7 @@ impl ViewCamera {
         let dv = rt * glam::DVec3::new(-k.skew / (k.fx * k.fy), 1.0 / k.fy, 0.0);
         let base = rt * glam::DVec3::new((-k.cx + k.skew * k.cy / k.fy) / k.fx, -k.cy / k.fy, 1.0);
         Ok(Self {
-            width: k.width,
-            height: k.height,
-            fx: k.fx as f32,
-            fy: k.fy as f32,
-            cx: k.cx as f32,
-            cy: k.cy as f32,
-            skew: k.skew as f32,
-            rotation: r.as_mat3(),
-            translation: camera.pose.translation.as_vec3(),
+            cam: camera.to_f32(),
             center: center.as_vec3(),
             ray_base: base.as_vec3(),
             ray_du: du.as_vec3(),
