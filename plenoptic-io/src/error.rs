@@ -149,6 +149,17 @@ impl Error {
             error,
         }
     }
+
+    /// Refuses a path that is not an existing regular file, before a reader library sees it.
+    pub(crate) fn require_file(path: &std::path::Path) -> Result<(), Self> {
+        if path.is_file() {
+            return Ok(());
+        }
+        Err(Self::io(
+            path,
+            std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"),
+        ))
+    }
 }
 
 /// Reports the first non-finite position (in parallel) as [`Error::NonFinite`].

@@ -15,12 +15,7 @@ pub(crate) fn read_gltf(path: &Path) -> Result<Mesh, Error> {
         path: path.to_path_buf(),
         message,
     };
-    if !path.is_file() {
-        return Err(Error::io(
-            path,
-            std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"),
-        ));
-    }
+    Error::require_file(path)?;
     if let Some(version) = asset_version(path).filter(|v| !v.starts_with("2.")) {
         return Err(err(format!(
             "glTF version {version} is not supported (glTF 2.0 only)"

@@ -14,12 +14,7 @@ pub(crate) fn read_obj(path: &Path) -> Result<Mesh, Error> {
         path: path.to_path_buf(),
         message,
     };
-    if !path.is_file() {
-        return Err(Error::io(
-            path,
-            std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"),
-        ));
-    }
+    Error::require_file(path)?;
     let (models, materials) =
         tobj::load_obj(path, &tobj::GPU_LOAD_OPTIONS).map_err(|e| err(e.to_string()))?;
     let obj_materials = match materials {
