@@ -5,6 +5,7 @@
 use glam::{Mat3, Quat, Vec2, Vec3};
 
 use crate::constants::{DILATION, EXTENT_SIGMAS, FOV_CLAMP_MARGIN, MIN_ALPHA, NEAR_PLANE};
+use crate::tiles::quad_bound;
 use crate::{RenderCamera, RenderOptions, Splats, num_sh_coeffs, sh, sigmoid};
 
 /// What the compositor needs of a visible splat, packed for the per-tile loop.
@@ -20,6 +21,8 @@ pub(crate) struct Projected {
     pub color: [f32; 3],
     /// Camera-space depth.
     pub depth: f32,
+    /// Bound on the conic's quadratic form beyond which alpha < 1/255 ([`quad_bound`]).
+    pub q_max: f32,
 }
 
 /// Why a splat was not drawn.
@@ -238,6 +241,7 @@ pub(crate) fn project(splats: &Splats, i: usize, v: &ViewConsts) -> Result<Inter
             opacity,
             color: color.into(),
             depth: z,
+            q_max: quad_bound(opacity),
         },
         rect,
         radius: radius_f as u32,

@@ -5,7 +5,7 @@ use rayon::prelude::*;
 
 use crate::constants::{MAX_ALPHA, MIN_ALPHA, MIN_TRANSMITTANCE};
 use crate::project::{Cull, Projected, ProjectedGrad, ViewConsts, project};
-use crate::tiles::{Bins, TILE_PIXELS, TILE_SIZE, quad_bound, row_range, row_span};
+use crate::tiles::{Bins, HALF_ROWS, RowSpans, TILE_PIXELS, TILE_SIZE};
 use crate::{RenderCamera, RenderOptions, RenderOutput, Splats};
 
 /// Counts from the last forward pass.
@@ -312,80 +312,93 @@ fn composite_tile_impl<const FULL: bool>(
     let mut cb = [0.0_f32; TILE_PIXELS];
     let mut d = [0.0_f32; TILE_PIXELS];
     let mut last = [0_u32; TILE_PIXELS];
-    // Pixels outside the image start as done, so only real pixels are counted.
+    // Pixels outside the image start as done, so only real pixels are counted; a half-row
+    // whose 8 pixels are all done (T spent, or outside the image) is skipped by every later
+    // splat, through one bit each in `done_rows`.
     let mut done = [true; TILE_PIXELS];
     for ly in 0..th as usize {
         done[ly * ts..ly * ts + tw as usize].fill(false);
     }
-    let n_real = (tw * th) as usize;
-    let mut n_done = 0;
+    let mut done_count = [0_u32; HALF_ROWS];
+    let mut done_rows = 0_u32;
+    for (hr, n) in done_count.iter_mut().enumerate() {
+        *n = done[hr * LANES..(hr + 1) * LANES]
+            .iter()
+            .map(|&x| u32::from(x))
+            .sum();
+        if *n == LANES as u32 {
+            done_rows |= 1 << hr;
+        }
+    }
     let (mut evaluations, mut contributions) = (0_u64, 0_u64);
+    let opaque_one = std::hint::black_box(1.0_f32);
+    let opaque_zero = std::hint::black_box(0_u32);
     for (k, &sid) in list.iter().enumerate() {
         if let Some(&ahead) = list.get(k + PREFETCH_AHEAD) {
             prefetch(proj, ahead as usize);
         }
         let p = &proj[sid as usize];
         let [a, b, c] = p.conic;
-        let q_max = quad_bound(p.opacity);
-        let Some((r0, r1)) = row_range(p, q_max, y0, th) else {
-            continue;
-        };
+        let spans = RowSpans::new(p, x0, y0, tw, th);
         let tag = k as u32 + 1;
-        for ly in r0..=r1 {
-            let dy = p.xy[1] - (y0 + ly as i32) as f32;
-            let Some((c0, c1)) = row_span(p, q_max, dy, x0, tw) else {
-                continue;
-            };
-            for half in (c0 / LANES)..=(c1 / LANES) {
-                let base = ly * ts + half * LANES;
-                let (l0, l1) = (
-                    c0.max(half * LANES) - half * LANES,
-                    c1.min(half * LANES + LANES - 1) - half * LANES,
-                );
-                // Fixed-size views: one bounds check per half-row, none per lane.
-                let donel: &mut [bool; LANES] = lanes_mut(&mut done, base);
-                // Half-rows whose pixels are all spent (behind the first surface, or splats
-                // whose tile has not finished elsewhere) would change nothing: skip them.
-                if donel.iter().all(|&x| x) {
-                    continue;
-                }
-                evaluations += (l1 + 1 - l0) as u64;
-                let tl: &mut [f32; LANES] = lanes_mut(&mut t, base);
-                let rl: &mut [f32; LANES] = lanes_mut(&mut cr, base);
-                let gl: &mut [f32; LANES] = lanes_mut(&mut cg, base);
-                let bl: &mut [f32; LANES] = lanes_mut(&mut cb, base);
-                let dl: &mut [f32; LANES] = lanes_mut(&mut d, base);
-                let ll: &mut [u32; LANES] = lanes_mut(&mut last, base);
-                let mut finished = 0;
-                let mut contributed = 0;
-                let xb = p.xy[0] - (x0 + (half * LANES) as i32) as f32;
-                let (lo, hi) = if FULL { (0, LANES) } else { (l0, l1 + 1) };
-                for l in lo..hi {
-                    let in_span = !FULL | ((l >= l0) & (l <= l1));
-                    let dx = xb - l as f32;
-                    let power = -0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy;
-                    let alpha = (p.opacity * fast_exp(power)).min(MAX_ALPHA);
-                    let ti = tl[l];
-                    let next_t = ti * (1.0 - alpha);
-                    let valid = in_span & !donel[l] & (power <= 0.0) & (alpha >= MIN_ALPHA);
-                    let finish = valid & (next_t < MIN_TRANSMITTANCE);
-                    let add = valid & !finish;
-                    let w = if add { alpha * ti } else { 0.0 };
-                    rl[l] += w * p.color[0];
-                    gl[l] += w * p.color[1];
-                    bl[l] += w * p.color[2];
-                    dl[l] += w * p.depth;
-                    tl[l] = if add { next_t } else { ti };
-                    ll[l] = if add { tag } else { ll[l] };
-                    donel[l] |= finish;
-                    finished += u32::from(finish);
-                    contributed += u32::from(add);
-                }
-                n_done += finished as usize;
-                contributions += u64::from(contributed);
+        let mut todo = spans.mask & !done_rows;
+        while todo != 0 {
+            let hr = todo.trailing_zeros() as usize;
+            todo &= todo - 1;
+            let ly = hr / 2;
+            let first = ((hr % 2) * LANES) as f32;
+            // The span in lane coordinates of this half-row.
+            let (lo, hi) = (spans.lo[ly] - first, spans.hi[ly] - first);
+            let (l0, l1) = (lo.max(0.0) as usize, hi.min((LANES - 1) as f32) as usize);
+            evaluations += (l1 + 1 - l0) as u64;
+            let dy = spans.dy[ly];
+            let base = hr * LANES;
+            // Fixed-size views: one bounds check per half-row, none per lane.
+            let donel: &mut [bool; LANES] = lanes_mut(&mut done, base);
+            let tl: &mut [f32; LANES] = lanes_mut(&mut t, base);
+            let rl: &mut [f32; LANES] = lanes_mut(&mut cr, base);
+            let gl: &mut [f32; LANES] = lanes_mut(&mut cg, base);
+            let bl: &mut [f32; LANES] = lanes_mut(&mut cb, base);
+            let dl: &mut [f32; LANES] = lanes_mut(&mut d, base);
+            let ll: &mut [u32; LANES] = lanes_mut(&mut last, base);
+            let mut finished = 0;
+            let mut contributed = 0;
+            let xb = p.xy[0] - (x0 as f32 + first);
+            let (from, to) = if FULL { (0, LANES) } else { (l0, l1 + 1) };
+            for l in from..to {
+                let lf = l as f32;
+                let in_span = !FULL | ((lf >= lo) & (lf <= hi));
+                let dx = xb - lf;
+                let power = -0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy;
+                let alpha = (p.opacity * fast_exp(power)).min(MAX_ALPHA);
+                let ti = tl[l];
+                let one_m = 1.0 - alpha;
+                let next_t = ti * one_m;
+                let valid = in_span & !donel[l] & (power <= 0.0) & (alpha >= MIN_ALPHA);
+                let finish = valid & (next_t < MIN_TRANSMITTANCE);
+                let add = valid & !finish;
+                let w = if add { alpha * ti } else { 0.0 };
+                rl[l] += w * p.color[0];
+                gl[l] += w * p.color[1];
+                bl[l] += w * p.color[2];
+                dl[l] += w * p.depth;
+                // Every lane is stored, written as arithmetic (T times a 1 the compiler cannot
+                // see, the larger tag: tags grow along the list) rather than `if add { new }
+                // else { old }`, which LLVM turns into masked stores (slow on AMD, and the next
+                // splat's loads cannot forward from them).
+                tl[l] = ti * if add { one_m } else { opaque_one };
+                ll[l] = ll[l].max(if add { tag } else { opaque_zero });
+                donel[l] |= finish;
+                finished += u32::from(finish);
+                contributed += u32::from(add);
+            }
+            contributions += u64::from(contributed);
+            done_count[hr] += finished;
+            if done_count[hr] == LANES as u32 {
+                done_rows |= 1 << hr;
             }
         }
-        if n_done == n_real {
+        if done_rows == u32::MAX {
             break;
         }
     }
@@ -430,8 +443,9 @@ pub(crate) fn lanes_mut<T>(buf: &mut [T], base: usize) -> &mut [T; LANES] {
     }
 }
 
-/// e^x for the Gaussian falloff: 2^(x·log₂e) with Cephes' `exp2f` polynomial (relative error
-/// below 6e-7 on [−10, 0], where alphas reach 1/255), written branch-free (no library calls) for the per-lane loops. Inputs below −87 give 0.
+/// e^x for the Gaussian falloff: 2^(x·log₂e) with a degree-5 polynomial for 2^f (relative
+/// error below 6e-7 on [−10, 0], where alphas reach 1/255), written branch-free (no library
+/// calls) for the per-lane loops. Inputs below −87 give 0.
 /// The forward and backward passes both use it, so they see identical alphas.
 #[inline(always)]
 pub(crate) fn fast_exp(x: f32) -> f32 {
@@ -442,10 +456,12 @@ pub(crate) fn fast_exp(x: f32) -> f32 {
     let shifted = t + ROUND;
     let n = shifted - ROUND;
     let f = t - n;
-    let p = ((((1.535_336_2e-4 * f + 1.339_887_4e-3) * f + 9.618_437e-3) * f + 5.550_332_5e-2) * f
-        + 2.402_265e-1)
-        * f
-        + 6.931_472e-1;
+    // 2^f on [−½, ½] as 1 + f·P(f), P of degree 4 fitted for least maximum relative error
+    // (1.9e-7 in f32 arithmetic, a term shorter than Cephes' degree-5 P at 1.2e-7). Its
+    // constant term is the fit's, not ln 2.
+    #[allow(clippy::approx_constant)]
+    let p = (((1.326_472_7e-3 * f + 9.671_513e-3) * f + 5.550_733_6e-2) * f + 2.402_224_2e-1) * f
+        + 6.931_47e-1;
     // 2ⁿ from the bits of `shifted`, whose low mantissa bits hold n (two's complement): a
     // saturating `n as i32` would not vectorise. Exact for the clamped range n ∈ [−126, 128).
     let scale = f32::from_bits(

@@ -16,7 +16,7 @@ use crate::rasterize::{
     DEPTH_MIN_ALPHA, LANES, PREFETCH_AHEAD, fast_exp, lanes_mut, prefetch, tile_extent,
     tile_major_index,
 };
-use crate::tiles::{TILE_PIXELS, TILE_SIZE, quad_bound, row_range, row_span};
+use crate::tiles::{HALF_ROWS, RowSpans, TILE_PIXELS, TILE_SIZE};
 use crate::{Rasterizer, RenderCamera, RenderOptions, SplatGrads, Splats};
 
 /// A pointer that may be shared across the tile tasks, each writing a disjoint range.
@@ -236,6 +236,17 @@ impl Rasterizer {
         for slot in out.iter_mut().skip(max_last as usize) {
             *slot = ProjectedGrad::default();
         }
+        // Half-row `hr` has a pixel that composited splat `kk` exactly when kk < its largest
+        // `last`; walking back to front, half-rows join the active set in decreasing order of
+        // that bound and never leave it.
+        let mut joins = [(0_u32, 0_u32); HALF_ROWS];
+        for (hr, j) in joins.iter_mut().enumerate() {
+            let lastl: &[u32; LANES] = lanes_mut(&mut last, hr * LANES);
+            *j = (lastl.iter().copied().max().unwrap_or(0), hr as u32);
+        }
+        joins.sort_unstable_by(|x, y| y.cmp(x));
+        let mut joined = 0;
+        let mut active = 0_u32;
         let [g_r, g_g, g_b] = &mut g_rgb;
         let [acc_r, acc_g, acc_b, acc_d] = &mut acc;
         for kk in (0..max_last as usize).rev() {
@@ -244,27 +255,30 @@ impl Rasterizer {
             }
             let p = &self.proj[list[kk] as usize];
             let [a, b, c] = p.conic;
-            let q_max = quad_bound(p.opacity);
             let kk32 = kk as u32;
+            while joined < HALF_ROWS && joins[joined].0 > kk32 {
+                active |= 1 << joins[joined].1;
+                joined += 1;
+            }
             // Per-lane partial sums, added up in a fixed order once the splat is done.
             let mut s_col = [[0.0_f32; LANES]; 3];
             let mut s_dep = [0.0_f32; LANES];
             let mut s_op = [0.0_f32; LANES];
             let mut s_xy = [[0.0_f32; LANES]; 2];
             let mut s_con = [[0.0_f32; LANES]; 3];
-            if let Some((r0, r1)) = row_range(p, q_max, y0, th) {
-                for ly in r0..=r1 {
-                    let dy = p.xy[1] - (y0 + ly as i32) as f32;
-                    let Some((c0, c1)) = row_span(p, q_max, dy, x0, tw) else {
-                        continue;
-                    };
-                    for half in (c0 / LANES)..=(c1 / LANES) {
-                        let base = ly * ts + half * LANES;
+            let spans = RowSpans::new(p, x0, y0, tw, th);
+            let mut todo = spans.mask & active;
+            while todo != 0 {
+                let hr = todo.trailing_zeros() as usize;
+                todo &= todo - 1;
+                let ly = hr / 2;
+                let first = ((hr % 2) * LANES) as f32;
+                let (lo, hi) = (spans.lo[ly] - first, spans.hi[ly] - first);
+                let dy = spans.dy[ly];
+                let base = hr * LANES;
+                {
+                    {
                         let lastl: &[u32; LANES] = lanes_mut(&mut last, base);
-                        // As in the forward pass: no pixel here composited splat `kk`.
-                        if lastl.iter().all(|&n| n <= kk32) {
-                            continue;
-                        }
                         let tl: &mut [f32; LANES] = lanes_mut(&mut t_cur, base);
                         let arl: &mut [f32; LANES] = lanes_mut(acc_r, base);
                         let agl: &mut [f32; LANES] = lanes_mut(acc_g, base);
@@ -275,13 +289,19 @@ impl Rasterizer {
                         let gbl: &[f32; LANES] = lanes_mut(g_b, base);
                         let gdl: &[f32; LANES] = lanes_mut(&mut g_d, base);
                         let kl: &[f32; LANES] = lanes_mut(&mut k_bg, base);
-                        let xb = p.xy[0] - (x0 + (half * LANES) as i32) as f32;
-                        let l0 = c0.max(half * LANES) - half * LANES;
-                        let l1 = c1.min(half * LANES + LANES - 1) - half * LANES;
-                        let (lo, hi) = if FULL { (0, LANES) } else { (l0, l1 + 1) };
-                        for l in lo..hi {
-                            let in_span = !FULL | ((l >= l0) & (l <= l1));
-                            let dx = xb - l as f32;
+                        let xb = p.xy[0] - (x0 as f32 + first);
+                        let (from, to) = if FULL {
+                            (0, LANES)
+                        } else {
+                            (
+                                lo.max(0.0) as usize,
+                                hi.min((LANES - 1) as f32) as usize + 1,
+                            )
+                        };
+                        for l in from..to {
+                            let lf = l as f32;
+                            let in_span = !FULL | ((lf >= lo) & (lf <= hi));
+                            let dx = xb - lf;
                             let power = -0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy;
                             let gauss = fast_exp(power);
                             let raw = p.opacity * gauss;
@@ -306,27 +326,16 @@ impl Rasterizer {
                             s_col[1][l] += wv * gr[1];
                             s_col[2][l] += wv * gr[2];
                             s_dep[l] += wv * gdp;
-                            arl[l] = if valid {
-                                alpha * p.color[0] + one_m * ac[0]
-                            } else {
-                                ac[0]
-                            };
-                            agl[l] = if valid {
-                                alpha * p.color[1] + one_m * ac[1]
-                            } else {
-                                ac[1]
-                            };
-                            abl[l] = if valid {
-                                alpha * p.color[2] + one_m * ac[2]
-                            } else {
-                                ac[2]
-                            };
-                            adl[l] = if valid {
-                                alpha * p.depth + one_m * ac[3]
-                            } else {
-                                ac[3]
-                            };
-                            tl[l] = if valid { t_i } else { tl[l] };
+                            // Stores of every lane, written as arithmetic (α of 0, T times 1)
+                            // rather than `if valid { new } else { old }`, which LLVM turns into
+                            // masked stores that the next splat's loads cannot forward from.
+                            let av = if valid { alpha } else { 0.0 };
+                            let keep = 1.0 - av;
+                            arl[l] = av * p.color[0] + keep * ac[0];
+                            agl[l] = av * p.color[1] + keep * ac[1];
+                            abl[l] = av * p.color[2] + keep * ac[2];
+                            adl[l] = av * p.depth + keep * ac[3];
+                            tl[l] *= if valid { inv } else { 1.0 };
                             // Where o·G is clamped at 0.99, alpha does not depend on o or G.
                             let da = if valid & (raw < MAX_ALPHA) {
                                 d_alpha
