@@ -14,6 +14,24 @@ pub const TILE_SIZE: u32 = 16;
 /// Pixels per tile.
 pub(crate) const TILE_PIXELS: usize = (TILE_SIZE * TILE_SIZE) as usize;
 
+/// Slices of the depth-sorted splats that bin in parallel (a constant, so the split does not
+/// depend on the thread count; the output would not either).
+const BIN_SLICES: usize = 16;
+
+/// The tile lists' buffer, written by the slices' tasks at disjoint positions.
+#[derive(Clone, Copy)]
+struct SharedList(*mut u32);
+// SAFETY: each task writes only its own (tile, slice) runs of the list (see `Bins::build`).
+unsafe impl Send for SharedList {}
+unsafe impl Sync for SharedList {}
+
+impl SharedList {
+    /// Returns the pointer (a method, so closures capture the whole `Sync` wrapper).
+    fn get(self) -> *mut u32 {
+        self.0
+    }
+}
+
 /// Reusable binning buffers.
 #[derive(Debug, Default)]
 pub(crate) struct Bins {
@@ -21,7 +39,8 @@ pub(crate) struct Bins {
     order: Vec<u64>,
     /// Start of each tile's list in `list`; `offsets[t + 1] − offsets[t]` is its length.
     pub offsets: Vec<usize>,
-    cursor: Vec<usize>,
+    /// Per (slice of `order`, tile): pair count, then the next write position.
+    slice_counts: Vec<usize>,
     /// Splat indices, tile-major, front to back within a tile.
     pub list: Vec<u32>,
 }
@@ -48,36 +67,65 @@ impl Bins {
         );
         self.order.par_sort_unstable();
 
+        // The counting sort runs in parallel over a fixed number of slices of `order`: each
+        // slice counts its pairs per tile, every (tile, slice) gets the next run of its tile's
+        // list, and each slice fills its runs in its own (depth) order. The result is the one
+        // stable order, whatever the thread count.
+        let slice_len = self.order.len().div_ceil(BIN_SLICES).max(1);
+        let n_slices = self.order.len().div_ceil(slice_len);
+        self.slice_counts.clear();
+        self.slice_counts.resize(n_slices * n_tiles, 0);
+        self.order
+            .par_chunks(slice_len)
+            .zip(self.slice_counts.par_chunks_mut(n_tiles))
+            .for_each(|(keys, counts)| {
+                for &key in keys {
+                    let [x0, x1, y0, y1] = rects[(key & 0xffff_ffff) as usize];
+                    for ty in y0..y1 {
+                        let row = (ty * tiles_x) as usize;
+                        for c in &mut counts[row + x0 as usize..row + x1 as usize] {
+                            *c += 1;
+                        }
+                    }
+                }
+            });
+        // Turn the counts into each (tile, slice) run's start, tile-major then slice order.
         self.offsets.clear();
         self.offsets.resize(n_tiles + 1, 0);
-        for &key in &self.order {
-            let [x0, x1, y0, y1] = rects[(key & 0xffff_ffff) as usize];
-            for ty in y0..y1 {
-                let row = (ty * tiles_x) as usize;
-                for tx in x0..x1 {
-                    self.offsets[row + tx as usize + 1] += 1;
-                }
-            }
-        }
+        let mut next = 0;
         for t in 0..n_tiles {
-            self.offsets[t + 1] += self.offsets[t];
-        }
-        self.cursor.clear();
-        self.cursor.extend_from_slice(&self.offsets[..n_tiles]);
-        self.list.clear();
-        self.list.resize(self.offsets[n_tiles], 0);
-        for &key in &self.order {
-            let i = (key & 0xffff_ffff) as u32;
-            let [x0, x1, y0, y1] = rects[i as usize];
-            for ty in y0..y1 {
-                let row = (ty * tiles_x) as usize;
-                for tx in x0..x1 {
-                    let c = &mut self.cursor[row + tx as usize];
-                    self.list[*c] = i;
-                    *c += 1;
-                }
+            self.offsets[t] = next;
+            for sl in 0..n_slices {
+                let c = &mut self.slice_counts[sl * n_tiles + t];
+                let n = *c;
+                *c = next;
+                next += n;
             }
         }
+        self.offsets[n_tiles] = next;
+        self.list.clear();
+        self.list.resize(next, 0);
+        let list = SharedList(self.list.as_mut_ptr());
+        self.order
+            .par_chunks(slice_len)
+            .zip(self.slice_counts.par_chunks_mut(n_tiles))
+            .for_each(|(keys, cursor)| {
+                for &key in keys {
+                    let i = (key & 0xffff_ffff) as u32;
+                    let [x0, x1, y0, y1] = rects[i as usize];
+                    for ty in y0..y1 {
+                        let row = (ty * tiles_x) as usize;
+                        for c in &mut cursor[row + x0 as usize..row + x1 as usize] {
+                            // SAFETY: slice `sl` writes only its own runs
+                            // [start(t, sl), start(t, sl) + count(t, sl)), which are disjoint
+                            // from every other (tile, slice) run and inside `list`, whose
+                            // length is the total count.
+                            unsafe { list.get().add(*c).write(i) };
+                            *c += 1;
+                        }
+                    }
+                }
+            });
     }
 
     /// Returns the number of (tile, splat) pairs.
