@@ -4,40 +4,18 @@
 //!
 //! Run: `cargo bench -p splat-core --bench rasterize`.
 
-use std::f32::consts::TAU;
 use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use glam::{Mat3, Vec3};
 use splat_core::{Rasterizer, RenderCamera, RenderOptions, SplatGrads, Splats};
 
-/// `n` splats on a torus (radii 1 and 0.4, with bumps), discs of about the local spacing,
-/// SH degree 3 with small view-dependent terms.
+#[path = "common/torus.rs"]
+mod torus;
+
+/// The shared torus scene with small view-dependent SH terms added.
 fn torus_scene(n: usize) -> Splats {
-    let (big, small) = (1.0_f32, 0.4_f32);
-    let area = TAU * big * TAU * small;
-    let spacing = (area / n as f32).sqrt();
-    let cols = ((TAU * big / spacing).round() as usize).max(1);
-    let mut pts = Vec::with_capacity(n);
-    let mut normals = Vec::with_capacity(n);
-    let mut colors = Vec::with_capacity(n);
-    let mut scales = Vec::with_capacity(n);
-    for i in 0..n {
-        let u = TAU * (i % cols) as f32 / cols as f32;
-        let v = TAU * ((i / cols) as f32 + 0.5 * (i % 2) as f32) / (n / cols).max(1) as f32;
-        let r = small * (1.0 + 0.1 * (5.0 * u).sin() * (3.0 * v).cos());
-        let nrm = Vec3::new(u.cos() * v.cos(), u.sin() * v.cos(), v.sin());
-        pts.push(Vec3::new(u.cos() * big, u.sin() * big, 0.0) + nrm * r);
-        normals.push(nrm);
-        colors.push([
-            0.5 + 0.4 * (3.0 * u).sin(),
-            0.5 + 0.4 * v.cos(),
-            0.5 + 0.3 * nrm.z,
-        ]);
-        scales.push(Vec3::new(spacing * 0.8, spacing * 0.8, spacing * 0.1));
-    }
-    let mut s = Splats::from_points(&pts, &colors, &scales, Some(&normals), 0.8, 3)
-        .expect("consistent inputs");
+    let mut s = torus::torus_scene(n);
     for (j, c) in s.sh.iter_mut().enumerate() {
         if j % 16 != 0 {
             let t = j as f32 * 0.618;

@@ -4,37 +4,17 @@
 //!
 //! Run: `cargo bench -p splat-train --bench train_step`.
 
-use std::f32::consts::TAU;
 use std::hint::black_box;
 
 use camera_model::{Camera, Intrinsics, Pose};
 use criterion::{Criterion, criterion_group, criterion_main};
-use glam::{DVec3, Vec3};
+use glam::DVec3;
 use splat_core::{Rasterizer, RenderCamera, RenderOptions, Splats};
 use splat_train::{TrainConfig, Trainer, View};
 
-/// `n` splats on a torus (radii 1 and 0.4, with bumps), as `splat-core`'s rasteriser bench.
-fn torus_scene(n: usize) -> Splats {
-    let (big, small) = (1.0_f32, 0.4_f32);
-    let spacing = (TAU * big * TAU * small / n as f32).sqrt();
-    let cols = ((TAU * big / spacing).round() as usize).max(1);
-    let (mut pts, mut normals, mut colors, mut scales) = (vec![], vec![], vec![], vec![]);
-    for i in 0..n {
-        let u = TAU * (i % cols) as f32 / cols as f32;
-        let v = TAU * ((i / cols) as f32 + 0.5 * (i % 2) as f32) / (n / cols).max(1) as f32;
-        let r = small * (1.0 + 0.1 * (5.0 * u).sin() * (3.0 * v).cos());
-        let nrm = Vec3::new(u.cos() * v.cos(), u.sin() * v.cos(), v.sin());
-        pts.push(Vec3::new(u.cos() * big, u.sin() * big, 0.0) + nrm * r);
-        normals.push(nrm);
-        colors.push([
-            0.5 + 0.4 * (3.0 * u).sin(),
-            0.5 + 0.4 * v.cos(),
-            0.5 + 0.3 * nrm.z,
-        ]);
-        scales.push(Vec3::new(spacing * 0.8, spacing * 0.8, spacing * 0.1));
-    }
-    Splats::from_points(&pts, &colors, &scales, Some(&normals), 0.8, 3).expect("consistent inputs")
-}
+#[path = "../../splat-core/benches/common/torus.rs"]
+mod torus;
+use torus::torus_scene;
 
 /// Four cameras 3.2 units from the origin above the torus plane, 50° field of view.
 fn views(model: &Splats, size: u32) -> Vec<View> {
