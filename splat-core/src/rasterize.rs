@@ -5,7 +5,7 @@ use rayon::prelude::*;
 
 use crate::constants::{MAX_ALPHA, MIN_ALPHA, MIN_TRANSMITTANCE};
 use crate::project::{Cull, Projected, ProjectedGrad, ViewConsts, project};
-use crate::tiles::{Bins, HALF_ROWS, RowSpans, TILE_PIXELS, TILE_SIZE};
+use crate::tiles::{Bins, Falloff, HALF_ROWS, RowSpans, TILE_PIXELS, TILE_SIZE};
 use crate::{RenderCamera, RenderOptions, RenderOutput, Splats};
 
 /// Counts from the last forward pass.
@@ -276,7 +276,7 @@ fn composite_tile(
         return unsafe { composite_tile_avx2(list, proj, ext, o) };
     }
     let _ = avx2;
-    composite_tile_impl::<false>(list, proj, ext, o)
+    composite_tile_impl(list, proj, ext, o)
 }
 
 /// [`composite_tile_impl`] compiled with AVX2 so LLVM turns each 8-lane half-row into one
@@ -289,16 +289,16 @@ fn composite_tile_avx2(
     ext: (i32, i32, i32, i32),
     o: TileOut<'_>,
 ) -> (u64, u64) {
-    composite_tile_impl::<true>(list, proj, ext, o)
+    composite_tile_impl(list, proj, ext, o)
 }
 
-/// Composites one tile front to back (Inria `renderCUDA`), splat by splat over the rows and
-/// 8-pixel half-rows each can reach, stopping once every pixel's transmittance is spent.
-/// With `FULL` every half-row runs all 8 lanes with the span as a mask (for SIMD); without, only
-/// the lanes of the span (cheaper for scalar code). Returns the (pixel, splat) evaluations and
-/// contributions.
+/// Composites one tile front to back (Inria `renderCUDA`), splat by splat over the 8-pixel
+/// half-rows each can reach (first the falloff of all of them, then the compositing), stopping
+/// once every pixel's transmittance is spent. Every half-row runs all 8 lanes with the span as
+/// a mask and no branches, so it maps onto one SIMD vector. Returns the (pixel, splat)
+/// evaluations and contributions.
 #[inline(always)]
-fn composite_tile_impl<const FULL: bool>(
+fn composite_tile_impl(
     list: &[u32],
     proj: &[Projected],
     ext: (i32, i32, i32, i32),
@@ -333,25 +333,17 @@ fn composite_tile_impl<const FULL: bool>(
     let (mut evaluations, mut contributions) = (0_u64, 0_u64);
     let opaque_one = std::hint::black_box(1.0_f32);
     let opaque_zero = std::hint::black_box(0_u32);
+    let mut falloff = Falloff::new();
     for (k, &sid) in list.iter().enumerate() {
         if let Some(&ahead) = list.get(k + PREFETCH_AHEAD) {
             prefetch(proj, ahead as usize);
         }
         let p = &proj[sid as usize];
-        let [a, b, c] = p.conic;
         let spans = RowSpans::new(p, x0, y0, tw, th);
         let tag = k as u32 + 1;
-        let mut todo = spans.mask & !done_rows;
-        while todo != 0 {
-            let hr = todo.trailing_zeros() as usize;
-            todo &= todo - 1;
-            let ly = hr / 2;
-            let first = ((hr % 2) * LANES) as f32;
-            // The span in lane coordinates of this half-row.
-            let (lo, hi) = (spans.lo[ly] - first, spans.hi[ly] - first);
-            let (l0, l1) = (lo.max(0.0) as usize, hi.min((LANES - 1) as f32) as usize);
-            evaluations += (l1 + 1 - l0) as u64;
-            let dy = spans.dy[ly];
+        evaluations += falloff.compute(p, &spans, spans.mask & !done_rows, x0);
+        for (&hr, g) in falloff.hr.iter().zip(&falloff.gauss).take(falloff.n) {
+            let hr = usize::from(hr);
             let base = hr * LANES;
             // Fixed-size views: one bounds check per half-row, none per lane.
             let donel: &mut [bool; LANES] = lanes_mut(&mut done, base);
@@ -363,18 +355,13 @@ fn composite_tile_impl<const FULL: bool>(
             let ll: &mut [u32; LANES] = lanes_mut(&mut last, base);
             let mut finished = 0;
             let mut contributed = 0;
-            let xb = p.xy[0] - (x0 as f32 + first);
-            let (from, to) = if FULL { (0, LANES) } else { (l0, l1 + 1) };
-            for l in from..to {
-                let lf = l as f32;
-                let in_span = !FULL | ((lf >= lo) & (lf <= hi));
-                let dx = xb - lf;
-                let power = -0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy;
-                let alpha = (p.opacity * fast_exp(power)).min(MAX_ALPHA);
+            for l in 0..LANES {
+                // G is 0 outside the span, so alpha fails the 1/255 test there.
+                let alpha = (p.opacity * g[l]).min(MAX_ALPHA);
                 let ti = tl[l];
                 let one_m = 1.0 - alpha;
                 let next_t = ti * one_m;
-                let valid = in_span & !donel[l] & (power <= 0.0) & (alpha >= MIN_ALPHA);
+                let valid = !donel[l] & (alpha >= MIN_ALPHA);
                 let finish = valid & (next_t < MIN_TRANSMITTANCE);
                 let add = valid & !finish;
                 let w = if add { alpha * ti } else { 0.0 };

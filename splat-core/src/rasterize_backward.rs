@@ -13,10 +13,9 @@ use rayon::prelude::*;
 use crate::constants::{MAX_ALPHA, MIN_ALPHA};
 use crate::project::{ProjectedGrad, ViewConsts, project, project_backward};
 use crate::rasterize::{
-    DEPTH_MIN_ALPHA, LANES, PREFETCH_AHEAD, fast_exp, lanes_mut, prefetch, tile_extent,
-    tile_major_index,
+    DEPTH_MIN_ALPHA, LANES, PREFETCH_AHEAD, lanes_mut, prefetch, tile_extent, tile_major_index,
 };
-use crate::tiles::{HALF_ROWS, RowSpans, TILE_PIXELS, TILE_SIZE};
+use crate::tiles::{Falloff, HALF_ROWS, RowSpans, TILE_PIXELS, TILE_SIZE};
 use crate::{Rasterizer, RenderCamera, RenderOptions, SplatGrads, Splats};
 
 /// A pointer that may be shared across the tile tasks, each writing a disjoint range.
@@ -161,7 +160,7 @@ impl Rasterizer {
             return unsafe { self.backward_tile_avx2(tile, list, cam, pg, out) };
         }
         let _ = avx2;
-        self.backward_tile_impl::<false>(tile, list, cam, pg, out);
+        self.backward_tile_impl(tile, list, cam, pg, out);
     }
 
     /// [`Self::backward_tile_impl`] compiled with AVX2 so LLVM vectorises the 8-lane half-rows.
@@ -175,14 +174,14 @@ impl Rasterizer {
         pg: &PixelGrads<'_>,
         out: &mut [ProjectedGrad],
     ) {
-        self.backward_tile_impl::<true>(tile, list, cam, pg, out);
+        self.backward_tile_impl(tile, list, cam, pg, out);
     }
 
-    /// The tile walk; with `FULL` every half-row runs all 8 lanes with the span as a mask (for
-    /// SIMD), without only the lanes of the span (cheaper for scalar code). Per-pixel state is
-    /// kept as one array per component so each lane view is a plain vector.
+    /// The tile walk: per splat, its falloff over the half-rows it reaches (see
+    /// `tiles::Falloff`), then the gradients, all 8 lanes of a half-row under the span as a mask.
+    /// Per-pixel state is kept as one array per component so each lane view is a plain vector.
     #[inline(always)]
-    fn backward_tile_impl<const FULL: bool>(
+    fn backward_tile_impl(
         &self,
         tile: usize,
         list: &[u32],
@@ -247,6 +246,7 @@ impl Rasterizer {
         joins.sort_unstable_by(|x, y| y.cmp(x));
         let mut joined = 0;
         let mut active = 0_u32;
+        let mut falloff = Falloff::new();
         let [g_r, g_g, g_b] = &mut g_rgb;
         let [acc_r, acc_g, acc_b, acc_d] = &mut acc;
         for kk in (0..max_last as usize).rev() {
@@ -267,90 +267,77 @@ impl Rasterizer {
             let mut s_xy = [[0.0_f32; LANES]; 2];
             let mut s_con = [[0.0_f32; LANES]; 3];
             let spans = RowSpans::new(p, x0, y0, tw, th);
-            let mut todo = spans.mask & active;
-            while todo != 0 {
-                let hr = todo.trailing_zeros() as usize;
-                todo &= todo - 1;
+            falloff.compute(p, &spans, spans.mask & active, x0);
+            if falloff.n == 0 {
+                out[kk] = ProjectedGrad::default();
+                continue;
+            }
+            for (&hr, gs) in falloff.hr.iter().zip(&falloff.gauss).take(falloff.n) {
+                let hr = usize::from(hr);
                 let ly = hr / 2;
                 let first = ((hr % 2) * LANES) as f32;
-                let (lo, hi) = (spans.lo[ly] - first, spans.hi[ly] - first);
                 let dy = spans.dy[ly];
+                let xb = p.xy[0] - (x0 as f32 + first);
                 let base = hr * LANES;
-                {
-                    {
-                        let lastl: &[u32; LANES] = lanes_mut(&mut last, base);
-                        let tl: &mut [f32; LANES] = lanes_mut(&mut t_cur, base);
-                        let arl: &mut [f32; LANES] = lanes_mut(acc_r, base);
-                        let agl: &mut [f32; LANES] = lanes_mut(acc_g, base);
-                        let abl: &mut [f32; LANES] = lanes_mut(acc_b, base);
-                        let adl: &mut [f32; LANES] = lanes_mut(acc_d, base);
-                        let grl: &[f32; LANES] = lanes_mut(g_r, base);
-                        let ggl: &[f32; LANES] = lanes_mut(g_g, base);
-                        let gbl: &[f32; LANES] = lanes_mut(g_b, base);
-                        let gdl: &[f32; LANES] = lanes_mut(&mut g_d, base);
-                        let kl: &[f32; LANES] = lanes_mut(&mut k_bg, base);
-                        let xb = p.xy[0] - (x0 as f32 + first);
-                        let (from, to) = if FULL {
-                            (0, LANES)
-                        } else {
-                            (
-                                lo.max(0.0) as usize,
-                                hi.min((LANES - 1) as f32) as usize + 1,
-                            )
-                        };
-                        for l in from..to {
-                            let lf = l as f32;
-                            let in_span = !FULL | ((lf >= lo) & (lf <= hi));
-                            let dx = xb - lf;
-                            let power = -0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy;
-                            let gauss = fast_exp(power);
-                            let raw = p.opacity * gauss;
-                            let alpha = raw.min(MAX_ALPHA);
-                            let valid =
-                                in_span & (kk32 < lastl[l]) & (power <= 0.0) & (alpha >= MIN_ALPHA);
-                            let one_m = 1.0 - alpha;
-                            let inv = 1.0 / one_m;
-                            let t_i = tl[l] * inv;
-                            let w = alpha * t_i;
-                            let gr = [grl[l], ggl[l], gbl[l]];
-                            let gdp = gdl[l];
-                            let ac = [arl[l], agl[l], abl[l], adl[l]];
-                            let d_alpha = t_i
-                                * ((p.color[0] - ac[0]) * gr[0]
-                                    + (p.color[1] - ac[1]) * gr[1]
-                                    + (p.color[2] - ac[2]) * gr[2]
-                                    + (p.depth - ac[3]) * gdp)
-                                + kl[l] * inv;
-                            let wv = if valid { w } else { 0.0 };
-                            s_col[0][l] += wv * gr[0];
-                            s_col[1][l] += wv * gr[1];
-                            s_col[2][l] += wv * gr[2];
-                            s_dep[l] += wv * gdp;
-                            // Stores of every lane, written as arithmetic (α of 0, T times 1)
-                            // rather than `if valid { new } else { old }`, which LLVM turns into
-                            // masked stores that the next splat's loads cannot forward from.
-                            let av = if valid { alpha } else { 0.0 };
-                            let keep = 1.0 - av;
-                            arl[l] = av * p.color[0] + keep * ac[0];
-                            agl[l] = av * p.color[1] + keep * ac[1];
-                            abl[l] = av * p.color[2] + keep * ac[2];
-                            adl[l] = av * p.depth + keep * ac[3];
-                            tl[l] *= if valid { inv } else { 1.0 };
-                            // Where o·G is clamped at 0.99, alpha does not depend on o or G.
-                            let da = if valid & (raw < MAX_ALPHA) {
-                                d_alpha
-                            } else {
-                                0.0
-                            };
-                            s_op[l] += gauss * da;
-                            let d_pow = raw * da;
-                            s_xy[0][l] -= d_pow * (a * dx + b * dy);
-                            s_xy[1][l] -= d_pow * (b * dx + c * dy);
-                            s_con[0][l] -= 0.5 * d_pow * dx * dx;
-                            s_con[1][l] -= d_pow * dx * dy;
-                            s_con[2][l] -= 0.5 * d_pow * dy * dy;
-                        }
-                    }
+                let lastl: &[u32; LANES] = lanes_mut(&mut last, base);
+                let tl: &mut [f32; LANES] = lanes_mut(&mut t_cur, base);
+                let arl: &mut [f32; LANES] = lanes_mut(acc_r, base);
+                let agl: &mut [f32; LANES] = lanes_mut(acc_g, base);
+                let abl: &mut [f32; LANES] = lanes_mut(acc_b, base);
+                let adl: &mut [f32; LANES] = lanes_mut(acc_d, base);
+                let grl: &[f32; LANES] = lanes_mut(g_r, base);
+                let ggl: &[f32; LANES] = lanes_mut(g_g, base);
+                let gbl: &[f32; LANES] = lanes_mut(g_b, base);
+                let gdl: &[f32; LANES] = lanes_mut(&mut g_d, base);
+                let kl: &[f32; LANES] = lanes_mut(&mut k_bg, base);
+                for l in 0..LANES {
+                    let dx = xb - l as f32;
+                    // G is 0 outside the span, so alpha fails the 1/255 test there.
+                    let gauss = gs[l];
+                    let raw = p.opacity * gauss;
+                    let alpha = raw.min(MAX_ALPHA);
+                    let valid = (kk32 < lastl[l]) & (alpha >= MIN_ALPHA);
+                    let one_m = 1.0 - alpha;
+                    let inv = 1.0 / one_m;
+                    let t_i = tl[l] * inv;
+                    let w = alpha * t_i;
+                    let gr = [grl[l], ggl[l], gbl[l]];
+                    let gdp = gdl[l];
+                    let ac = [arl[l], agl[l], abl[l], adl[l]];
+                    let d_alpha = t_i
+                        * ((p.color[0] - ac[0]) * gr[0]
+                            + (p.color[1] - ac[1]) * gr[1]
+                            + (p.color[2] - ac[2]) * gr[2]
+                            + (p.depth - ac[3]) * gdp)
+                        + kl[l] * inv;
+                    let wv = if valid { w } else { 0.0 };
+                    s_col[0][l] += wv * gr[0];
+                    s_col[1][l] += wv * gr[1];
+                    s_col[2][l] += wv * gr[2];
+                    s_dep[l] += wv * gdp;
+                    // Stores of every lane, written as arithmetic (α of 0, T times 1) rather
+                    // than `if valid { new } else { old }`, which LLVM turns into masked stores
+                    // that the next splat's loads cannot forward from.
+                    let av = if valid { alpha } else { 0.0 };
+                    let keep = 1.0 - av;
+                    arl[l] = av * p.color[0] + keep * ac[0];
+                    agl[l] = av * p.color[1] + keep * ac[1];
+                    abl[l] = av * p.color[2] + keep * ac[2];
+                    adl[l] = av * p.depth + keep * ac[3];
+                    tl[l] *= if valid { inv } else { 1.0 };
+                    // Where o·G is clamped at 0.99, alpha does not depend on o or G.
+                    let da = if valid & (raw < MAX_ALPHA) {
+                        d_alpha
+                    } else {
+                        0.0
+                    };
+                    s_op[l] += gauss * da;
+                    let d_pow = raw * da;
+                    s_xy[0][l] -= d_pow * (a * dx + b * dy);
+                    s_xy[1][l] -= d_pow * (b * dx + c * dy);
+                    s_con[0][l] -= 0.5 * d_pow * dx * dx;
+                    s_con[1][l] -= d_pow * dx * dy;
+                    s_con[2][l] -= 0.5 * d_pow * dy * dy;
                 }
             }
             let sum = |v: &[f32; LANES]| v.iter().sum::<f32>();

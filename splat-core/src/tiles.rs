@@ -8,6 +8,7 @@
 use rayon::prelude::*;
 
 use crate::project::Projected;
+use crate::rasterize::{LANES, fast_exp};
 
 /// Side of a square tile in pixels (Inria's `BLOCK_X = BLOCK_Y = 16`).
 pub const TILE_SIZE: u32 = 16;
@@ -195,6 +196,75 @@ impl RowSpans {
         }
         Self { lo, hi, dy, mask }
     }
+}
+
+/// A splat's Gaussian falloff over the half-rows of a tile it is to be drawn in, computed in a
+/// pass of its own before the compositing that uses it.
+///
+/// The falloff (quadratic form, exponential) is the long chain of dependent operations of each
+/// half-row; computed in the compositing loop, a half-row's instructions nearly filled the CPU's
+/// reorder window, so the core waited on one chain at a time. In a pass of their own the
+/// half-rows are short and independent and their chains overlap, and the compositing pass that
+/// follows has a short chain per half-row.
+pub(crate) struct Falloff {
+    /// The half-rows, ascending.
+    pub hr: [u8; HALF_ROWS],
+    /// G = e^power per lane of each half-row, or 0 outside the span or where power > 0 (so
+    /// o·G fails the alpha ≥ 1/255 test there).
+    pub gauss: [[f32; LANES]; HALF_ROWS],
+    /// Number of half-rows filled.
+    pub n: usize,
+}
+
+impl Falloff {
+    /// Returns an empty buffer.
+    pub fn new() -> Self {
+        Self {
+            hr: [0; HALF_ROWS],
+            gauss: [[0.0; LANES]; HALF_ROWS],
+            n: 0,
+        }
+    }
+
+    /// Fills the buffer with splat `p`'s falloff over the half-rows of `todo` (bits of
+    /// `spans.mask`) in the tile whose pixel origin has x = `x0`; returns the number of
+    /// (pixel, splat) pairs inside the spans.
+    #[inline(always)]
+    pub fn compute(&mut self, p: &Projected, spans: &RowSpans, mut todo: u32, x0: i32) -> u64 {
+        let [a, b, c] = p.conic;
+        let mut evaluations = 0;
+        self.n = 0;
+        while todo != 0 {
+            let hr = todo.trailing_zeros() as usize;
+            todo &= todo - 1;
+            let ly = hr / 2;
+            let first = ((hr % 2) * LANES) as f32;
+            // The span in lane coordinates of this half-row.
+            let (lo, hi) = (spans.lo[ly] - first, spans.hi[ly] - first);
+            evaluations += (hi.min((LANES - 1) as f32) - lo.max(0.0) + 1.0) as u64;
+            let dy = spans.dy[ly];
+            let xb = p.xy[0] - (x0 as f32 + first);
+            let g = &mut self.gauss[self.n];
+            for (l, g) in g.iter_mut().enumerate() {
+                let lf = l as f32;
+                let in_span = (lf >= lo) & (lf <= hi);
+                let dx = xb - lf;
+                let power = falloff_power(a, b, c, dx, dy);
+                let gauss = fast_exp(power);
+                *g = if in_span & (power <= 0.0) { gauss } else { 0.0 };
+            }
+            self.hr[self.n] = hr as u8;
+            self.n += 1;
+        }
+        evaluations
+    }
+}
+
+/// The exponent of the Gaussian at offset (dx, dy) = centre − pixel for the conic (a, b, c):
+/// −½(a·dx² + c·dy²) − b·dx·dy.
+#[inline(always)]
+pub(crate) fn falloff_power(a: f32, b: f32, c: f32, dx: f32, dy: f32) -> f32 {
+    -0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy
 }
 
 /// Pixels in a half-row, as a float.
