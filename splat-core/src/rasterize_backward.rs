@@ -193,12 +193,14 @@ impl Rasterizer {
         let ts = TILE_SIZE as usize;
         let base = tile * TILE_PIXELS;
         // Per-pixel state: loss gradients, the background/alpha coefficient, running T and the
-        // back-to-front accumulated colour and depth of the splats behind.
+        // back-to-front accumulated (colour, depth) of the splats behind, dotted with the
+        // pixel's loss gradient (∂L/∂α needs only that dot product, so one value per pixel
+        // stands for the four accumulators).
         let mut g_rgb = [[0.0_f32; TILE_PIXELS]; 3];
         let mut g_d = [0.0_f32; TILE_PIXELS];
         let mut k_bg = [0.0_f32; TILE_PIXELS];
         let mut t_cur = [0.0_f32; TILE_PIXELS];
-        let mut acc = [[0.0_f32; TILE_PIXELS]; 4];
+        let mut acc_dot = [0.0_f32; TILE_PIXELS];
         let mut last = [0_u32; TILE_PIXELS];
         let mut max_last = 0;
         for ly in 0..th as usize {
@@ -248,7 +250,6 @@ impl Rasterizer {
         let mut active = 0_u32;
         let mut falloff = Falloff::new();
         let [g_r, g_g, g_b] = &mut g_rgb;
-        let [acc_r, acc_g, acc_b, acc_d] = &mut acc;
         for kk in (0..max_last as usize).rev() {
             if let Some(ahead) = kk.checked_sub(PREFETCH_AHEAD) {
                 prefetch(&self.proj, list[ahead] as usize);
@@ -260,12 +261,18 @@ impl Rasterizer {
                 active |= 1 << joins[joined].1;
                 joined += 1;
             }
-            // Per-lane partial sums, added up in a fixed order once the splat is done.
+            // Per-lane partial sums, added up in a fixed order once the splat is done: of w·∂L/∂c
+            // (colour, depth) and, with u = G·∂L/∂α, of u, u·dx, u·dx², u·dy, u·dy², u·dx·dy.
+            // The centre and conic gradients are these moments times the splat's constants
+            // (see below), which saves their products per lane.
             let mut s_col = [[0.0_f32; LANES]; 3];
             let mut s_dep = [0.0_f32; LANES];
-            let mut s_op = [0.0_f32; LANES];
-            let mut s_xy = [[0.0_f32; LANES]; 2];
-            let mut s_con = [[0.0_f32; LANES]; 3];
+            let mut s_u = [0.0_f32; LANES];
+            let mut s_ux = [0.0_f32; LANES];
+            let mut s_uxx = [0.0_f32; LANES];
+            let mut s_uy = [0.0_f32; LANES];
+            let mut s_uyy = [0.0_f32; LANES];
+            let mut s_uxy = [0.0_f32; LANES];
             let spans = RowSpans::new(p, x0, y0, tw, th);
             falloff.compute(p, &spans, spans.mask & active, x0);
             if falloff.n == 0 {
@@ -281,10 +288,7 @@ impl Rasterizer {
                 let base = hr * LANES;
                 let lastl: &[u32; LANES] = lanes_mut(&mut last, base);
                 let tl: &mut [f32; LANES] = lanes_mut(&mut t_cur, base);
-                let arl: &mut [f32; LANES] = lanes_mut(acc_r, base);
-                let agl: &mut [f32; LANES] = lanes_mut(acc_g, base);
-                let abl: &mut [f32; LANES] = lanes_mut(acc_b, base);
-                let adl: &mut [f32; LANES] = lanes_mut(acc_d, base);
+                let al: &mut [f32; LANES] = lanes_mut(&mut acc_dot, base);
                 let grl: &[f32; LANES] = lanes_mut(g_r, base);
                 let ggl: &[f32; LANES] = lanes_mut(g_g, base);
                 let gbl: &[f32; LANES] = lanes_mut(g_b, base);
@@ -303,13 +307,14 @@ impl Rasterizer {
                     let w = alpha * t_i;
                     let gr = [grl[l], ggl[l], gbl[l]];
                     let gdp = gdl[l];
-                    let ac = [arl[l], agl[l], abl[l], adl[l]];
-                    let d_alpha = t_i
-                        * ((p.color[0] - ac[0]) * gr[0]
-                            + (p.color[1] - ac[1]) * gr[1]
-                            + (p.color[2] - ac[2]) * gr[2]
-                            + (p.depth - ac[3]) * gdp)
-                        + kl[l] * inv;
+                    // ∂L/∂α = Tᵢ·((cᵢ − C_behind)·g) − T_N·(bg·g − ∂L/∂A)/(1 − αᵢ), the
+                    // colour including depth; C_behind·g is the accumulated dot product.
+                    let cg = p.color[0] * gr[0]
+                        + p.color[1] * gr[1]
+                        + p.color[2] * gr[2]
+                        + p.depth * gdp;
+                    let behind = al[l];
+                    let d_alpha = t_i * (cg - behind) + kl[l] * inv;
                     let wv = if valid { w } else { 0.0 };
                     s_col[0][l] += wv * gr[0];
                     s_col[1][l] += wv * gr[1];
@@ -319,11 +324,7 @@ impl Rasterizer {
                     // than `if valid { new } else { old }`, which LLVM turns into masked stores
                     // that the next splat's loads cannot forward from.
                     let av = if valid { alpha } else { 0.0 };
-                    let keep = 1.0 - av;
-                    arl[l] = av * p.color[0] + keep * ac[0];
-                    agl[l] = av * p.color[1] + keep * ac[1];
-                    abl[l] = av * p.color[2] + keep * ac[2];
-                    adl[l] = av * p.depth + keep * ac[3];
+                    al[l] = av * cg + (1.0 - av) * behind;
                     tl[l] *= if valid { inv } else { 1.0 };
                     // Where o·G is clamped at 0.99, alpha does not depend on o or G.
                     let da = if valid & (raw < MAX_ALPHA) {
@@ -331,24 +332,34 @@ impl Rasterizer {
                     } else {
                         0.0
                     };
-                    s_op[l] += gauss * da;
-                    let d_pow = raw * da;
-                    s_xy[0][l] -= d_pow * (a * dx + b * dy);
-                    s_xy[1][l] -= d_pow * (b * dx + c * dy);
-                    s_con[0][l] -= 0.5 * d_pow * dx * dx;
-                    s_con[1][l] -= d_pow * dx * dy;
-                    s_con[2][l] -= 0.5 * d_pow * dy * dy;
+                    let u = gauss * da;
+                    let ux = u * dx;
+                    let uy = u * dy;
+                    s_u[l] += u;
+                    s_ux[l] += ux;
+                    s_uxx[l] += ux * dx;
+                    s_uy[l] += uy;
+                    s_uyy[l] += uy * dy;
+                    s_uxy[l] += ux * dy;
                 }
             }
             let sum = |v: &[f32; LANES]| v.iter().sum::<f32>();
-            let g = ProjectedGrad {
-                xy: [sum(&s_xy[0]), sum(&s_xy[1])],
-                conic: [sum(&s_con[0]), sum(&s_con[1]), sum(&s_con[2])],
-                opacity: sum(&s_op),
+            // α = o·G with G = exp(−½(a·dx² + 2b·dx·dy + c·dy²)) and dx = x_c − x (so
+            // ∂dx/∂x_c = 1): ∂L/∂x_c = Σ ∂L/∂α·o·G·(−(a·dx + b·dy)), ∂L/∂a = Σ ∂L/∂α·o·G·(−dx²/2),
+            // ∂L/∂b = Σ … ·(−dx·dy), ∂L/∂c = Σ … ·(−dy²/2), ∂L/∂o = Σ ∂L/∂α·G.
+            let o = p.opacity;
+            let (mx, my) = (sum(&s_ux), sum(&s_uy));
+            out[kk] = ProjectedGrad {
+                xy: [-o * (a * mx + b * my), -o * (b * mx + c * my)],
+                conic: [
+                    -0.5 * o * sum(&s_uxx),
+                    -o * sum(&s_uxy),
+                    -0.5 * o * sum(&s_uyy),
+                ],
+                opacity: sum(&s_u),
                 color: [sum(&s_col[0]), sum(&s_col[1]), sum(&s_col[2])],
                 depth: sum(&s_dep),
             };
-            out[kk] = g;
         }
     }
 }
