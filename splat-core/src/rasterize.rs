@@ -5,7 +5,7 @@ use rayon::prelude::*;
 
 use crate::constants::{MAX_ALPHA, MIN_ALPHA, MIN_TRANSMITTANCE};
 use crate::project::{Cull, Projected, ProjectedGrad, ViewConsts, project};
-use crate::tiles::{Bins, Falloff, HALF_ROWS, RowSpans, TILE_PIXELS, TILE_SIZE};
+use crate::tiles::{Bins, Falloff, HALF_ROWS, LANES, RowSpans, TILE_PIXELS, TILE_SIZE};
 use crate::{RenderCamera, RenderOptions, RenderOutput, Splats};
 
 /// Counts from the last forward pass.
@@ -240,11 +240,6 @@ pub(crate) fn tile_major_index(x: usize, y: usize, tiles_x: u32) -> usize {
     let tile = (y / ts) * tiles_x as usize + x / ts;
     tile * TILE_PIXELS + (y % ts) * ts + x % ts
 }
-
-/// Pixels per inner loop: half a tile row, seen through fixed-size lane views (no per-lane
-/// bounds checks); the lane bodies are branch-free (masks, no early exits) so they map one to
-/// one onto SIMD lanes.
-pub(crate) const LANES: usize = 8;
 
 /// Whether the AVX2 instantiations of the tile loops can run on this CPU (detected at run time,
 /// so the binary still runs on any x86-64; always false elsewhere).

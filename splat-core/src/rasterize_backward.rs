@@ -13,9 +13,9 @@ use rayon::prelude::*;
 use crate::constants::{MAX_ALPHA, MIN_ALPHA};
 use crate::project::{ProjectedGrad, ViewConsts, project, project_backward};
 use crate::rasterize::{
-    DEPTH_MIN_ALPHA, LANES, PREFETCH_AHEAD, lanes_mut, prefetch, tile_extent, tile_major_index,
+    DEPTH_MIN_ALPHA, PREFETCH_AHEAD, lanes_mut, prefetch, tile_extent, tile_major_index,
 };
-use crate::tiles::{Falloff, HALF_ROWS, RowSpans, TILE_PIXELS, TILE_SIZE};
+use crate::tiles::{Falloff, HALF_ROWS, LANES, RowSpans, TILE_PIXELS, TILE_SIZE};
 use crate::{Rasterizer, RenderCamera, RenderOptions, SplatGrads, Splats};
 
 /// A pointer that may be shared across the tile tasks, each writing a disjoint range.

@@ -1,5 +1,6 @@
-//! Tile binning: every visible splat is listed in each 16×16 tile its 3σ square touches, each
-//! tile's list front to back.
+//! Tile geometry and binning: every visible splat is listed in each 16×16 tile its 3σ square
+//! touches, each tile's list front to back; and, per (tile, splat) pair, the row spans and the
+//! Gaussian falloff that both tile loops (forward and backward) work from.
 //!
 //! This is Inria's single sort of (tile, depth) keys done as the two passes of an LSD radix sort:
 //! one sort of the visible splats by (depth, index), then a stable counting sort by tile. The
@@ -8,7 +9,7 @@
 use rayon::prelude::*;
 
 use crate::project::Projected;
-use crate::rasterize::{LANES, fast_exp};
+use crate::rasterize::fast_exp;
 
 /// Side of a square tile in pixels (Inria's `BLOCK_X = BLOCK_Y = 16`).
 pub const TILE_SIZE: u32 = 16;
@@ -135,6 +136,11 @@ impl Bins {
     }
 }
 
+/// Pixels per inner loop: half a tile row, seen through fixed-size lane views (no per-lane
+/// bounds checks); the lane bodies are branch-free (masks, no early exits) so they map one to
+/// one onto SIMD lanes.
+pub(crate) const LANES: usize = TILE_SIZE as usize / 2;
+
 /// Half-rows per tile: bit `2·row + half` of a [`RowSpans::mask`] stands for the 8 pixels
 /// `row·16 + half·8 ..+ 8` of the tile-major per-tile buffers.
 pub(crate) const HALF_ROWS: usize = 2 * TILE_SIZE as usize;
@@ -187,7 +193,7 @@ impl RowSpans {
             hi[r] = if empty { -1.0 } else { h };
             dy[r] = d;
         }
-        let half = (LANES_F32) - 1.0;
+        let half = (LANES - 1) as f32;
         let mut mask = 0_u32;
         for r in 0..N {
             let first = u32::from((lo[r] <= hi[r]) & (lo[r] <= half));
@@ -266,9 +272,6 @@ impl Falloff {
 pub(crate) fn falloff_power(a: f32, b: f32, c: f32, dx: f32, dy: f32) -> f32 {
     -0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy
 }
-
-/// Pixels in a half-row, as a float.
-const LANES_F32: f32 = (TILE_SIZE / 2) as f32;
 
 /// The bound on the conic's quadratic form beyond which alpha < 1/255: o·e^(−q/2) ≥ 1/255
 /// ⇔ q ≤ 2·ln(255·o); with a small relative margin so float rounding never drops a pixel.
