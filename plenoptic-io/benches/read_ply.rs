@@ -2,7 +2,7 @@
 //! point (float xyz, float normal, uchar main colour, 13 × uchar colours), binary little endian.
 //! Compares, in the same run, our reader with ply-rs-bw reading the same file into a struct
 //! (its fast, allocation-free way), and ply-rs-bw's generic `DefaultElement` on a smaller file
-//! (at 3 M points it needs ~17 GB, see shared/reference/crates.md §2).
+//! (at 3 M points it needs ~17 GB, see docs/reference/crates.md §2).
 //!
 //! `PLENOPTIC_BENCH_POINTS` overrides the point count.
 

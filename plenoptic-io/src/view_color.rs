@@ -2,7 +2,7 @@
 //!
 //! Its vertex shaders weight camera `i` by `max(0, cos∠(C_i − P, V − P))^n` with n = 10 and
 //! normalised vectors, and fall back to the main colour when the weights vanish
-//! (see `shared/reference/formats.md` §2.3). This is the only implementation in the project.
+//! (see `docs/reference/formats.md` §2.3). This is the only implementation in the project.
 
 use glam::Vec3;
 

@@ -12,7 +12,7 @@ use splat_core::{Error, Splats, ply};
 fn gt_path() -> PathBuf {
     PathBuf::from(concat!(
         env!("CARGO_MANIFEST_DIR"),
-        "/../../shared/data/splat-scene/gt.ply"
+        "/../testdata/splat-scene/gt.ply"
     ))
 }
 

@@ -1,4 +1,4 @@
-//! The real 3DGS file in `shared/data/splat-scene`: `gt.ply` (Inria layout, SH degree 3,
+//! The real 3DGS file in `testdata/splat-scene`: `gt.ply` (Inria layout, SH degree 3,
 //! unnormalised quaternions) with held-out images rendered from it by an independent numpy
 //! renderer with the Inria conventions. Our render from the held-out COLMAP cameras must
 //! reproduce those images: they are 8-bit PNGs, so a render equal up to quantisation scores
@@ -14,7 +14,7 @@ use splat_core::{Rasterizer, RenderCamera, RenderOptions};
 fn data() -> PathBuf {
     PathBuf::from(concat!(
         env!("CARGO_MANIFEST_DIR"),
-        "/../../shared/data/splat-scene"
+        "/../testdata/splat-scene"
     ))
 }
 

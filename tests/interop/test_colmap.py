@@ -3,7 +3,7 @@
 Models written by colmap-io (via `transcode colmap convert`, text and binary) must load in
 pycolmap with the same cameras, poses, points and tracks as the source, and models written by
 pycolmap (every camera model, text and binary, with its rigs.bin/frames.bin) must read back
-equal in colmap-io. Needs TRANSCODE_BIN (the debug `transcode` binary) and SHARED_DATA.
+equal in colmap-io. Needs TRANSCODE_BIN (the debug `transcode` binary) (test data from `testdata/`).
 """
 
 import json
@@ -17,8 +17,8 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[2]
 TRANSCODE = os.environ.get("TRANSCODE_BIN", "")
-SHARED = Path(os.environ.get("SHARED_DATA", Path(__file__).resolve().parents[3] / "shared" / "data"))
-MAUPERTUIS = SHARED / "colmap" / "maupertuis" / "sparse" / "0"
+TESTDATA = REPO / "testdata"
+MAUPERTUIS = TESTDATA / "colmap" / "maupertuis" / "sparse" / "0"
 
 
 def transcode(*args):

@@ -14,7 +14,7 @@ import pytest
 from plyfile import PlyData
 
 REPO = Path(__file__).resolve().parents[2]
-SHARED = Path(os.environ.get("SHARED_DATA", REPO.parent / "shared" / "data"))
+TESTDATA = REPO / "testdata"
 
 
 def inria_names(degree):
@@ -69,7 +69,7 @@ def test_synthetic_model_matches_the_published_layout(tmp_path, degree):
 
 
 def test_copy_of_a_real_model_keeps_every_value(tmp_path):
-    src = SHARED / "splat-scene" / "gt.ply"
+    src = TESTDATA / "splat-scene" / "gt.ply"
     out = tmp_path / "copy.ply"
     write_ply("copy", src, out)
     original = PlyData.read(str(src))["vertex"]

@@ -1,4 +1,4 @@
-//! The real COLMAP model in `../shared/data/colmap/maupertuis` (kapture's sample, 4 photos):
+//! The real COLMAP model in `testdata/colmap/maupertuis` (kapture's sample, 4 photos):
 //! read it, reproject every observation through `camera-model`, and convert it exactly.
 
 use std::path::PathBuf;
@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use colmap_io::{CameraModel, Format, read_model, read_model_as, write_model};
 
 fn model_dir() -> PathBuf {
-    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data"))
+    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../testdata"))
         .join("colmap/maupertuis/sparse/0")
 }
 

@@ -7,7 +7,7 @@ use transcode::config::{Config, InitMode};
 use transcode::scene::{DemoConfig, demo_scene};
 
 fn data() -> PathBuf {
-    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data"))
+    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../testdata"))
 }
 
 /// A small, quick configuration: 16 training views and 4 held-out views at 96×96.

@@ -1,4 +1,4 @@
-//! plenoptic-io on every mesh, cloud and bad file in `shared/data`, checked against values read
+//! plenoptic-io on every mesh, cloud and bad file in `testdata`, checked against values read
 //! independently from the files themselves (text parsing, raw bytes of the .bin buffers).
 
 use std::collections::{HashMap, HashSet};
@@ -11,7 +11,7 @@ use plenoptic_io::{
 };
 
 fn data(rel: &str) -> PathBuf {
-    Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data")).join(rel)
+    Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../testdata")).join(rel)
 }
 
 /// Lines of a text file starting with `prefix`, split into numbers.

@@ -1,4 +1,4 @@
-//! Training on the real data in `shared/data`: the synthetic splat scene (held-out views rendered
+//! Training on the real data in `testdata`: the synthetic splat scene (held-out views rendered
 //! by an independent renderer) and the maupertuis photos with their SfM points.
 
 use std::path::{Path, PathBuf};
@@ -8,7 +8,7 @@ use splat_core::{Splats, logit, rgb_to_sh_dc};
 use splat_train::{DensifyConfig, TrainConfig, Trainer, View, evaluate, load_view};
 
 fn data() -> PathBuf {
-    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data"))
+    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../testdata"))
 }
 
 /// The views of a COLMAP dataset folder and its model.

@@ -11,7 +11,7 @@ use transcode::scene::{DemoConfig, SynthConfig, demo_scene, synth_from_mesh};
 use transcode::views::{self, ViewOptions};
 
 fn data(rel: &str) -> PathBuf {
-    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data")).join(rel)
+    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../testdata")).join(rel)
 }
 
 #[test]

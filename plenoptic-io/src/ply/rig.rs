@@ -1,5 +1,5 @@
 //! The PccAppRenderer header comments: `frame_to_world_scale`, `frame_to_world_translation`,
-//! `width`, `rig_count` and `rig_matrix_k` (see `shared/reference/formats.md` §1.3, §2.2).
+//! `width`, `rig_count` and `rig_matrix_k` (see `docs/reference/formats.md` §1.3, §2.2).
 
 use std::path::Path;
 

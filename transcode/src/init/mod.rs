@@ -771,7 +771,7 @@ mod tests {
     fn sparse_init_reads_colmap_points3d() {
         let dir = std::path::PathBuf::from(concat!(
             env!("CARGO_MANIFEST_DIR"),
-            "/../../shared/data/colmap/maupertuis/sparse/0"
+            "/../testdata/colmap/maupertuis/sparse/0"
         ));
         // Independent truth: the text file's own data lines (id x y z r g b error track…).
         let text = std::fs::read_to_string(dir.join("points3D.txt")).unwrap();

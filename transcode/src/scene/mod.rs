@@ -1,6 +1,6 @@
 //! Synthetic plenoptic inputs: the built-in demo scene and plenoptic clouds made from real meshes.
 //!
-//! Both produce what an 8iVSLF frame holds (`shared/reference/formats.md` §1): integer voxel
+//! Both produce what an 8iVSLF frame holds (`docs/reference/formats.md` §1): integer voxel
 //! positions, normals, a main colour, one colour per capture camera, the rig as `rig_matrix_k`
 //! comments and the frame-to-world transform. Per-camera colours come from one specular shading
 //! model ([`Shading`], Blinn–Phong with a fixed directional light) evaluated towards each capture

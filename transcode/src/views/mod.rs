@@ -1,6 +1,6 @@
 //! Reference renderer: plenoptic clouds and meshes to RGB, alpha and depth images per camera.
 //!
-//! It draws what MPEG's PccAppRenderer draws by default (`shared/reference/formats.md` §2):
+//! It draws what MPEG's PccAppRenderer draws by default (`docs/reference/formats.md` §2):
 //! every point an axis-aligned cube one voxel wide (or a view-aligned disc), z-buffered, coloured
 //! towards the viewer with [`plenoptic_io::view_color::interpolate`]; meshes are rasterised with
 //! perspective-correct attributes, bilinear textures, vertex colours and per-vertex plenoptic
