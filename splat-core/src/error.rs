@@ -35,6 +35,14 @@ pub enum Error {
         /// What is wrong.
         message: String,
     },
+    /// An SPZ file that is not what its header says, or of a version this crate does not read.
+    #[error("{path}: SPZ: {message}")]
+    Spz {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
     /// A [`crate::Splats`] value whose arrays disagree in length or whose degree is unsupported.
     #[error("inconsistent splats: {0}")]
     Inconsistent(String),

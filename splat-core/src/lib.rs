@@ -9,7 +9,8 @@
 //! - [`sh`]: real spherical harmonics of degree 0–3 with their gradients.
 //! - [`RenderCamera`], [`RenderOptions`], [`RenderOutput`], [`SplatGrads`]: rasteriser inputs/outputs.
 //! - [`Rasterizer`]: forward and backward passes (projection, tile binning, compositing).
-//! - [`ply`]: the Inria 3DGS PLY, read and write; [`export`]: the antimatter15 `.splat` layout.
+//! - [`ply`]: the Inria 3DGS PLY, read and write; [`export`]: the antimatter15 `.splat` layout;
+//!   [`spz`]: Niantic's compressed SPZ, read and write.
 
 mod camera;
 mod error;
@@ -21,6 +22,7 @@ mod rasterize_backward;
 mod render;
 pub mod sh;
 mod splats;
+pub mod spz;
 mod tiles;
 
 pub use camera::RenderCamera;

@@ -1,0 +1,264 @@
+//! SPZ (`splat_core::spz`): round trips within the format's quantisation steps, the frame change
+//! to SPZ's right-up-back axes checked on the raw bytes, and clear errors for broken files.
+
+use std::io::{Read, Write};
+use std::path::Path;
+
+use glam::{Quat, Vec3};
+use splat_core::Splats;
+use splat_core::spz::{SpzOptions, decode_spz, encode_spz, read_spz, write_spz};
+
+fn gt() -> Splats {
+    splat_core::ply::read_splats(Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../testdata/splat-scene/gt.ply"
+    )))
+    .unwrap()
+}
+
+fn gunzip(bytes: &[u8]) -> Vec<u8> {
+    let mut out = Vec::new();
+    flate2::read::GzDecoder::new(bytes)
+        .read_to_end(&mut out)
+        .unwrap();
+    out
+}
+
+fn gzip(bytes: &[u8]) -> Vec<u8> {
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+    gz.write_all(bytes).unwrap();
+    gz.finish().unwrap()
+}
+
+#[test]
+fn every_attribute_comes_back_within_its_quantisation_step() {
+    let s = gt();
+    let m = decode_spz(
+        Path::new("x.spz"),
+        &encode_spz(&s, &SpzOptions::default()).unwrap(),
+    )
+    .unwrap();
+    assert_eq!((m.version, m.antialiased), (3, false));
+    let b = &m.splats;
+    assert_eq!((b.len(), b.sh_degree), (s.len(), s.sh_degree));
+    let pos_step = 0.5 / (1_u32 << m.fractional_bits) as f32;
+    let k = s.coeffs_per_splat();
+    for i in 0..s.len() {
+        let d = (s.means[i] - b.means[i]).abs().max_element();
+        assert!(d <= pos_step * 1.0001, "splat {i}: position off by {d}");
+        for a in 0..3 {
+            let (x, y) = (s.log_scales[i][a], b.log_scales[i][a]);
+            // 1/16 steps from −10 up to 255/16 − 10; outside, the value is clamped.
+            let want = x.clamp(-10.0, 255.0 / 16.0 - 10.0);
+            assert!(
+                (want - y).abs() <= 1.0 / 32.0 + 1e-5,
+                "splat {i}: log-scale {x} -> {y}"
+            );
+        }
+        let (o, p) = (s.opacity(i), b.opacity(i));
+        assert!(
+            (o - p).abs() <= 0.5 / 255.0 + 1e-5,
+            "splat {i}: opacity {o} -> {p}"
+        );
+        let (q, r) = (s.rotation(i), b.rotation(i));
+        let angle = 2.0 * q.dot(r).abs().min(1.0).acos();
+        assert!(angle < 4e-3, "splat {i}: rotation off by {angle} rad");
+        let dc_step = 0.5 / (0.15 * 255.0);
+        for ch in 0..3 {
+            let (x, y) = (s.sh[i * k][ch], b.sh[i * k][ch]);
+            let want = x.clamp(-127.5 / (0.15 * 255.0), 127.5 / (0.15 * 255.0));
+            assert!(
+                (want - y).abs() <= dc_step + 1e-5,
+                "splat {i}: DC {x} -> {y}"
+            );
+            for j in 1..k {
+                let (x, y) = (s.sh[i * k + j][ch], b.sh[i * k + j][ch]);
+                // Degree 1 keeps 5 bits (buckets of 8/128), degrees 2–3 keep 4 (16/128); the
+                // byte's range is [−1, 127/128].
+                let bucket = if j < 4 { 8.0 } else { 16.0 } / 128.0;
+                let want = x.clamp(-1.0, 127.0 / 128.0);
+                assert!(
+                    (want - y).abs() <= bucket / 2.0 + 1.0 / 256.0 + 1e-5,
+                    "splat {i}: SH {j} {x} -> {y}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn the_stored_frame_is_right_up_back() {
+    // One splat at (1, 2, 3), turned 90° about y, with a degree-1 SH term along each axis: the
+    // raw SPZ bytes hold it a half turn about x away from this crate's right-down-forward frame.
+    let mut s = Splats::new(1);
+    let q = Quat::from_rotation_y(std::f32::consts::FRAC_PI_2);
+    s.push(
+        Vec3::new(1.0, 2.0, 3.0),
+        Vec3::new(-1.0, -2.0, -3.0),
+        [q.w, q.x, q.y, q.z],
+        0.0,
+        &[
+            [0.0; 3],
+            [0.5, 0.0, 0.0],
+            [0.0, 0.25, 0.0],
+            [0.0, 0.0, -0.5],
+        ],
+    );
+    let raw = gunzip(&encode_spz(&s, &SpzOptions::default()).unwrap());
+    let bits = raw[13];
+    let fixed = |o: usize| {
+        let v = i32::from(raw[o]) | i32::from(raw[o + 1]) << 8 | i32::from(raw[o + 2]) << 16;
+        let v = if v >= 1 << 23 { v - (1 << 24) } else { v };
+        v as f32 / (1_u32 << bits) as f32
+    };
+    assert_eq!([fixed(16), fixed(19), fixed(22)], [1.0, -2.0, -3.0]);
+    // SH bytes follow positions (9), alpha (1), colour (3), scales (3), rotation (4): coefficient
+    // 1 (y) and 2 (z) change sign, 3 (x) does not; 5 bits keep 0.5 and 0.25 exactly.
+    let sh = &raw[16 + 20..16 + 29];
+    assert_eq!(sh, &[64, 128, 128, 128, 96, 128, 128, 128, 64]);
+    // Read back, the frame change is undone.
+    let back = decode_spz(Path::new("x.spz"), &gzip(&raw)).unwrap().splats;
+    let r = back.rotation(0);
+    assert!((r.dot(q)).abs() > 0.999_99, "{r:?} vs {q:?}");
+}
+
+#[test]
+fn written_files_read_back_and_keep_their_flags() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("m.spz");
+    let s = gt();
+    let opts = SpzOptions {
+        antialiased: true,
+        fractional_bits: Some(10),
+        ..SpzOptions::default()
+    };
+    write_spz(&p, &s, &opts).unwrap();
+    let m = read_spz(&p).unwrap();
+    assert!(m.antialiased);
+    assert_eq!(m.fractional_bits, 10);
+    assert_eq!(m.splats.len(), s.len());
+    assert_eq!(
+        std::fs::read_dir(dir.path()).unwrap().count(),
+        1,
+        "a temporary file was left"
+    );
+}
+
+#[test]
+fn models_outside_the_format_are_refused() {
+    let mut s = Splats::new(0);
+    s.push(
+        Vec3::new(1e7, 0.0, 0.0),
+        Vec3::ZERO,
+        [1.0, 0.0, 0.0, 0.0],
+        0.0,
+        &[[0.0; 3]],
+    );
+    let e = encode_spz(&s, &SpzOptions::default())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("24-bit"), "{e}");
+    s.means[0] = Vec3::new(f32::NAN, 0.0, 0.0);
+    assert!(encode_spz(&s, &SpzOptions::default()).is_err());
+    s.means[0] = Vec3::new(100.0, 0.0, 0.0);
+    let too_fine = SpzOptions {
+        fractional_bits: Some(20),
+        ..SpzOptions::default()
+    };
+    let e = encode_spz(&s, &too_fine).unwrap_err().to_string();
+    assert!(
+        e.contains("splat 0") && e.contains("20 fractional bits"),
+        "{e}"
+    );
+    let bad_bits = SpzOptions {
+        sh1_bits: 0,
+        ..SpzOptions::default()
+    };
+    assert!(
+        encode_spz(&s, &bad_bits)
+            .unwrap_err()
+            .to_string()
+            .contains("sh1_bits")
+    );
+}
+
+#[test]
+fn broken_files_give_errors_that_say_what_is_wrong() {
+    let good = gunzip(&encode_spz(&gt(), &SpzOptions::default()).unwrap());
+    let path = Path::new("bad.spz");
+    let check = |bytes: &[u8], want: &str| {
+        let e = decode_spz(path, bytes).unwrap_err().to_string();
+        assert!(e.starts_with("bad.spz: SPZ: ") && e.contains(want), "{e}");
+    };
+    check(b"", "gzip");
+    check(b"not gzip at all", "gzip");
+    check(&gzip(&good[..10]), "gzip stream holding an SPZ header");
+    let mut v = good.clone();
+    v[0] ^= 0xff;
+    check(&gzip(&v), "magic");
+    let mut v = good.clone();
+    v[4] = 9;
+    check(&gzip(&v), "version 9");
+    let mut v = good.clone();
+    v[12] = 4;
+    check(&gzip(&v), "SH degree 4");
+    let mut v = good.clone();
+    v[13] = 24;
+    check(&gzip(&v), "24 fractional bits");
+    check(&gzip(&good[..good.len() - 1]), "bytes of attributes");
+    let mut v = good.clone();
+    v.push(0);
+    check(&gzip(&v), "more than");
+    // A header claiming 4 billion splats over a short body: refused, nothing huge allocated.
+    let mut v = good.clone();
+    v[8..12].copy_from_slice(&u32::MAX.to_le_bytes());
+    check(&gzip(&v), "splats, more than");
+    let mut v = good.clone();
+    v[8..12].copy_from_slice(&100_000_000_u32.to_le_bytes());
+    check(&gzip(&v), "need");
+    // Version 4's uncompressed header is recognised and named.
+    check(&good[..16], "version 4");
+    // A truncated gzip stream.
+    let z = gzip(&good);
+    check(&z[..z.len() / 2], "corrupt gzip stream");
+}
+
+#[test]
+fn version_2_files_are_read() {
+    // Version 2 stores x, y, z of the unit quaternion with w ≥ 0 as u8 = (c + 1)·127.5 and
+    // leaves w to be derived. Build a version-2 file from a version-3 one and check each
+    // rotation against that rule evaluated here (in SPZ's frame), then against the original.
+    let s = gt();
+    let v3 = gunzip(&encode_spz(&s, &SpzOptions::default()).unwrap());
+    let n = s.len();
+    let rot = 9 * n + n + 3 * n + 3 * n;
+    let mut v2 = v3[..16 + rot].to_vec();
+    v2[4] = 2;
+    let spz_frame = splat_core::spz::to_spz_frame(&s);
+    let mut expected = Vec::new();
+    for i in 0..n {
+        let q = spz_frame.rotation(i);
+        let q = if q.w < 0.0 { -q } else { q };
+        let bytes = [q.x, q.y, q.z].map(|c| ((c + 1.0) * 127.5).round() as u8);
+        let [x, y, z] = bytes.map(|b| f64::from(b) / 127.5 - 1.0);
+        expected.push([(1.0 - x * x - y * y - z * z).max(0.0).sqrt(), x, y, z]);
+        v2.extend(bytes);
+    }
+    v2.extend_from_slice(&v3[16 + rot + 4 * n..]);
+    let m = decode_spz(Path::new("v2.spz"), &gzip(&v2)).unwrap();
+    assert_eq!(m.version, 2);
+    let read = splat_core::spz::to_spz_frame(&m.splats);
+    for (i, (got, want)) in read.rotations.iter().zip(&expected).enumerate() {
+        for (c, (&got, &want)) in got.iter().zip(want).enumerate() {
+            let got = f64::from(got);
+            assert!(
+                (got - want).abs() < 1e-5,
+                "splat {i}: component {c} {got} vs {want}"
+            );
+        }
+    }
+    // Everything but the rotations is the same as version 3's.
+    let m3 = decode_spz(Path::new("v3.spz"), &gzip(&v3)).unwrap();
+    assert_eq!(m.splats.means, m3.splats.means);
+    assert_eq!(m.splats.sh, m3.splats.sh);
+}
