@@ -10,11 +10,12 @@
 //! - [`RenderCamera`], [`RenderOptions`], [`RenderOutput`], [`SplatGrads`]: rasteriser inputs/outputs.
 //! - [`Rasterizer`]: forward and backward passes (projection, tile binning, compositing).
 //! - [`ply`]: the Inria 3DGS PLY, read and write; [`export`]: the antimatter15 `.splat` layout;
-//!   [`spz`]: Niantic's compressed SPZ, read and write.
+//!   [`spz`]: Niantic's compressed SPZ, read and write; [`frame`]: the change to their y-up frame.
 
 mod camera;
 mod error;
 pub mod export;
+pub mod frame;
 pub mod ply;
 mod project;
 mod rasterize;

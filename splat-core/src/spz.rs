@@ -11,7 +11,7 @@
 //!
 //! SPZ stores its splats in a right-up-back frame (three.js and OpenGL); this crate's splats are
 //! in COLMAP's right-down-forward frame. The two differ by a half turn about x, applied on write
-//! and undone on read ([`to_spz_frame`]), so a model keeps its place and look in viewers that
+//! and undone on read ([`crate::frame::y_up_frame`]), so a model keeps its place and look in viewers that
 //! follow the format. Writing uses the full 24 bits of the positions (the fractional bits are
 //! chosen from the largest coordinate) instead of Niantic's fixed 12, since this project's models
 //! are often in voxel units of a 4,096 grid, which 12 fractional bits cannot hold.
@@ -23,6 +23,7 @@ use std::path::Path;
 
 use glam::{Quat, Vec3};
 
+use crate::frame::y_up_frame;
 use crate::ply::{MAX_SPLATS, write_atomic};
 use crate::{Error, Splats, logit, num_sh_coeffs, sigmoid};
 
@@ -78,36 +79,6 @@ pub struct SpzModel {
     pub fractional_bits: u8,
     /// The header's antialiased flag.
     pub antialiased: bool,
-}
-
-/// SH sign of each coefficient (Inria's order, DC first) under a half turn about x, (x, y, z) →
-/// (x, −y, −z): the basis polynomials with an odd number of y and z factors change sign.
-const HALF_TURN_X_SH_SIGN: [f32; 16] = [
-    1.0, // 1
-    -1.0, -1.0, 1.0, // y, z, x
-    -1.0, 1.0, 1.0, -1.0, 1.0, // xy, yz, 2z²−x²−y², xz, x²−y²
-    -1.0, 1.0, -1.0, -1.0, 1.0, -1.0,
-    1.0, // y(3x²−y²), xyz, y(…), z(…), x(…), z(x²−y²), x(…)
-];
-
-/// Moves splat attributes between this crate's right-down-forward frame and SPZ's right-up-back
-/// frame (a half turn about x, its own inverse): position (x, −y, −z), quaternion (w, x, −y, −z),
-/// SH coefficients times [`HALF_TURN_X_SH_SIGN`].
-#[must_use]
-pub fn to_spz_frame(splats: &Splats) -> Splats {
-    let k = splats.coeffs_per_splat();
-    let mut out = splats.clone();
-    for m in &mut out.means {
-        *m = Vec3::new(m.x, -m.y, -m.z);
-    }
-    for q in &mut out.rotations {
-        *q = [q[0], q[1], -q[2], -q[3]];
-    }
-    for (j, c) in out.sh.iter_mut().enumerate() {
-        let s = HALF_TURN_X_SH_SIGN[j % k];
-        *c = c.map(|v| v * s);
-    }
-    out
 }
 
 /// Returns the SPZ bytes (gzip-compressed) of `splats`.
@@ -205,7 +176,7 @@ pub fn decode_spz(path: &Path, data: &[u8]) -> Result<SpzModel, Error> {
     }
     let splats = unpack(&body, &layout, n, sh_degree, fractional_bits);
     Ok(SpzModel {
-        splats: to_spz_frame(&splats),
+        splats: y_up_frame(&splats),
         version,
         fractional_bits,
         antialiased: flags & FLAG_ANTIALIASED != 0,
@@ -348,7 +319,7 @@ fn pack(splats: &Splats, options: &SpzOptions) -> Result<Vec<u8>, Error> {
         .ok()
         .filter(|_| n <= MAX_SPLATS)
         .ok_or_else(|| Error::Inconsistent(format!("{n} splats are too many for SPZ")))?;
-    let s = to_spz_frame(splats);
+    let s = y_up_frame(splats);
     let bits = match options.fractional_bits {
         Some(b) if b <= 23 => b,
         Some(b) => {
@@ -455,30 +426,6 @@ fn unpack(body: &[u8], layout: &Layout, n: usize, sh_degree: u32, fractional_bit
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn sh_signs_match_the_basis_under_a_half_turn_about_x() {
-        // Independent check of the table: the basis at (x, −y, −z) against the basis at (x, y, z).
-        let mut a = [0.0; 16];
-        let mut b = [0.0; 16];
-        for d in [
-            Vec3::new(0.3, -0.5, 0.81),
-            Vec3::new(-0.7, 0.2, 0.4),
-            Vec3::new(0.1, 0.9, -0.3),
-        ] {
-            let d = d.normalize();
-            crate::sh::basis(3, d, &mut a);
-            crate::sh::basis(3, Vec3::new(d.x, -d.y, -d.z), &mut b);
-            for j in 0..16 {
-                assert!(
-                    (b[j] - HALF_TURN_X_SH_SIGN[j] * a[j]).abs() < 1e-6,
-                    "coefficient {j}: {} vs {}",
-                    b[j],
-                    a[j]
-                );
-            }
-        }
-    }
 
     #[test]
     fn quaternions_round_trip_within_the_smallest_three_step() {

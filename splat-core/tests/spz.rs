@@ -234,7 +234,7 @@ fn version_2_files_are_read() {
     let rot = 9 * n + n + 3 * n + 3 * n;
     let mut v2 = v3[..16 + rot].to_vec();
     v2[4] = 2;
-    let spz_frame = splat_core::spz::to_spz_frame(&s);
+    let spz_frame = splat_core::frame::y_up_frame(&s);
     let mut expected = Vec::new();
     for i in 0..n {
         let q = spz_frame.rotation(i);
@@ -247,7 +247,7 @@ fn version_2_files_are_read() {
     v2.extend_from_slice(&v3[16 + rot + 4 * n..]);
     let m = decode_spz(Path::new("v2.spz"), &gzip(&v2)).unwrap();
     assert_eq!(m.version, 2);
-    let read = splat_core::spz::to_spz_frame(&m.splats);
+    let read = splat_core::frame::y_up_frame(&m.splats);
     for (i, (got, want)) in read.rotations.iter().zip(&expected).enumerate() {
         for (c, (&got, &want)) in got.iter().zip(want).enumerate() {
             let got = f64::from(got);
