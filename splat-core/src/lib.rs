@@ -10,12 +10,14 @@
 //! - [`RenderCamera`], [`RenderOptions`], [`RenderOutput`], [`SplatGrads`]: rasteriser inputs/outputs.
 //! - [`Rasterizer`]: forward and backward passes (projection, tile binning, compositing).
 //! - [`ply`]: the Inria 3DGS PLY, read and write; [`export`]: the antimatter15 `.splat` layout;
-//!   [`spz`]: Niantic's compressed SPZ, read and write; [`frame`]: the change to their y-up frame.
+//!   [`spz`]: Niantic's compressed SPZ, read and write; [`glb`]: binary glTF with
+//!   `KHR_gaussian_splatting`; [`frame`]: the change to their y-up frame.
 
 mod camera;
 mod error;
 pub mod export;
 pub mod frame;
+pub mod glb;
 pub mod ply;
 mod project;
 mod rasterize;
