@@ -20,10 +20,11 @@ pub struct View {
 }
 
 impl View {
-    /// Checks that the image and mask sizes match the camera and that values are finite.
+    /// Checks that the camera's size fits the rasteriser's buffers, that the image and mask
+    /// sizes match the camera and that values are finite.
     ///
     /// # Errors
-    /// A message naming the mismatch or the first bad value.
+    /// A message naming the mismatch, the limit or the first bad value.
     pub fn check(&self) -> Result<(), String> {
         let k = &self.camera.intrinsics;
         let px = k.width as usize * k.height as usize;
@@ -33,6 +34,9 @@ impl View {
                 k.width, k.height
             ));
         }
+        // The trainer's per-pixel buffers (loss, SSIM) are sized by the view like the
+        // rasteriser's: the rasteriser's limit refuses them all before any is allocated.
+        splat_core::Rasterizer::check_view_size(k.width, k.height).map_err(|e| e.to_string())?;
         if self.image.len() != 3 * px {
             return Err(format!(
                 "image holds {} values, the {}×{} camera needs {}",
