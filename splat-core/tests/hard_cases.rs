@@ -234,6 +234,30 @@ fn zero_quaternion_renders_as_identity() {
     assert_eq!(g.rotations[0], [0.0; 4]);
 }
 
+/// A zero quaternion in a 3DGS PLY is not an error at load: it is kept as written and drawn as
+/// the identity (the documented fallback of `Splats::rotation` and the projection).
+#[test]
+fn zero_quaternion_from_a_ply_renders_as_identity() {
+    let z = one(
+        Vec3::new(0.1, 0.0, 3.0),
+        Vec3::new(-1.0, -2.0, -1.5),
+        [0.0; 4],
+        1.0,
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("zero_quaternion.ply");
+    splat_core::ply::write_splats(&path, &z).unwrap();
+    let back = splat_core::ply::read_splats(&path).unwrap();
+    assert_eq!(back.rotations[0], [0.0; 4]);
+    assert_eq!(back.rotation(0), glam::Quat::IDENTITY);
+    let mut id = back.clone();
+    id.rotations[0] = [1.0, 0.0, 0.0, 0.0];
+    let (a, g, _) = render_checked(&back, &cam(32, 32), &RenderOptions::default());
+    let (b, _, _) = render_checked(&id, &cam(32, 32), &RenderOptions::default());
+    assert_eq!(a.rgb, b.rgb);
+    assert_eq!(g.rotations[0], [0.0; 4]);
+}
+
 #[test]
 fn a_splat_covering_the_whole_image() {
     let s = one(
@@ -487,7 +511,11 @@ fn needles(tilt: f32) -> Splats {
         let theta = 0.13 + 0.51 * i as f32;
         let spin = glam::Quat::from_rotation_z(theta) * glam::Quat::from_rotation_y(tilt);
         let ls = Vec3::new(long.ln(), short.ln(), (short * 1.7).ln());
-        let rgb = [rng.uniform(0.1, 0.9), rng.uniform(0.1, 0.9), rng.uniform(0.1, 0.9)];
+        let rgb = [
+            rng.uniform(0.1, 0.9),
+            rng.uniform(0.1, 0.9),
+            rng.uniform(0.1, 0.9),
+        ];
         s.push(
             mean,
             ls,
@@ -565,7 +593,10 @@ fn camera_inside_a_splat() {
     let opts = RenderOptions::default();
     let (out, _, stats) = render_checked(&s, &c, &opts);
     assert_eq!(stats.visible, 1);
-    assert!(out.alpha.iter().all(|&a| a > 0.1), "the veil covers the image");
+    assert!(
+        out.alpha.iter().all(|&a| a > 0.1),
+        "the veil covers the image"
+    );
     let p = psnr_against_reference(&s, &c, &opts);
     assert!(p >= 60.0, "PSNR {p:.1} dB");
     let mut rng = Rng::new(41);
@@ -758,19 +789,34 @@ fn opacity_logits_beyond_the_exp_overflow() {
     let c = cam(32, 32);
     let opts = RenderOptions::default();
     for logit_o in [100.0, 1e30, f32::MAX] {
-        let s = one(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, [1.0, 0.0, 0.0, 0.0], logit_o);
+        let s = one(
+            Vec3::new(0.0, 0.0, 3.0),
+            Vec3::ZERO,
+            [1.0, 0.0, 0.0, 0.0],
+            logit_o,
+        );
         let (out, g, stats) = render_checked(&s, &c, &opts);
         assert_eq!(stats.visible, 1);
         assert!((out.alpha[16 * 32 + 16] - 0.99).abs() < 1e-6);
         assert_eq!(g.opacity_logits[0], 0.0);
     }
     for logit_o in [-100.0, -1e30, f32::MIN] {
-        let s = one(Vec3::new(0.0, 0.0, 3.0), Vec3::splat(-1.0), [1.0, 0.0, 0.0, 0.0], logit_o);
+        let s = one(
+            Vec3::new(0.0, 0.0, 3.0),
+            Vec3::splat(-1.0),
+            [1.0, 0.0, 0.0, 0.0],
+            logit_o,
+        );
         let (out, _, stats) = render_checked(&s, &c, &opts);
         assert_eq!((stats.visible, stats.culled_non_finite), (0, 0));
         assert!(out.alpha.iter().all(|&a| a == 0.0));
     }
-    let s = one(Vec3::new(0.05, 0.0, 3.0), Vec3::new(-1.5, -1.2, -1.0), [1.0, 0.0, 0.0, 0.0], 100.0);
+    let s = one(
+        Vec3::new(0.05, 0.0, 3.0),
+        Vec3::new(-1.5, -1.2, -1.0),
+        [1.0, 0.0, 0.0, 0.0],
+        100.0,
+    );
     let mut rng = Rng::new(46);
     let w = weights(&mut rng, &c, true, false);
     check_gradients_with(&s, &c, &opts, &w, &["opacity_logits"], 1e-4);
@@ -848,7 +894,11 @@ fn every_splat_in_one_tile() {
             [rng.normal(), rng.normal(), rng.normal(), rng.normal()],
             rng.uniform(-1.0, 2.0),
             &[
-                [rng.uniform(-1.0, 1.0), rng.uniform(-1.0, 1.0), rng.uniform(-1.0, 1.0)],
+                [
+                    rng.uniform(-1.0, 1.0),
+                    rng.uniform(-1.0, 1.0),
+                    rng.uniform(-1.0, 1.0),
+                ],
                 [0.1, -0.1, 0.05],
             ],
         );
@@ -873,9 +923,19 @@ fn every_splat_in_one_tile() {
 /// check, and sizes whose tile count would overflow u32 are refused, not wrapped.
 #[test]
 fn views_over_the_pixel_limit_are_refused_up_front() {
-    let s = one(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, [1.0, 0.0, 0.0, 0.0], 0.0);
+    let s = one(
+        Vec3::new(0.0, 0.0, 3.0),
+        Vec3::ZERO,
+        [1.0, 0.0, 0.0, 0.0],
+        0.0,
+    );
     let mut r = Rasterizer::new();
-    for (w, h) in [(100_000, 100_000), (8193, 8192), (u32::MAX, u32::MAX), (1, 1 << 27)] {
+    for (w, h) in [
+        (100_000, 100_000),
+        (8193, 8192),
+        (u32::MAX, u32::MAX),
+        (1, 1 << 27),
+    ] {
         let err = r
             .try_forward(&s, &cam(w, h), &RenderOptions::default())
             .unwrap_err();
@@ -884,11 +944,16 @@ fn views_over_the_pixel_limit_are_refused_up_front() {
             matches!(err, splat_core::Error::ViewTooLarge { limit, .. } if limit == splat_core::MAX_PIXELS),
             "{msg}"
         );
-        assert!(msg.contains(&format!("{w}×{h}")) && msg.contains("67108864"), "{msg}");
+        assert!(
+            msg.contains(&format!("{w}×{h}")) && msg.contains("67108864"),
+            "{msg}"
+        );
     }
     assert_eq!(splat_core::MAX_PIXELS, 8192 * 8192);
     Rasterizer::check_view_size(8192, 8192).unwrap();
     // A refused view leaves the rasteriser usable.
-    let out = r.try_forward(&s, &cam(8, 8), &RenderOptions::default()).unwrap();
+    let out = r
+        .try_forward(&s, &cam(8, 8), &RenderOptions::default())
+        .unwrap();
     assert!(out.alpha[4 * 8 + 4] > 0.4);
 }

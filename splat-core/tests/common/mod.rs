@@ -330,9 +330,13 @@ pub fn render_ref(
         // det(J·Σ_cam·Jᵀ) by Cauchy–Binet on its factor F = J·W·R·S (2×3): the sum of squares of
         // F's 2×2 minors. a·c − b² cancels even in f64 for needles 10⁴ px long (a·c ≈ 10¹⁶), which
         // made finite differences of this reference noisy.
-        let wrs = mm(&mm(&wr, &r), &[[sc[0], 0.0, 0.0], [0.0, sc[1], 0.0], [0.0, 0.0, sc[2]]]);
-        let f: [[f64; 3]; 2] =
-            std::array::from_fn(|a| std::array::from_fn(|k| (0..3).map(|l| j[a][l] * wrs[l][k]).sum()));
+        let wrs = mm(
+            &mm(&wr, &r),
+            &[[sc[0], 0.0, 0.0], [0.0, sc[1], 0.0], [0.0, 0.0, sc[2]]],
+        );
+        let f: [[f64; 3]; 2] = std::array::from_fn(|a| {
+            std::array::from_fn(|k| (0..3).map(|l| j[a][l] * wrs[l][k]).sum())
+        });
         let minor = |k: usize, l: usize| f[0][k] * f[1][l] - f[0][l] * f[1][k];
         let det0 = minor(0, 1).powi(2) + minor(0, 2).powi(2) + minor(1, 2).powi(2);
         let (a, b, c) = (c2[0][0] + 0.3, c2[0][1], c2[1][1] + 0.3);
