@@ -141,3 +141,27 @@ pub fn scale_intrinsics(k: &Intrinsics, w: u32, h: u32) -> Intrinsics {
         skew: k.skew * sx,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use camera_model::Pose;
+
+    /// A view over the rasteriser's pixel limit is refused by its size alone, before its image
+    /// (which here is not even there) is looked at; the message names the limit.
+    #[test]
+    fn views_over_the_pixel_limit_are_refused() {
+        let view = |w: u32, h: u32, image: Vec<f32>| View {
+            name: "big".into(),
+            camera: Camera::new(Intrinsics::centered(w, h, 1000.0, 1000.0), Pose::IDENTITY),
+            image,
+            mask: None,
+        };
+        let err = view(100_000, 100_000, Vec::new()).check().unwrap_err();
+        assert!(
+            err.contains("100000×100000") && err.contains(&splat_core::MAX_PIXELS.to_string()),
+            "{err}"
+        );
+        view(4, 3, vec![0.5; 36]).check().unwrap();
+    }
+}
