@@ -132,7 +132,7 @@ impl Rasterizer {
                 height,
                 pixels,
                 limit: MAX_PIXELS,
-                limit_mib: MAX_PIXELS * BYTES_PER_PIXEL >> 20,
+                limit_mib: (MAX_PIXELS * BYTES_PER_PIXEL) >> 20,
             });
         }
         Ok(())
