@@ -133,6 +133,10 @@ pub(crate) fn look_frame(eye: DVec3, target: DVec3, up: DVec3) -> (DVec3, DVec3,
             forward.cross(fallback).normalize()
         }
     };
+    // Just above the threshold the cross product is the small difference of products near 1,
+    // so its rounding (~1e-16) is up to 1e-7 of its length: remove the part along forward that
+    // this leaves, or the basis is orthogonal only to ~1e-7.
+    let right = (right - forward * forward.dot(right)).normalize();
     let down = forward.cross(right);
     (right, down, forward)
 }
@@ -179,6 +183,47 @@ mod tests {
         // Eye at the target: a valid pose looking down −z rather than NaN.
         let p = Pose::look_at(DVec3::ONE, DVec3::ONE, DVec3::Y);
         assert_relative_eq!(p.forward(), DVec3::NEG_Z, epsilon = 1e-15);
+    }
+
+    /// Straight up and down with an up vector parallel or nearly parallel to the view (within
+    /// 10⁻¹³ to 10⁻³ rad, on both sides of the fallback's threshold), for oblique view directions:
+    /// the rotation is orthonormal with det +1 and its forward axis is the view direction, checked
+    /// on the pose's matrix and on the (right, down, forward) basis the pose was built from.
+    #[test]
+    fn look_at_with_up_nearly_parallel_to_the_view() {
+        let dirs = [
+            DVec3::Y,
+            DVec3::NEG_Y,
+            DVec3::new(0.3, 0.9, -0.2).normalize(),
+            DVec3::new(-0.577, 0.01, 0.8166).normalize(),
+        ];
+        for f in dirs {
+            let perp = f.any_orthonormal_vector();
+            for angle in [0.0_f64, 1e-13, 1e-11, 1e-10, 1e-9, 3e-9, 1e-8, 1e-6, 1e-3] {
+                for sign in [1.0, -1.0] {
+                    let up = sign * (f * angle.cos() + perp * angle.sin()) * 2.5;
+                    let eye = DVec3::new(1.0, -2.0, 3.0);
+                    let target = eye + 7.0 * f;
+                    let (right, down, forward) = look_frame(eye, target, up);
+                    let basis = DMat3::from_cols(right, down, forward);
+                    let ctx = format!("forward {f}, angle {angle}, sign {sign}");
+                    assert!(
+                        (basis.transpose() * basis - DMat3::IDENTITY)
+                            .to_cols_array()
+                            .iter()
+                            .all(|v| v.abs() < 1e-14),
+                        "basis not orthonormal: {ctx}"
+                    );
+                    assert!((basis.determinant() - 1.0).abs() < 1e-14, "{ctx}");
+                    assert!((forward - f).length() < 1e-15, "{ctx}");
+                    let p = Pose::look_at(eye, target, up);
+                    let r = p.rotation_matrix();
+                    assert_relative_eq!(r * r.transpose(), DMat3::IDENTITY, epsilon = 1e-14);
+                    assert_relative_eq!(r.determinant(), 1.0, epsilon = 1e-14);
+                    assert!((p.forward() - f).length() < 1e-14, "{ctx}: {}", p.forward());
+                }
+            }
+        }
     }
 
     #[test]

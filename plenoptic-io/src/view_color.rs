@@ -100,6 +100,27 @@ mod tests {
         assert_eq!(c[2], 0.0);
     }
 
+    /// A viewer on the point has no direction: every weight is 0 and the main colour shows. A
+    /// capture camera on the point gets weight 0 and the others share the colour as usual.
+    #[test]
+    fn viewer_or_camera_exactly_on_the_point() {
+        let p = Vec3::new(512.0, 300.0, 700.0);
+        let cameras = [p, Vec3::new(512.0, 300.0, 2000.0)];
+        let colors = [[1.0, 0.0, 0.0], [0.0, 0.5, 1.0]];
+        let c = interpolate(p, p, &cameras, &colors, [0.3, 0.3, 0.3], DEFAULT_EXPONENT);
+        assert_eq!(c, [0.3, 0.3, 0.3]);
+        let viewer = Vec3::new(512.0, 300.0, 900.0);
+        let c = interpolate(
+            p,
+            viewer,
+            &cameras,
+            &colors,
+            [0.3, 0.3, 0.3],
+            DEFAULT_EXPONENT,
+        );
+        assert_eq!(c, [0.0, 0.5, 1.0]);
+    }
+
     #[test]
     fn far_cameras_do_not_overflow() {
         // Unnormalised dot products of ~1e4-voxel vectors raised to 10 overflow f32 (formats.md §2.3).

@@ -46,4 +46,21 @@ pub enum Error {
     /// A [`crate::Splats`] value whose arrays disagree in length or whose degree is unsupported.
     #[error("inconsistent splats: {0}")]
     Inconsistent(String),
+    /// A view larger than the rasteriser's per-pixel buffers may be ([`crate::MAX_PIXELS`]).
+    #[error(
+        "a {width}×{height} view needs {pixels} pixels of buffers (padded to 16×16 tiles), over \
+         the rasteriser's limit of {limit} pixels ({limit_mib} MiB); render it at a lower resolution"
+    )]
+    ViewTooLarge {
+        /// Image width in pixels.
+        width: u32,
+        /// Image height in pixels.
+        height: u32,
+        /// Pixels the buffers would need.
+        pixels: u64,
+        /// The limit, [`crate::MAX_PIXELS`].
+        limit: u64,
+        /// The memory the limit stands for, in MiB.
+        limit_mib: u64,
+    },
 }

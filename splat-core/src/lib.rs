@@ -30,9 +30,12 @@ mod tiles;
 
 pub use camera::RenderCamera;
 pub use error::Error;
-pub use rasterize::{Rasterizer, RenderStats};
+pub use rasterize::{MAX_PIXELS, Rasterizer, RenderStats};
 pub use render::{RenderOptions, RenderOutput, SplatGrads};
-pub use splats::{Splats, logit, num_sh_coeffs, rgb_to_sh_dc, sh_dc_to_rgb, sigmoid};
+pub use splats::{
+    MIN_QUAT_NORM, Splats, logit, normalize_quat, num_sh_coeffs, rgb_to_sh_dc, sh_dc_to_rgb,
+    sigmoid,
+};
 pub use tiles::TILE_SIZE;
 
 /// Rasteriser constants shared by the forward and backward passes (Inria/gsplat values).

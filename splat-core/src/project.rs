@@ -6,7 +6,7 @@ use glam::{Mat3, Quat, Vec2, Vec3};
 
 use crate::constants::{DILATION, EXTENT_SIGMAS, FOV_CLAMP_MARGIN, MIN_ALPHA, NEAR_PLANE};
 use crate::tiles::quad_bound;
-use crate::{RenderCamera, RenderOptions, Splats, num_sh_coeffs, sh, sigmoid};
+use crate::{RenderCamera, RenderOptions, Splats, normalize_quat, num_sh_coeffs, sh, sigmoid};
 
 /// What the compositor needs of a visible splat, packed for the per-tile loop.
 #[derive(Clone, Copy, Debug, Default)]
@@ -101,10 +101,7 @@ pub(crate) struct Intermediates {
     clamped: [bool; 2],
     /// Rows of J·M_c (2×3), so Σ₂ = T·Tᵀ before dilation.
     t_rows: [Vec3; 2],
-    cov2: [f32; 3],
-    det: f32,
     comp: f32,
-    det0: f32,
     sigmoid_o: f32,
     dir: Vec3,
     dir_len: f32,
@@ -113,6 +110,61 @@ pub(crate) struct Intermediates {
 
 fn finite3(v: Vec3) -> bool {
     v.is_finite()
+}
+
+/// The 2-D covariance Σ₂ = T·Tᵀ + 0.3·I of a splat and its determinants, in f64.
+///
+/// For a thin splat that is long on screen, a·c − b² cancels: with σ = 3000 px by 0.3 px, a·c is
+/// about 10¹³ while the determinant is about 3·10⁶, below the f32 rounding of a·c, so it came out
+/// wrong by more than itself, often negative (the splat vanished). Here det(T·Tᵀ) is the sum of
+/// squares of the 2×2 minors of T (Cauchy–Binet; the Lagrange identity |t₀|²|t₁|² − (t₀·t₁)² =
+/// |t₀ × t₁|² with t₀, t₁ the rows of T): each minor involves two of the splat's scaled axes and
+/// scales with their product, so nothing large cancels, and the dilated determinant is
+/// det₀ + 0.3·(s₀₀ + s₁₁) + 0.3², a sum of non-negative terms. The products of f32 entries are
+/// exact in f64, and the f64 range holds the determinant of splats whose axes are up to ~10³⁸ px
+/// (f32 overflowed at ~10¹⁰ px). About twenty f64 operations per splat and view, against the
+/// per-pixel work of the tiles: no measurable cost.
+struct Cov2 {
+    /// Σ₂ before dilation: s₀₀, s₀₁, s₁₁.
+    s: [f64; 3],
+    /// det(T·Tᵀ).
+    det0: f64,
+    /// det(T·Tᵀ + 0.3·I).
+    det: f64,
+}
+
+impl Cov2 {
+    fn new([t0, t1]: [Vec3; 2]) -> Self {
+        let (t0, t1) = (t0.as_dvec3(), t1.as_dvec3());
+        let s = [t0.length_squared(), t0.dot(t1), t1.length_squared()];
+        let det0 = t0.cross(t1).length_squared();
+        let d = f64::from(DILATION);
+        Self {
+            s,
+            det0,
+            det: det0 + d * (s[0] + s[2]) + d * d,
+        }
+    }
+
+    /// The conic Σ₂⁻¹ (a, b, c) of the dilated covariance.
+    fn conic(&self) -> [f64; 3] {
+        let d = f64::from(DILATION);
+        let [s00, s01, s11] = self.s;
+        [(s11 + d) / self.det, -s01 / self.det, (s00 + d) / self.det]
+    }
+
+    /// The inverse of the covariance before dilation (infinite when it is singular).
+    fn conic0(&self) -> [f64; 3] {
+        let [s00, s01, s11] = self.s;
+        [s11 / self.det0, -s01 / self.det0, s00 / self.det0]
+    }
+
+    /// The larger eigenvalue of the dilated covariance (Inria floors the discriminant at 0.1).
+    fn lambda_max(&self) -> f64 {
+        let d = f64::from(DILATION);
+        let mid = 0.5 * (self.s[0] + self.s[2]) + d;
+        mid + (mid * mid - self.det).max(0.1).sqrt()
+    }
 }
 
 /// Projects splat `i`; returns its intermediates or why it is culled.
@@ -144,14 +196,10 @@ pub(crate) fn project(splats: &Splats, i: usize, v: &ViewConsts) -> Result<Inter
     }
 
     // Σ = R S Sᵀ Rᵀ (Inria `computeCov3D`), carried as the factor M_c = W R S in camera space.
-    let q_raw = Quat::from_xyzw(qx, qy, qz, qw);
-    let quat_norm = q_raw.length();
-    let quat_zero = quat_norm.is_nan() || quat_norm <= 1e-30;
-    // A zero quaternion carries no rotation: treat it as the identity (and give it no gradient).
-    let quat = if quat_zero {
-        Quat::IDENTITY
-    } else {
-        q_raw / quat_norm
+    // A zero quaternion carries no rotation: it is drawn as the identity, with no gradient.
+    let (quat, quat_norm, quat_zero) = match normalize_quat([qw, qx, qy, qz]) {
+        Some((q, n)) => (q, n, false),
+        None => (Quat::IDENTITY, 0.0, true),
     };
     let rot = Mat3::from_quat(quat);
     let scale = ls.exp();
@@ -173,22 +221,15 @@ pub(crate) fn project(splats: &Splats, i: usize, v: &ViewConsts) -> Result<Inter
     let j1 = Vec3::new(0.0, v.fy / z, -v.fy * uy / z);
     let mct = mc.transpose();
     let t_rows = [mct * j0, mct * j1];
-    let s00 = t_rows[0].length_squared();
-    let s01 = t_rows[0].dot(t_rows[1]);
-    let s11 = t_rows[1].length_squared();
-    let det0 = s00 * s11 - s01 * s01;
-    let a = s00 + DILATION;
-    let b = s01;
-    let c = s11 + DILATION;
-    let det = a * c - b * b;
-    if !(a.is_finite() && b.is_finite() && c.is_finite() && det.is_finite()) {
+    if !(finite3(t_rows[0]) && finite3(t_rows[1])) {
         return Err(Cull::NonFinite);
     }
-    if det <= 0.0 {
+    let cov = Cov2::new(t_rows);
+    if cov.det <= 0.0 {
         return Err(Cull::Hidden);
     }
     let comp = if v.antialiased {
-        (det0.max(0.0) / det).sqrt()
+        (cov.det0 / cov.det).sqrt() as f32
     } else {
         1.0
     };
@@ -196,12 +237,10 @@ pub(crate) fn project(splats: &Splats, i: usize, v: &ViewConsts) -> Result<Inter
     if opacity < MIN_ALPHA {
         return Err(Cull::Hidden);
     }
-    let conic = [c / det, -b / det, a / det];
+    let conic = cov.conic().map(|x| x as f32);
 
     // Inria's extent: 3·√λmax with λ from the dilated covariance, and its tile rectangle.
-    let mid = 0.5 * (a + c);
-    let lambda = mid + (mid * mid - det).max(0.1).sqrt();
-    let radius_f = (EXTENT_SIGMAS * lambda.sqrt()).ceil();
+    let radius_f = (f64::from(EXTENT_SIGMAS) * cov.lambda_max().sqrt()).ceil() as f32;
     let xy = [v.fx * ux_raw + v.cx - 0.5, v.fy * uy_raw + v.cy - 0.5];
     if !(xy[0].is_finite() && xy[1].is_finite() && radius_f.is_finite()) {
         return Err(Cull::NonFinite);
@@ -255,10 +294,7 @@ pub(crate) fn project(splats: &Splats, i: usize, v: &ViewConsts) -> Result<Inter
         u: Vec2::new(ux, uy),
         clamped,
         t_rows,
-        cov2: [a, b, c],
-        det,
         comp,
-        det0,
         sigmoid_o,
         dir,
         dir_len,
@@ -299,13 +335,8 @@ pub(crate) struct ParamGrad {
     pub screen_norm: f32,
 }
 
-/// Inverse of a symmetric 2×2 matrix (a, b, c) with determinant `det`, as (a, b, c).
-fn inv2(m: [f32; 3], det: f32) -> [f32; 3] {
-    [m[2] / det, -m[1] / det, m[0] / det]
-}
-
 /// Product P·G·P of symmetric 2×2 matrices stored as (a, b, c).
-fn sandwich(p: [f32; 3], g: [f32; 3]) -> [f32; 3] {
+fn sandwich(p: [f64; 3], g: [f64; 3]) -> [f64; 3] {
     // P·G
     let pg00 = p[0] * g[0] + p[1] * g[1];
     let pg01 = p[0] * g[1] + p[1] * g[2];
@@ -348,26 +379,31 @@ pub(crate) fn project_backward(
     let d_logit = g.opacity * it.comp * it.sigmoid_o * (1.0 - it.sigmoid_o);
     let d_comp = g.opacity * it.sigmoid_o;
 
-    // Conic = Σ₂⁻¹ → dL/dΣ₂ = −Q·G_Q·Q with G_Q the symmetric matrix gradient (b appears twice).
-    let q = it.out.conic;
-    let gq = [g.conic[0], 0.5 * g.conic[1], g.conic[2]];
+    // Conic = Σ₂⁻¹ → dL/dΣ₂ = −Q·G_Q·Q with G_Q the symmetric matrix gradient (b appears
+    // twice), then Σ₂ = T·Tᵀ → G_T = 2·G_Σ·T. In f64 with the forward's `Cov2`: for a thin splat
+    // long on screen, Q·T's long column (≈ the axis / λ_max) is far smaller than Q's entries, and
+    // f32 lost it (needles' gradients were off by percents).
+    let cov = Cov2::new(it.t_rows);
+    let q = cov.conic();
+    let gq = [
+        f64::from(g.conic[0]),
+        0.5 * f64::from(g.conic[1]),
+        f64::from(g.conic[2]),
+    ];
     let qgq = sandwich(q, gq);
     let mut gs = [-qgq[0], -qgq[1], -qgq[2]];
-    if v.antialiased && it.det0 > 0.0 && it.comp > 0.0 {
-        // comp = √(det₀/det₁): d comp = comp/2·tr((Σ₀⁻¹ − Σ₁⁻¹)·dΣ), Σ₀ = Σ₁ − 0.3·I.
-        let s0 = [it.cov2[0] - DILATION, it.cov2[1], it.cov2[2] - DILATION];
-        let i0 = inv2(s0, it.det0);
-        let i1 = inv2(it.cov2, it.det);
-        let f = d_comp * it.comp * 0.5;
+    if v.antialiased && it.comp > 0.0 {
+        // comp = √(det₀/det₁): d comp = comp/2·tr((Σ₀⁻¹ − Σ₁⁻¹)·dΣ), Σ₀ = Σ₁ − 0.3·I
+        // (comp > 0 implies det₀ > 0 and a finite Σ₀⁻¹).
+        let f = f64::from(d_comp * it.comp * 0.5);
+        let q0 = cov.conic0();
         for kk in 0..3 {
-            gs[kk] += f * (i0[kk] - i1[kk]);
+            gs[kk] += f * (q0[kk] - q[kk]);
         }
     }
-
-    // Σ₂ = T·Tᵀ with T = J·M_c: G_T = 2·G_Σ·T (rows of T are t_rows).
-    let [t0, t1] = it.t_rows;
-    let gt0 = 2.0 * (gs[0] * t0 + gs[1] * t1);
-    let gt1 = 2.0 * (gs[1] * t0 + gs[2] * t1);
+    let [t0, t1] = it.t_rows.map(Vec3::as_dvec3);
+    let gt0 = (2.0 * (gs[0] * t0 + gs[1] * t1)).as_vec3();
+    let gt1 = (2.0 * (gs[1] * t0 + gs[2] * t1)).as_vec3();
     // T rows = M_cᵀ·j_r → G_j_r = M_c·G_t_r; G_M_c = Σ_r j_r·G_t_rᵀ.
     let z = it.p_cam.z;
     let j0 = Vec3::new(v.fx / z, 0.0, -v.fx * it.u.x / z);

@@ -6,7 +6,17 @@ use rayon::prelude::*;
 use crate::constants::{MAX_ALPHA, MIN_ALPHA, MIN_TRANSMITTANCE};
 use crate::project::{Cull, Projected, ProjectedGrad, ViewConsts, project};
 use crate::tiles::{Bins, Falloff, HALF_ROWS, LANES, RowSpans, TILE_PIXELS, TILE_SIZE};
-use crate::{RenderCamera, RenderOptions, RenderOutput, Splats};
+use crate::{Error, RenderCamera, RenderOptions, RenderOutput, Splats};
+
+/// The most pixels a view may have, counted after padding to whole 16×16 tiles: 2²⁶, an
+/// 8192 × 8192 image. The forward pass keeps 44 bytes per pixel (transmittance, depth sum, colour
+/// and last contributor per tile pixel, then the RGB, alpha and depth images), so this bounds
+/// those buffers at 2.75 GiB; a larger view is refused before anything is allocated rather than
+/// aborting the process when an allocation fails (and its tile count cannot overflow).
+pub const MAX_PIXELS: u64 = 1 << 26;
+
+/// Bytes the forward pass keeps per (tile-padded) pixel.
+const BYTES_PER_PIXEL: u64 = 44;
 
 /// Counts from the last forward pass.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -107,19 +117,57 @@ impl Rasterizer {
         &self.output
     }
 
+    /// Checks that a `width` × `height` view fits the per-pixel buffers' limit, [`MAX_PIXELS`].
+    ///
+    /// # Errors
+    /// [`Error::ViewTooLarge`] naming the size and the limit.
+    pub fn check_view_size(width: u32, height: u32) -> Result<(), Error> {
+        let ts = u64::from(TILE_SIZE);
+        // At most 2^28 tiles a side, 2^64 padded pixels: saturate rather than wrap.
+        let pixels = (u64::from(width).div_ceil(ts) * u64::from(height).div_ceil(ts))
+            .saturating_mul(ts * ts);
+        if pixels > MAX_PIXELS {
+            return Err(Error::ViewTooLarge {
+                width,
+                height,
+                pixels,
+                limit: MAX_PIXELS,
+                limit_mib: (MAX_PIXELS * BYTES_PER_PIXEL) >> 20,
+            });
+        }
+        Ok(())
+    }
+
     /// Renders `splats` from `cam`: RGB over the background, alpha = 1 − T, expected depth.
     ///
     /// # Panics
-    /// If `splats` is inconsistent (see [`Splats::validate`]).
+    /// If `splats` is inconsistent (see [`Splats::validate`]) or the view is larger than
+    /// [`MAX_PIXELS`]; [`Rasterizer::try_forward`] returns these as errors instead.
     pub fn forward(
         &mut self,
         splats: &Splats,
         cam: &RenderCamera,
         opts: &RenderOptions,
     ) -> &RenderOutput {
-        if let Err(e) = splats.validate() {
+        if let Err(e) = self.try_forward(splats, cam, opts) {
             panic!("Rasterizer::forward: {e}");
         }
+        &self.output
+    }
+
+    /// [`Rasterizer::forward`], with inconsistent splats and oversized views refused up front.
+    ///
+    /// # Errors
+    /// [`Error::Inconsistent`] from [`Splats::validate`], [`Error::ViewTooLarge`] from
+    /// [`Rasterizer::check_view_size`].
+    pub fn try_forward(
+        &mut self,
+        splats: &Splats,
+        cam: &RenderCamera,
+        opts: &RenderOptions,
+    ) -> Result<&RenderOutput, Error> {
+        splats.validate()?;
+        Self::check_view_size(cam.width, cam.height)?;
         let n = splats.len();
         let v = ViewConsts::new(cam, opts, splats);
         self.project_all(splats, &v);
@@ -135,7 +183,7 @@ impl Rasterizer {
         };
         self.resolve(cam, v.tiles_x, opts.background);
         self.last_view = Some((n, cam.width, cam.height));
-        &self.output
+        Ok(&self.output)
     }
 
     fn project_all(&mut self, splats: &Splats, v: &ViewConsts) {

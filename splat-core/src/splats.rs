@@ -53,6 +53,29 @@ pub fn sh_dc_to_rgb(dc: [f32; 3]) -> [f32; 3] {
     dc.map(|c| c * C0 + 0.5)
 }
 
+/// Below this norm a stored quaternion counts as zero: it has no direction to normalise, and the
+/// gradient through the normalisation (which grows as 1/|q|) would overflow f32.
+pub const MIN_QUAT_NORM: f32 = 1e-30;
+
+/// Normalises a stored quaternion (w, x, y, z); returns it with its norm, or `None` when it is
+/// zero (norm below [`MIN_QUAT_NORM`]) or not finite. Zero quaternions render as the identity.
+///
+/// The components are divided by the largest magnitude first, so the sum of squares neither
+/// underflows (|q| ≈ 1e-25 gave 0 and the identity) nor overflows (|q| ≈ 1e20 gave ∞ and a
+/// zero quaternion) for any finite input.
+#[must_use]
+pub fn normalize_quat([w, x, y, z]: [f32; 4]) -> Option<(Quat, f32)> {
+    let q = Quat::from_xyzw(x, y, z, w);
+    let m = [w, x, y, z].iter().fold(0.0_f32, |m, v| m.max(v.abs()));
+    if !(m.is_finite() && m > 0.0) {
+        return None;
+    }
+    let unit = q / m;
+    let n = unit.length();
+    let norm = m * n;
+    (norm > MIN_QUAT_NORM).then(|| (unit / n, norm))
+}
+
 impl Splats {
     /// Returns an empty model of the given SH degree (clamped to 3).
     #[must_use]
@@ -100,17 +123,11 @@ impl Splats {
         self.log_scales[i].exp()
     }
 
-    /// Returns the normalised rotation of splat `i` (identity for a zero quaternion).
+    /// Returns the normalised rotation of splat `i` (identity for a zero quaternion, see
+    /// [`normalize_quat`]).
     #[must_use]
     pub fn rotation(&self, i: usize) -> Quat {
-        let [w, x, y, z] = self.rotations[i];
-        let q = Quat::from_xyzw(x, y, z, w);
-        let n = q.length();
-        if n > 0.0 && n.is_finite() {
-            q / n
-        } else {
-            Quat::IDENTITY
-        }
+        normalize_quat(self.rotations[i]).map_or(Quat::IDENTITY, |(q, _)| q)
     }
 
     /// Appends one splat; `sh` must hold `coeffs_per_splat()` coefficients (missing ones are zero,

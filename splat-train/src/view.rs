@@ -20,10 +20,11 @@ pub struct View {
 }
 
 impl View {
-    /// Checks that the image and mask sizes match the camera and that values are finite.
+    /// Checks that the camera's size fits the rasteriser's buffers, that the image and mask
+    /// sizes match the camera and that values are finite.
     ///
     /// # Errors
-    /// A message naming the mismatch or the first bad value.
+    /// A message naming the mismatch, the limit or the first bad value.
     pub fn check(&self) -> Result<(), String> {
         let k = &self.camera.intrinsics;
         let px = k.width as usize * k.height as usize;
@@ -33,6 +34,9 @@ impl View {
                 k.width, k.height
             ));
         }
+        // The trainer's per-pixel buffers (loss, SSIM) are sized by the view like the
+        // rasteriser's: the rasteriser's limit refuses them all before any is allocated.
+        splat_core::Rasterizer::check_view_size(k.width, k.height).map_err(|e| e.to_string())?;
         if self.image.len() != 3 * px {
             return Err(format!(
                 "image holds {} values, the {}×{} camera needs {}",
@@ -135,5 +139,29 @@ pub fn scale_intrinsics(k: &Intrinsics, w: u32, h: u32) -> Intrinsics {
         cx: k.cx * sx,
         cy: k.cy * sy,
         skew: k.skew * sx,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use camera_model::Pose;
+
+    /// A view over the rasteriser's pixel limit is refused by its size alone, before its image
+    /// (which here is not even there) is looked at; the message names the limit.
+    #[test]
+    fn views_over_the_pixel_limit_are_refused() {
+        let view = |w: u32, h: u32, image: Vec<f32>| View {
+            name: "big".into(),
+            camera: Camera::new(Intrinsics::centered(w, h, 1000.0, 1000.0), Pose::IDENTITY),
+            image,
+            mask: None,
+        };
+        let err = view(100_000, 100_000, Vec::new()).check().unwrap_err();
+        assert!(
+            err.contains("100000×100000") && err.contains(&splat_core::MAX_PIXELS.to_string()),
+            "{err}"
+        );
+        view(4, 3, vec![0.5; 36]).check().unwrap();
     }
 }

@@ -18,7 +18,10 @@ const CHUNK: usize = 16_384;
 /// Renders a (plenoptic) point cloud from `camera`.
 ///
 /// Each point is a cube of side `opts.point_size` centred on it, axis-aligned in the cloud's frame
-/// (PccAppRenderer `--type 0`), or a view-aligned disc (`--type 1`). The colour of a point is
+/// (PccAppRenderer `--type 0`), or a view-aligned disc (`--type 1`). A point is drawn only when
+/// its primitive lies wholly in front of the camera: the cube's camera-space bounding box, or the
+/// ball of the disc's radius. So a point at the camera centre, or within a point size of it, is
+/// not drawn (rather than filling the image, or depending on the rounding of its depth). The colour of a point is
 /// [`interpolate`]d towards the camera centre from its per-camera colours and the capture-camera
 /// positions (main colour when the cloud has no rig or no camera faces the viewer). The cloud is
 /// drawn in its own (voxel) frame, where the rig positions live.
@@ -134,7 +137,8 @@ fn draw_cubes(positions: &[Vec3], view: &ViewCamera, h: f32, zbuf: &ZBuffer) {
         });
 }
 
-/// Visibility pass for view-aligned discs of radius `radius` at the point's depth.
+/// Visibility pass for view-aligned discs of radius `radius` at the point's depth; a disc whose
+/// centre is not more than `radius` in front of the camera is not drawn (see [`render_cloud`]).
 fn draw_discs(positions: &[Vec3], view: &ViewCamera, radius: f32, zbuf: &ZBuffer) {
     let w = view.width as usize;
     let extent = Vec3::new(radius, radius, 0.0);
@@ -145,6 +149,9 @@ fn draw_discs(positions: &[Vec3], view: &ViewCamera, radius: f32, zbuf: &ZBuffer
         .for_each(|(chunk, points)| {
             for (j, &p) in points.iter().enumerate() {
                 let c = view.rotation * p + view.translation;
+                if c.z <= radius {
+                    continue;
+                }
                 let Some((x0, x1, y0, y1)) = view.pixel_range(c - extent, c + extent) else {
                     continue;
                 };
@@ -449,6 +456,72 @@ mod tests {
             render_cloud(&cloud, &small, &opts),
             Err(Error::InvalidCamera(_))
         ));
+    }
+
+    /// Points at the camera centre (in voxel coordinates, where its camera-space position is
+    /// f32 rounding noise), inside a voxel around it, and a hair in front of it: with cubes and
+    /// discs, supersampled or not, no pixel is NaN and the image is that of the other points
+    /// alone, whose colours (viewer exactly at a capture camera's position too) are finite.
+    #[test]
+    fn points_at_the_camera_centre_are_not_drawn() {
+        let eye = DVec3::new(812.3, 700.1, 1300.7);
+        let target = DVec3::new(512.0, 500.0, 480.0);
+        let cam = camera(eye, target, 48, 40, 30.0);
+        let forward = (target - eye).normalize().as_vec3();
+        let mut rng = 1_u32;
+        let mut next = || {
+            rng = rng.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (rng >> 8) as f32 / (1 << 24) as f32 - 0.5
+        };
+        let others: Vec<Vec3> = (0..200)
+            .map(|_| target.as_vec3() + 60.0 * Vec3::new(next(), next(), next()))
+            .collect();
+        let e = eye.as_vec3();
+        let near = [e, e + Vec3::new(0.3, -0.2, 0.1), e + 1e-3 * forward];
+        let with_near: Vec<Vec3> = near.iter().chain(&others).copied().collect();
+        let colours = |n: usize| -> Vec<[f32; 3]> {
+            (0..n).map(|i| [0.1 + 0.004 * i as f32, 0.5, 0.9]).collect()
+        };
+        let rig = |n: usize| PlenopticCloud {
+            colors: colours(n),
+            num_cameras: 2,
+            camera_colors: (0..2 * n).map(|i| [0.2, 0.001 * i as f32, 0.7]).collect(),
+            // The viewer sits exactly on the first capture camera.
+            cameras: [eye, DVec3::new(-400.0, 500.0, 480.0)]
+                .iter()
+                .map(|&position| CaptureCamera {
+                    position,
+                    matrix: None,
+                })
+                .collect(),
+            ..Default::default()
+        };
+        for shape in [PointShape::Cube, PointShape::Disc] {
+            for supersample in [1, 3] {
+                let opts = ViewOptions {
+                    point_shape: shape,
+                    point_size: 4.0,
+                    supersample,
+                    ..Default::default()
+                };
+                let mut a = rig(with_near.len());
+                a.positions = with_near.clone();
+                // Same per-point colours for the points both clouds share.
+                let mut b = rig(others.len());
+                b.positions = others.clone();
+                b.colors = a.colors[near.len()..].to_vec();
+                b.camera_colors = (0..others.len())
+                    .flat_map(|i| a.camera_colors_of(i + near.len()).to_vec())
+                    .collect();
+                let img = render_cloud(&a, &cam, &opts).unwrap();
+                let alone = render_cloud(&b, &cam, &opts).unwrap();
+                for v in img.rgb.iter().chain(&img.alpha).chain(&img.depth) {
+                    assert!(v.is_finite(), "{shape:?} ×{supersample}");
+                }
+                assert_eq!(img, alone, "{shape:?} ×{supersample}");
+                assert!(img.alpha.iter().any(|&a| a > 0.0));
+            }
+        }
     }
 
     #[test]
