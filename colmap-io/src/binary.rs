@@ -172,6 +172,9 @@ pub(crate) fn read_cameras(path: &Path) -> Result<BTreeMap<u32, CameraRecord>, E
             height,
             params,
         };
+        if let Some((i, problem)) = camera.non_finite() {
+            return Err(r.error_at(at + CAMERA_HEADER + 8 * i as u64, problem));
+        }
         if cameras.insert(id, camera).is_some() {
             return Err(r.error_at(
                 at,
@@ -223,6 +226,10 @@ pub(crate) fn read_images(path: &Path) -> Result<ImagesRead, Error> {
             name,
             points2d,
         };
+        if let Some((i, problem)) = image.non_finite() {
+            // The pose follows the 4-byte image id: QW QX QY QZ TX TY TZ, 8 bytes each.
+            return Err(r.error_at(at + 4 + 8 * i as u64, problem));
+        }
         if out.images.insert(id, image).is_some() {
             return Err(r.error_at(
                 at,
@@ -265,19 +272,17 @@ pub(crate) fn read_points3d(path: &Path) -> Result<PointsRead, Error> {
                 })
             })
             .collect::<Result<Vec<_>, Error>>()?;
-        if out
-            .points
-            .insert(
-                id,
-                Point3D {
-                    xyz,
-                    rgb,
-                    error,
-                    track,
-                },
-            )
-            .is_some()
-        {
+        let point = Point3D {
+            xyz,
+            rgb,
+            error,
+            track,
+        };
+        if let Some((i, problem)) = point.non_finite(id) {
+            // X Y Z follow the 8-byte point id.
+            return Err(r.error_at(at + 8 + 8 * i as u64, problem));
+        }
+        if out.points.insert(id, point).is_some() {
             return Err(r.error_at(
                 at,
                 Problem::DuplicateId {

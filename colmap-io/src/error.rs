@@ -68,6 +68,18 @@ pub enum Problem {
         /// The text found.
         token: String,
     },
+    /// A number that is NaN or infinite where the model needs a finite one.
+    #[error("{record} {id}, {field}: {value} is not a finite number")]
+    NonFinite {
+        /// What kind of record (`camera`, `image`, `point3D`).
+        record: &'static str,
+        /// The record's id.
+        id: u64,
+        /// The field (`PARAMS[0] (f)`, `QW`, `TX`, `X`…).
+        field: String,
+        /// The value read.
+        value: f64,
+    },
     /// A field that is missing from a text line.
     #[error("missing {0}")]
     Missing(&'static str),

@@ -22,6 +22,37 @@ pub struct CameraRecord {
     pub params: Vec<f64>,
 }
 
+/// The first of `values` that is NaN or infinite, as its index and a [`Problem::NonFinite`]
+/// naming the record and the field.
+fn first_non_finite(
+    record: &'static str,
+    id: u64,
+    values: &[f64],
+    field: impl Fn(usize) -> String,
+) -> Option<(usize, Problem)> {
+    let i = values.iter().position(|v| !v.is_finite())?;
+    Some((
+        i,
+        Problem::NonFinite {
+            record,
+            id,
+            field: field(i),
+            value: values[i],
+        },
+    ))
+}
+
+impl CameraRecord {
+    /// The first parameter that is NaN or infinite (its index among the parameters): such a
+    /// camera projects every point to NaN.
+    pub(crate) fn non_finite(&self) -> Option<(usize, Problem)> {
+        let names = self.model.param_names();
+        first_non_finite("camera", self.id.into(), &self.params, |i| {
+            format!("PARAMS[{i}] ({})", names.get(i).copied().unwrap_or("?"))
+        })
+    }
+}
+
 /// One 2D observation of an image: a keypoint, possibly triangulated.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Point2D {
@@ -48,6 +79,15 @@ pub struct ImageRecord {
     pub points2d: Vec<Point2D>,
 }
 
+impl ImageRecord {
+    /// The first pose number that is NaN or infinite (its index in QW QX QY QZ TX TY TZ).
+    pub(crate) fn non_finite(&self) -> Option<(usize, Problem)> {
+        const FIELDS: [&str; 7] = ["QW", "QX", "QY", "QZ", "TX", "TY", "TZ"];
+        let pose = [self.qvec.as_slice(), &self.tvec].concat();
+        first_non_finite("image", self.id.into(), &pose, |i| FIELDS[i].to_string())
+    }
+}
+
 /// One observation in a 3D point's track.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct TrackElement {
@@ -68,6 +108,15 @@ pub struct Point3D {
     pub error: f64,
     /// Observations of the point.
     pub track: Vec<TrackElement>,
+}
+
+impl Point3D {
+    /// The first coordinate that is NaN or infinite (its index in X Y Z), for the point `id`.
+    pub(crate) fn non_finite(&self, id: u64) -> Option<(usize, Problem)> {
+        first_non_finite("point3D", id, &self.xyz.to_array(), |i| {
+            ["X", "Y", "Z"][i].to_string()
+        })
+    }
 }
 
 /// A COLMAP sparse model: cameras, registered images and 3D points, keyed by id.

@@ -122,13 +122,17 @@ fn parse_camera(line: &str) -> Result<CameraRecord, Problem> {
             found: params.len(),
         });
     }
-    Ok(CameraRecord {
+    let camera = CameraRecord {
         id,
         model,
         width,
         height,
         params,
-    })
+    };
+    match camera.non_finite() {
+        Some((_, problem)) => Err(problem),
+        None => Ok(camera),
+    }
 }
 
 /// Reads `images.txt`: each data line is followed by its POINTS2D line, which may be empty
@@ -176,14 +180,18 @@ fn parse_image(line: &str) -> Result<ImageRecord, Problem> {
             extra.join(" ")
         )));
     }
-    Ok(ImageRecord {
+    let image = ImageRecord {
         id,
         qvec,
         tvec,
         camera_id,
         name,
         points2d: Vec::new(),
-    })
+    };
+    match image.non_finite() {
+        Some((_, problem)) => Err(problem),
+        None => Ok(image),
+    }
 }
 
 fn parse_points2d(line: &str) -> Result<Vec<Point2D>, Problem> {
@@ -254,15 +262,16 @@ fn parse_point3d(line: &str) -> Result<(u64, Point3D), Problem> {
             })
         })
         .collect::<Result<_, Problem>>()?;
-    Ok((
-        id,
-        Point3D {
-            xyz,
-            rgb,
-            error,
-            track,
-        },
-    ))
+    let point = Point3D {
+        xyz,
+        rgb,
+        error,
+        track,
+    };
+    match point.non_finite(id) {
+        Some((_, problem)) => Err(problem),
+        None => Ok((id, point)),
+    }
 }
 
 /// Appends a float in its shortest exact form; exponent notation only for very small or very

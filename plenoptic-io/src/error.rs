@@ -71,17 +71,19 @@ pub enum Error {
         /// What is wrong.
         message: String,
     },
-    /// A position is NaN or infinite.
-    #[error("{}: {what} {index} has a non-finite coordinate ({value:?})", path.display())]
+    /// A value that becomes a position, normal, colour or texture coordinate is NaN or infinite.
+    #[error("{}: {what} {index}, property {property}: {value}", path.display())]
     NonFinite {
         /// The file.
         path: PathBuf,
-        /// What holds the coordinate (`vertex`, `glTF POSITION of mesh 0 primitive 0`…).
+        /// What holds the value (`vertex`, `glTF mesh 0 primitive 0 vertex`, `line 12: v`…).
         what: String,
-        /// Index of the first offending entry.
+        /// 0-based index of the first offending entry.
         index: u64,
-        /// Its value.
-        value: [f32; 3],
+        /// The property or attribute component (`x`, `red3`, `POSITION.y`…).
+        property: String,
+        /// The value as read (`NaN`, `inf`, `-inf`), with a note when it overflowed a conversion.
+        value: String,
     },
     /// The capture-rig comments disagree with the colour properties, or a camera lacks its matrix.
     #[error("{}: capture rig: {message}", path.display())]
@@ -162,20 +164,30 @@ impl Error {
     }
 }
 
-/// Reports the first non-finite position (in parallel) as [`Error::NonFinite`].
-pub(crate) fn check_finite(
+/// Reports the first entry (in parallel) of `values`, `N` components each named by
+/// `components`, that holds a NaN or an infinity, as [`Error::NonFinite`].
+pub(crate) fn check_finite<const N: usize>(
     path: &std::path::Path,
     what: &str,
-    positions: &[glam::Vec3],
+    components: [&str; N],
+    values: &[[f32; N]],
 ) -> Result<(), Error> {
     use rayon::prelude::*;
-    match positions.par_iter().position_first(|p| !p.is_finite()) {
-        Some(index) => Err(Error::NonFinite {
-            path: path.to_path_buf(),
-            what: what.to_string(),
-            index: index as u64,
-            value: positions[index].to_array(),
-        }),
-        None => Ok(()),
-    }
+    let Some(index) = values
+        .par_iter()
+        .position_first(|v| v.iter().any(|x| !x.is_finite()))
+    else {
+        return Ok(());
+    };
+    let c = values[index]
+        .iter()
+        .position(|x| !x.is_finite())
+        .unwrap_or(0);
+    Err(Error::NonFinite {
+        path: path.to_path_buf(),
+        what: what.to_string(),
+        index: index as u64,
+        property: components[c].to_string(),
+        value: values[index][c].to_string(),
+    })
 }

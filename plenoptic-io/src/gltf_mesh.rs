@@ -154,32 +154,51 @@ impl Builder<'_> {
             )));
         }
         let reader = primitive.reader(|b| self.buffers.get(b.index()).map(|d| &d.0[..]));
-        let positions: Vec<Vec3> = reader
+        let positions: Vec<[f32; 3]> = reader
             .read_positions()
             .ok_or_else(|| self.err(format!("{what} has no POSITION attribute")))?
-            .map(Vec3::from)
             .collect();
-        crate::error::check_finite(
-            self.path,
-            &format!("glTF POSITION of {what}, vertex"),
-            &positions,
-        )?;
+        let vertex = format!("glTF {what} vertex");
+        let position = ["POSITION.x", "POSITION.y", "POSITION.z"];
+        crate::error::check_finite(self.path, &vertex, position, &positions)?;
         let count = positions.len();
         let base = self.mesh.positions.len();
-        self.mesh
-            .positions
-            .extend(positions.iter().map(|&p| world.transform_point3(p)));
+        self.mesh.positions.extend(
+            positions
+                .iter()
+                .map(|&p| world.transform_point3(Vec3::from(p))),
+        );
         let normal_matrix = Mat3::from_mat4(world).inverse().transpose();
-        let normals = reader.read_normals().map(|n| {
-            n.map(|n| (normal_matrix * Vec3::from(n)).normalize_or_zero())
+        let normals = reader
+            .read_normals()
+            .map(Iterator::collect::<Vec<[f32; 3]>>);
+        if let Some(n) = &normals {
+            let normal = ["NORMAL.x", "NORMAL.y", "NORMAL.z"];
+            crate::error::check_finite(self.path, &vertex, normal, n)?;
+        }
+        let normals = normals.map(|n| {
+            n.into_iter()
+                .map(|n| (normal_matrix * Vec3::from(n)).normalize_or_zero())
                 .collect::<Vec<_>>()
         });
         let uvs = reader
             .read_tex_coords(0)
-            .map(|t| t.into_f32().map(Vec2::from).collect::<Vec<_>>());
+            .map(|t| t.into_f32().collect::<Vec<[f32; 2]>>());
+        if let Some(t) = &uvs {
+            crate::error::check_finite(self.path, &vertex, ["TEXCOORD_0.u", "TEXCOORD_0.v"], t)?;
+        }
+        let uvs = uvs.map(|t| t.into_iter().map(Vec2::from).collect::<Vec<_>>());
         let colors = reader
             .read_colors(0)
             .map(|c| c.into_rgb_f32().collect::<Vec<_>>());
+        if let Some(c) = &colors {
+            crate::error::check_finite(
+                self.path,
+                &vertex,
+                ["COLOR_0.r", "COLOR_0.g", "COLOR_0.b"],
+                c,
+            )?;
+        }
         append(&mut self.normals, normals, count);
         append(&mut self.uvs, uvs, count);
         append(&mut self.colors, colors, count);

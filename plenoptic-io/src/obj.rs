@@ -15,6 +15,8 @@ pub(crate) fn read_obj(path: &Path) -> Result<Mesh, Error> {
         message,
     };
     Error::require_file(path)?;
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    check_finite_lines(path, &String::from_utf8_lossy(&bytes))?;
     let (models, materials) =
         tobj::load_obj(path, &tobj::GPU_LOAD_OPTIONS).map_err(|e| err(e.to_string()))?;
     let obj_materials = match materials {
@@ -118,9 +120,49 @@ pub(crate) fn read_obj(path: &Path) -> Result<Mesh, Error> {
     if mesh.triangles.is_empty() {
         return Err(err("the file has no faces".into()));
     }
-    crate::error::check_finite(path, "OBJ vertex", &mesh.positions)?;
     mesh.normals = has_normals.then_some(normals);
     mesh.uvs = has_uvs.then_some(uvs);
     mesh.colors = has_colors.then_some(colors);
     Ok(mesh)
+}
+
+/// Refuses the first `v`, `vn` or `vt` line holding a NaN or an infinity (or a number beyond the
+/// f32 range), naming the line, the 0-based index among lines of its kind and the component.
+/// tobj parses `nan` and `inf` as numbers, and its re-indexed vertices could not say which line
+/// they came from, so the text is scanned before tobj sees it.
+fn check_finite_lines(path: &Path, text: &str) -> Result<(), Error> {
+    const V: [&str; 6] = ["x", "y", "z", "red", "green", "blue"];
+    const VN: [&str; 3] = ["x", "y", "z"];
+    const VT: [&str; 3] = ["u", "v", "w"];
+    let mut counts = [0u64; 3];
+    for (n, line) in text.lines().enumerate() {
+        let mut words = line.split_whitespace();
+        let (key, kind, names): (&str, usize, &[&str]) = match words.next() {
+            Some("v") => ("v", 0, &V),
+            Some("vn") => ("vn", 1, &VN),
+            Some("vt") => ("vt", 2, &VT),
+            _ => continue,
+        };
+        for (c, word) in words.enumerate() {
+            if let Ok(x) = word.parse::<f32>()
+                && !x.is_finite()
+            {
+                return Err(Error::NonFinite {
+                    path: path.to_path_buf(),
+                    what: format!("line {}: {key}", n + 1),
+                    index: counts[kind],
+                    property: names
+                        .get(c)
+                        .map_or_else(|| format!("value {}", c + 1), |s| (*s).to_string()),
+                    value: if word.parse::<f64>().is_ok_and(f64::is_finite) {
+                        format!("{word} (beyond the 32-bit float range)")
+                    } else {
+                        x.to_string()
+                    },
+                });
+            }
+        }
+        counts[kind] += 1;
+    }
+    Ok(())
 }

@@ -43,6 +43,18 @@ pub enum Error {
         /// What is wrong.
         message: String,
     },
+    /// An attribute of a splat is NaN or infinite (or a double beyond the f32 range).
+    #[error("{path}: vertex {index}, property {property}: {value:?}")]
+    NonFinite {
+        /// The file.
+        path: PathBuf,
+        /// 0-based vertex index.
+        index: usize,
+        /// The property name (`x`, `f_rest_17`, `opacity`…).
+        property: String,
+        /// The value as read from the file.
+        value: f64,
+    },
     /// A [`crate::Splats`] value whose arrays disagree in length or whose degree is unsupported.
     #[error("inconsistent splats: {0}")]
     Inconsistent(String),

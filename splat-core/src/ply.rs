@@ -226,6 +226,47 @@ struct Columns {
     rot: [usize; 4],
 }
 
+impl Columns {
+    /// Every column that becomes part of a splat, in file order.
+    fn used(&self) -> Vec<usize> {
+        let mut used: Vec<usize> = [
+            &self.mean[..],
+            &self.dc,
+            &self.rest,
+            &[self.opacity],
+            &self.scale,
+            &self.rot,
+        ]
+        .concat();
+        used.sort_unstable();
+        used
+    }
+}
+
+/// The first attribute of a vertex whose value is not a finite f32 (NaN, ±inf, or a double
+/// beyond the f32 range), as [`Error::NonFinite`]: one such value makes the splat, and every
+/// pixel and gradient it touches, NaN.
+fn check_finite(
+    path: &Path,
+    el: &Element,
+    used: &[usize],
+    index: usize,
+    values: &[f64],
+) -> Result<(), Error> {
+    match used.iter().find(|&&c| !(values[c] as f32).is_finite()) {
+        None => Ok(()),
+        Some(&c) => Err(Error::NonFinite {
+            path: path.to_path_buf(),
+            index,
+            property: match &el.props[c] {
+                Property::Scalar { name, .. } => name.clone(),
+                Property::List { .. } => format!("property {c}"),
+            },
+            value: values[c],
+        }),
+    }
+}
+
 fn find_columns(path: &Path, el: &Element) -> Result<Columns, Error> {
     let mut names = Vec::with_capacity(el.props.len());
     for p in &el.props {
@@ -315,6 +356,7 @@ pub fn parse_splats(path: &Path, data: &[u8]) -> Result<Splats, Error> {
         ));
     }
     let n_props = el.props.len();
+    let used = cols.used();
     let body = &data[header.body..];
     let mut values = vec![0.0_f64; n_props];
     let mut splats = Splats::new(degree);
@@ -371,6 +413,7 @@ pub fn parse_splats(path: &Path, data: &[u8]) -> Result<Splats, Error> {
                             message: format!("property {c} is missing or not a number"),
                         })?;
                 }
+                check_finite(path, el, &used, i, &values)?;
                 emit(&mut splats, &values);
             }
         }
@@ -413,6 +456,7 @@ pub fn parse_splats(path: &Path, data: &[u8]) -> Result<Splats, Error> {
                 for (slot, &(o, ty)) in values.iter_mut().zip(&layout) {
                     *slot = ty.read(&rec[o..], le);
                 }
+                check_finite(path, el, &used, i, &values)?;
                 emit(&mut splats, &values);
             }
         }

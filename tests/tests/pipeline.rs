@@ -102,7 +102,7 @@ fn pipeline_on_a_small_plenoptic_cloud() {
     let refs = transcode::eval::load_reference_views(&out.join("dataset")).unwrap();
     assert_eq!(refs.len(), 16);
     let opts = transcode::eval::EvalOptions::from(&cfg.eval);
-    let (train_metrics, _) = transcode::eval::evaluate(&splats, &refs, None, &opts);
+    let (train_metrics, _) = transcode::eval::evaluate(&splats, &refs, None, &opts).unwrap();
     assert!(
         train_metrics.psnr_black > m.psnr_black - 1.0 && train_metrics.alpha_iou > 0.97,
         "training views: {} dB, IoU {}",
@@ -180,4 +180,97 @@ fn bad_input_fails_clearly_and_leaves_no_complete_looking_output() {
         .unwrap_err()
         .to_string();
     assert!(msg.contains("nope.ply"), "{msg}");
+}
+
+/// Runs the pipeline on `input` into a folder holding an earlier run's model, report and dataset,
+/// expects an error containing `expected`, and checks that nothing complete-looking is left.
+fn refused(input: &Path, out: &Path, cfg: &Config, expected: &str) -> String {
+    let sparse = out.join("dataset/sparse/0");
+    std::fs::create_dir_all(out.join("model")).unwrap();
+    std::fs::create_dir_all(out.join("report")).unwrap();
+    std::fs::create_dir_all(&sparse).unwrap();
+    std::fs::write(out.join("model/splats.ply"), b"old").unwrap();
+    std::fs::write(out.join("report/report.json"), b"old").unwrap();
+    std::fs::write(sparse.join("cameras.txt"), b"old").unwrap();
+    let started = std::time::Instant::now();
+    let msg = transcode::pipeline::run(input, out, cfg, true)
+        .unwrap_err()
+        .to_string();
+    eprintln!("{msg} ({:.1} s)", started.elapsed().as_secs_f64());
+    assert!(msg.contains(expected), "{msg}");
+    assert!(!out.join("model/splats.ply").exists());
+    assert!(!out.join("report/report.json").exists());
+    msg
+}
+
+#[test]
+fn degenerate_input_stops_before_training_with_a_clear_message() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    let cfg = small_config();
+    // The real points.ply (4 points) with its points moved; written as a cloud.
+    let points = plenoptic_io::read_cloud(&data().join("meshes/misc/points.ply")).unwrap();
+    let with_positions = |name: &str, f: &dyn Fn(usize, glam::Vec3) -> glam::Vec3| {
+        let mut c = points.clone();
+        c.positions = c
+            .positions
+            .iter()
+            .enumerate()
+            .map(|(i, &p)| f(i, p))
+            .collect();
+        let path = tmp.path().join(name);
+        plenoptic_io::write_cloud(&path, &c).unwrap();
+        path
+    };
+
+    // Every point at the same place: no extent on any axis (this used to "succeed" with
+    // held-out PSNR None and SSIM 1.0).
+    let same = with_positions("same.ply", &|_, _| glam::Vec3::new(3.0, 4.0, 5.0));
+    let msg = refused(&same, &out, &cfg, "same.ply: the input has no extent");
+    assert!(msg.contains("4 point(s)"), "{msg}");
+
+    // Three distinct points (point 3 moved onto point 2).
+    let three = with_positions("three.ply", &|i, p| {
+        if i == 3 { points.positions[2] } else { p }
+    });
+    refused(
+        &three,
+        &out,
+        &cfg,
+        "three.ply: only 3 distinct point(s) among 4",
+    );
+
+    // cube_binary.ply with every vertex pushed onto the z axis: 12 faces, all of zero area.
+    let mut cube = plenoptic_io::read_mesh(&data().join("meshes/misc/cube_binary.ply")).unwrap();
+    for p in &mut cube.positions {
+        *p = glam::Vec3::new(0.0, 0.0, p.z);
+    }
+    let line = tmp.path().join("line.obj");
+    let mut obj = String::new();
+    for p in &cube.positions {
+        obj += &format!("v {} {} {}\n", p.x, p.y, p.z);
+    }
+    for t in &cube.triangles {
+        obj += &format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1);
+    }
+    std::fs::write(&line, obj).unwrap();
+    refused(
+        &line,
+        &out,
+        &cfg,
+        "line.obj: all 12 triangle(s) have zero area",
+    );
+
+    // The four points spread over 10,000 units: their one-unit cubes fall between the pixel
+    // centres of every 96×96 view. Refused after rendering the training views, before sparse/0.
+    let far = with_positions("far.ply", &|_, p| p * 10_000.0);
+    let msg = refused(
+        &far,
+        &out,
+        &cfg,
+        "nothing is visible in 16 of the 16 training views",
+    );
+    assert!(msg.contains("dataset"), "{msg}");
+    assert!(!out.join("dataset/sparse/0/cameras.txt").exists());
+    assert!(!out.join("dataset/sparse/0/points3D.bin").exists());
 }

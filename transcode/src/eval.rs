@@ -51,6 +51,15 @@ pub enum EvalError {
     /// The folder holds no images.
     #[error("no reference images in {0}")]
     Empty(PathBuf),
+    /// No reference view covers a single pixel: an empty render would match every one of them
+    /// (PSNR ∞, SSIM 1), so there is nothing to score.
+    #[error(
+        "none of the {views} reference views has a covered pixel (every mask or alpha is 0): there is nothing to score"
+    )]
+    NothingCovered {
+        /// Number of reference views.
+        views: usize,
+    },
 }
 
 /// Reads reference views from a dataset folder: `sparse/0/` (text or binary, pinhole cameras),
@@ -185,6 +194,10 @@ pub struct ViewMetrics {
     pub hole_alpha: f64,
     /// Mean rendered alpha where the reference is empty: splats in free space.
     pub free_alpha: f64,
+    /// Pixels the reference covers (alpha > 0). A view with none is scored but left out of the
+    /// means: an empty render matches it perfectly whatever the model.
+    #[serde(default)]
+    pub covered_pixels: usize,
 }
 
 /// Opacity-weighted distance of splat centres to the input surface.
@@ -258,17 +271,25 @@ impl From<&crate::config::EvalConfig> for EvalOptions {
 
 /// Renders `splats` from every reference view on black and white and scores them; with the
 /// input's surface points and spacing, also measures the splats' distance to the surface.
-#[must_use]
+/// The means are over the views that cover at least one pixel; when none does, the result is
+/// [`EvalError::NothingCovered`] rather than a perfect-looking score.
 pub fn evaluate(
     splats: &Splats,
     views: &[ReferenceView],
     surface: Option<(&[Vec3], f32)>,
     opts: &EvalOptions,
-) -> (Metrics, Vec<RenderedView>) {
+) -> Result<(Metrics, Vec<RenderedView>), EvalError> {
+    let covered: Vec<usize> = views
+        .iter()
+        .map(|v| v.alpha.iter().filter(|&&a| a > 0.0).count())
+        .collect();
+    if covered.iter().all(|&c| c == 0) {
+        return Err(EvalError::NothingCovered { views: views.len() });
+    }
     let mut raster = Rasterizer::new();
     let mut per_view = Vec::with_capacity(views.len());
     let mut renders = Vec::with_capacity(views.len());
-    for v in views {
+    for (v, &covered_pixels) in views.iter().zip(&covered) {
         let cam = RenderCamera::from(&v.camera);
         let (w, h) = (cam.width, cam.height);
         let mut score = |bg: Vec3| -> (f64, f64, Vec<f32>, Vec<f32>) {
@@ -300,12 +321,13 @@ pub fn evaluate(
             alpha_iou,
             hole_alpha,
             free_alpha,
+            covered_pixels,
         });
         renders.push(RenderedView { rgb, alpha });
     }
-    let mean = |f: fn(&ViewMetrics) -> f64| {
-        per_view.iter().map(f).sum::<f64>() / per_view.len().max(1) as f64
-    };
+    let scored: Vec<&ViewMetrics> = per_view.iter().filter(|v| v.covered_pixels > 0).collect();
+    let mean =
+        |f: fn(&ViewMetrics) -> f64| scored.iter().map(|v| f(v)).sum::<f64>() / scored.len() as f64;
     let metrics = Metrics {
         psnr_black: mean(|v| v.psnr_black),
         psnr_white: mean(|v| v.psnr_white),
@@ -320,7 +342,7 @@ pub fn evaluate(
         splats: splats.len(),
         views: per_view,
     };
-    (metrics, renders)
+    Ok((metrics, renders))
 }
 
 /// IoU of two coverage maps thresholded at `threshold` (1 when both are empty).
@@ -455,6 +477,53 @@ mod tests {
         assert!((d.floater_share - 1.0 / 3.0).abs() < 1e-9);
         assert_eq!(d.floaters, 1);
         assert!((d.p95 - 10.0).abs() < 1e-5);
+    }
+
+    /// A `w`×1 reference view straight down the z axis with the given coverage, grey where covered.
+    fn strip(name: &str, alpha: Vec<f32>) -> ReferenceView {
+        let w = alpha.len() as u32;
+        ReferenceView {
+            name: name.into(),
+            camera: Camera::new(
+                camera_model::Intrinsics::centered(w, 1, 1.0, 1.0),
+                camera_model::Pose::IDENTITY,
+            ),
+            rgb: alpha.iter().flat_map(|&a| [0.5 * a; 3]).collect(),
+            alpha,
+        }
+    }
+
+    #[test]
+    fn views_without_coverage_are_left_out_and_none_at_all_is_an_error() {
+        let splats = Splats::new(0);
+        let opts = EvalOptions {
+            alpha_threshold: 0.5,
+            floater_spacings: 2.0,
+        };
+        // Nothing covered anywhere: an empty model would score PSNR ∞ and SSIM 1; refused.
+        let empty = [strip("a", vec![0.0; 16]), strip("b", vec![0.0; 16])];
+        let e = evaluate(&splats, &empty, None, &opts).unwrap_err();
+        assert!(matches!(e, EvalError::NothingCovered { views: 2 }), "{e}");
+        assert!(
+            e.to_string()
+                .contains("none of the 2 reference views has a covered pixel")
+        );
+        // One covered view: the means are its scores, finite; the empty view is listed, unscored.
+        let mut alpha = vec![0.0; 16];
+        alpha[4..12].fill(1.0);
+        let views = [strip("a", vec![0.0; 16]), strip("b", alpha)];
+        let (m, renders) = evaluate(&splats, &views, None, &opts).unwrap();
+        assert_eq!(renders.len(), 2);
+        assert_eq!(
+            (m.views[0].covered_pixels, m.views[1].covered_pixels),
+            (0, 8)
+        );
+        // The empty model renders black: MSE on black = 8·3·0.25 / 48 = 1/8.
+        let expected = -10.0 * (1.0f64 / 8.0).log10();
+        assert!((m.psnr_black - expected).abs() < 1e-9, "{}", m.psnr_black);
+        assert_eq!(m.psnr_black, m.views[1].psnr_black);
+        assert!(m.views[0].psnr_black.is_infinite());
+        assert_eq!(m.ssim_black, m.views[1].ssim_black);
     }
 
     #[test]

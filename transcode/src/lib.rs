@@ -6,6 +6,7 @@
 
 pub mod atomic;
 pub mod config;
+pub mod degenerate;
 pub mod eval;
 pub mod init;
 pub mod pipeline;

@@ -33,6 +33,9 @@ pub enum PipelineError {
     /// The input holds nothing to render.
     #[error("the input {0} holds no points or triangles")]
     EmptyInput(PathBuf),
+    /// The input cannot make a model (no extent, too few points, no area, nothing visible).
+    #[error("{0}")]
+    Degenerate(#[from] crate::degenerate::DegenerateError),
     /// The configuration is invalid.
     #[error(transparent)]
     Config(#[from] crate::config::ConfigError),
@@ -56,6 +59,9 @@ pub enum PipelineError {
     /// The trainer refused its inputs.
     #[error("training: {0}")]
     Train(Box<splat_train::Error>),
+    /// The trained model could not be evaluated (e.g. no held-out view covers a pixel).
+    #[error("evaluation: {0}")]
+    Eval(Box<crate::eval::EvalError>),
     /// The model could not be written.
     #[error("cannot write the model {path}: {source}")]
     Model {
@@ -84,7 +90,7 @@ macro_rules! boxed_from {
         }
     )*};
 }
-boxed_from!(Load: plenoptic_io::Error, Views: views::Error, Init: init::InitError, Train: splat_train::Error);
+boxed_from!(Load: plenoptic_io::Error, Views: views::Error, Init: init::InitError, Train: splat_train::Error, Eval: crate::eval::EvalError);
 
 fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> PipelineError + '_ {
     move |source| PipelineError::Io {
@@ -326,6 +332,7 @@ pub fn run(input: &Path, out: &Path, cfg: &Config, quiet: bool) -> Result<Outcom
     if info.points == 0 {
         return Err(PipelineError::EmptyInput(input.to_path_buf()));
     }
+    crate::degenerate::check_model(input, &model)?;
     lap("load", &mut timings);
     for d in [&model_dir, &report_dir, &dataset_dir] {
         std::fs::create_dir_all(d).map_err(io_err(d))?;
@@ -366,6 +373,12 @@ pub fn run(input: &Path, out: &Path, cfg: &Config, quiet: bool) -> Result<Outcom
     bar.finish_and_clear();
     lap("render training views + write dataset", &mut timings);
     let heldout_images = views::render_views(&model, &rig.heldout, &opts)?;
+    crate::degenerate::check_views(
+        input,
+        "held-out",
+        heldout_images.iter().map(|v| v.alpha.as_slice()),
+        heldout_name,
+    )?;
     lap("render held-out views", &mut timings);
     say(format!(
         "      dataset written to {}",
@@ -393,7 +406,7 @@ pub fn run(input: &Path, out: &Path, cfg: &Config, quiet: bool) -> Result<Outcom
         .zip(heldout_images)
         .enumerate()
         .map(|(i, (c, img))| ReferenceView {
-            name: format!("heldout_{i:03}"),
+            name: heldout_name(i),
             camera: *c,
             rgb: img.rgb,
             alpha: img.alpha,
@@ -551,7 +564,7 @@ fn init_train_eval(
         heldout,
         Some(distance_surface),
         &EvalOptions::from(&cfg.eval),
-    );
+    )?;
     lap("evaluate", &mut timings);
     let run = RunReport {
         init: summary,
@@ -649,6 +662,11 @@ fn pick_pictures(
             }
         })
         .collect()
+}
+
+/// The name of held-out view `i` in reports and messages.
+fn heldout_name(i: usize) -> String {
+    format!("heldout_{i:03}")
 }
 
 /// What the input file holds.

@@ -562,7 +562,7 @@ pub(crate) fn read_body(
         }
     }
     let vertices = vertices.unwrap_or_default();
-    crate::error::check_finite(path, "vertex", &vertices.positions)?;
+    check_finite(path, vertex_element, &plan, &vertices)?;
     let count = vertices.positions.len() as u64;
     if let Some((t, &bad)) = triangles
         .iter()
@@ -581,6 +581,67 @@ pub(crate) fn read_body(
         plan,
         vertices,
         triangles,
+    })
+}
+
+/// Refuses the first vertex (lowest index, then file order) whose position, normal, colour or
+/// texture coordinate is NaN or infinite, naming the property: any of them would poison every
+/// bound, render and gradient downstream. Integer properties cannot hold one, so only columns
+/// with a float property are scanned; properties without a role are kept as read.
+fn check_finite(
+    path: &Path,
+    element: &Element,
+    plan: &VertexPlan,
+    data: &VertexData,
+) -> Result<(), Error> {
+    let mut columns: Vec<(&[f32], Vec<usize>)> = vec![(
+        bytemuck::cast_slice(&data.positions),
+        plan.position.to_vec(),
+    )];
+    if let (Some(v), Some(ix)) = (&data.normals, plan.normal) {
+        columns.push((bytemuck::cast_slice(v), ix.to_vec()));
+    }
+    if let (Some(v), Some(ix)) = (&data.colors, plan.main) {
+        columns.push((bytemuck::cast_slice(v), ix.to_vec()));
+    }
+    if !plan.cameras.is_empty() {
+        columns.push((
+            bytemuck::cast_slice(&data.camera_colors),
+            plan.cameras.concat(),
+        ));
+    }
+    if let (Some(v), Some(ix)) = (&data.uvs, plan.uv) {
+        columns.push((bytemuck::cast_slice(v), ix.to_vec()));
+    }
+    let first = columns
+        .iter()
+        .filter(|(_, ix)| ix.iter().any(|&i| plan.types[i].is_float()))
+        .filter_map(|(values, ix)| {
+            let row = values
+                .par_chunks_exact(ix.len())
+                .position_first(|r| r.iter().any(|x| !x.is_finite()))?;
+            let r = &values[row * ix.len()..(row + 1) * ix.len()];
+            let c = r.iter().position(|x| !x.is_finite()).unwrap_or(0);
+            Some((row, ix[c], r[c]))
+        })
+        .min_by_key(|&(row, property, _)| (row, property));
+    let Some((row, property, mut value)) = first else {
+        return Ok(());
+    };
+    if plan.uv.is_some_and(|uv| uv[1] == property) {
+        // Undo the v flip of `store_row` so the value is the file's.
+        value = 1.0 - value;
+    }
+    let mut value = value.to_string();
+    if plan.types[property] == ScalarType::F64 && !value.contains("NaN") {
+        value.push_str(" (infinite, or a double beyond the 32-bit float range)");
+    }
+    Err(Error::NonFinite {
+        path: path.to_path_buf(),
+        what: element.name.clone(),
+        index: row as u64,
+        property: element.properties[property].name.clone(),
+        value,
     })
 }
 

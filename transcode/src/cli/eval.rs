@@ -50,10 +50,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         &views,
         surface.as_ref().map(|(p, s)| (p.as_slice(), *s)),
         &EvalOptions::from(&config.eval),
-    );
+    )
+    .with_context(|| format!("cannot evaluate against {}", args.reference.display()))?;
     println!("{} views, {} splats", views.len(), metrics.splats);
     println!("view                 PSNR black  PSNR white  SSIM black  SSIM white  alpha IoU");
     for v in &metrics.views {
+        if v.covered_pixels == 0 {
+            println!(
+                "{:<20} no covered pixel in the reference: not scored",
+                v.name
+            );
+            continue;
+        }
         println!(
             "{:<20} {:>10.2} {:>11.2} {:>11.4} {:>11.4} {:>10.4}",
             v.name, v.psnr_black, v.psnr_white, v.ssim_black, v.ssim_white, v.alpha_iou

@@ -70,6 +70,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
     let model = plenoptic_io::load(&args.input)
         .with_context(|| format!("cannot read {}", args.input.display()))?;
+    transcode::degenerate::check_model(&args.input, &model)?;
     let (center, radius) = views::bounding_sphere(&model)?;
     let cameras = views::fibonacci_rig(center, radius, &config.rig)?;
 

@@ -48,6 +48,9 @@ pub fn dataset_image_name(i: usize) -> String {
 /// text and binary (PINHOLE cameras, world→camera poses, points3D = the input's points with their
 /// colours and empty tracks) and `dir/sparse/0/points3D.ply` (Inria's loader reads it first).
 /// `on_view` is called once per finished view. Returns the rendered images in camera order.
+/// When more than half of the views see nothing ([`crate::degenerate::check_views`]) the error
+/// comes before `sparse/0/` is written, and a model left there by an earlier run is removed
+/// first, so a failed dataset never looks complete.
 pub fn write_dataset(
     dir: &Path,
     model: &Model,
@@ -63,6 +66,16 @@ pub fn write_dataset(
         ));
     }
     let writer = DatasetWriter::create(dir)?;
+    // A model left by an earlier run would make a failed one look complete: it goes first, and
+    // is written again only once every view is rendered and something is visible in them.
+    for name in STALE_MODEL_FILES {
+        let path = writer.sparse_dir().join(name);
+        match std::fs::remove_file(&path) {
+            Ok(()) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(source) => return Err(Error::Io { path, source }),
+        }
+    }
     let mkdir = |name: &str| -> Result<std::path::PathBuf, Error> {
         let path = dir.join(name);
         std::fs::create_dir_all(&path).map_err(|source| Error::Io {
@@ -107,6 +120,19 @@ pub fn write_dataset(
             Ok(())
         })?;
 
+    let images = slots.into_inner().unwrap_or_default();
+    let images: Vec<ViewImage> = images
+        .into_iter()
+        .enumerate()
+        .map(|(i, v)| v.ok_or_else(|| Error::InvalidOption(format!("view {i} was not rendered"))))
+        .collect::<Result<_, _>>()?;
+    crate::degenerate::check_views(
+        dir,
+        "training",
+        images.iter().map(|v| v.alpha.as_slice()),
+        |i| names[i].clone(),
+    )?;
+
     let points = input_points(model);
     let mut rec = reconstruction_from_cameras(names.iter().map(String::as_str).zip(cameras))?;
     rec.points3d =
@@ -123,14 +149,19 @@ pub fn write_dataset(
         path: ply.clone(),
         message: e.to_string(),
     })?;
-
-    let images = slots.into_inner().unwrap_or_default();
-    images
-        .into_iter()
-        .enumerate()
-        .map(|(i, v)| v.ok_or_else(|| Error::InvalidOption(format!("view {i} was not rendered"))))
-        .collect()
+    Ok(images)
 }
+
+/// The files of `sparse/0/` that make a dataset usable, removed before a dataset is written.
+const STALE_MODEL_FILES: [&str; 7] = [
+    "cameras.txt",
+    "images.txt",
+    "points3D.txt",
+    "cameras.bin",
+    "images.bin",
+    "points3D.bin",
+    "points3D.ply",
+];
 
 /// The input's points with one colour each and normals (zero when unknown: Inria's loader
 /// requires the nx/ny/nz columns): a cloud's points and main colours, or a mesh's referenced

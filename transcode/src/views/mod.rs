@@ -153,6 +153,9 @@ pub enum Error {
     /// The model's arrays disagree (e.g. a triangle names a vertex that does not exist).
     #[error("inconsistent model: {0}")]
     InvalidModel(String),
+    /// The input or its views cannot make a model (see [`crate::degenerate`]).
+    #[error(transparent)]
+    Degenerate(#[from] crate::degenerate::DegenerateError),
     /// A file could not be written.
     #[error("cannot write {path}: {source}")]
     Io {

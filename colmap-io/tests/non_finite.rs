@@ -1,0 +1,148 @@
+//! NaN and infinities in a real COLMAP model (testdata/colmap/maupertuis), each changed in one
+//! value, in the text and in the binary files: refused with the file, the place and the field.
+
+use std::path::{Path, PathBuf};
+
+use colmap_io::{Error, Format, Location, Problem, read_model, read_model_as, write_model};
+
+fn maupertuis() -> PathBuf {
+    PathBuf::from(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../testdata/colmap/maupertuis/sparse/0"
+    ))
+}
+
+/// The maupertuis text model copied into `dir` with word `k` (0-based) of 1-based line `line`
+/// of `file` replaced by `value`.
+fn text_with(dir: &Path, file: &str, line: usize, k: usize, value: &str) {
+    for f in ["cameras.txt", "images.txt", "points3D.txt"] {
+        let text = std::fs::read_to_string(maupertuis().join(f)).unwrap();
+        let text = if f == file {
+            let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+            let mut words: Vec<&str> = lines[line - 1].split(' ').collect();
+            words[k] = value;
+            lines[line - 1] = words.join(" ");
+            lines.join("\n") + "\n"
+        } else {
+            text
+        };
+        std::fs::write(dir.join(f), text).unwrap();
+    }
+}
+
+/// The error of reading `dir`, checked to be a located `NonFinite` of `file`.
+fn refused(dir: &Path, format: Format, file: &str) -> (Location, Problem, String) {
+    let err = read_model_as(dir, format).unwrap_err();
+    let message = err.to_string();
+    match err {
+        Error::Format {
+            path,
+            location,
+            problem: problem @ Problem::NonFinite { .. },
+        } => {
+            assert_eq!(path, dir.join(file), "{message}");
+            (location, problem, message)
+        }
+        other => panic!("expected a non-finite format error, got {other}"),
+    }
+}
+
+#[test]
+fn text_model_refuses_nan_and_inf_with_file_line_and_field() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    // The good copy reads.
+    text_with(dir, "cameras.txt", 4, 5, "539.5");
+    assert_eq!(read_model(dir).unwrap().points3d.len(), 1039);
+
+    // cameras.txt line 4: `1 SIMPLE_PINHOLE 1919 1079 1847.53 959.5 539.5`; cx becomes NaN.
+    text_with(dir, "cameras.txt", 4, 5, "nan");
+    let (loc, problem, m) = refused(dir, Format::Text, "cameras.txt");
+    assert_eq!(loc, Location::Line(4));
+    assert!(
+        m.ends_with("cameras.txt: line 4: camera 1, PARAMS[1] (cx): NaN is not a finite number"),
+        "{m}"
+    );
+    assert!(matches!(
+        problem,
+        Problem::NonFinite {
+            record: "camera",
+            id: 1,
+            ..
+        }
+    ));
+
+    // images.txt line 5: `4 QW QX QY QZ TX TY TZ 1 03.jpg`; QX becomes inf.
+    text_with(dir, "images.txt", 5, 2, "inf");
+    let (loc, _, m) = refused(dir, Format::Text, "images.txt");
+    assert_eq!(loc, Location::Line(5));
+    assert!(
+        m.ends_with("image 4, QX: inf is not a finite number"),
+        "{m}"
+    );
+    // … and TZ becomes -inf.
+    text_with(dir, "images.txt", 5, 7, "-inf");
+    let (_, _, m) = refused(dir, Format::Text, "images.txt");
+    assert!(
+        m.ends_with("image 4, TZ: -inf is not a finite number"),
+        "{m}"
+    );
+
+    // points3D.txt line 5: `707 X Y Z …`; Y becomes NaN.
+    text_with(dir, "points3D.txt", 5, 2, "NaN");
+    let (loc, _, m) = refused(dir, Format::Text, "points3D.txt");
+    assert_eq!(loc, Location::Line(5));
+    assert!(
+        m.ends_with("point3D 707, Y: NaN is not a finite number"),
+        "{m}"
+    );
+}
+
+#[test]
+fn binary_model_refuses_nan_and_inf_at_the_field_offset() {
+    let tmp = tempfile::tempdir().unwrap();
+    let rec = read_model(&maupertuis()).unwrap();
+    let dir = tmp.path();
+    write_model(dir, &rec, Format::Binary).unwrap();
+    let patch = |file: &str, at: usize, value: f64| {
+        let good = std::fs::read(dir.join(file)).unwrap();
+        let mut bad = good.clone();
+        bad[at..at + 8].copy_from_slice(&value.to_le_bytes());
+        std::fs::write(dir.join(file), bad).unwrap();
+        good
+    };
+    // cameras.bin: count (8), then camera 1: id 4, model 4, width 8, height 8, params (f cx cy).
+    let good = patch("cameras.bin", 8 + 24 + 16, f64::NAN);
+    let (loc, _, m) = refused(dir, Format::Binary, "cameras.bin");
+    assert_eq!(loc, Location::Offset(48));
+    assert!(
+        m.ends_with("camera 1, PARAMS[2] (cy): NaN is not a finite number"),
+        "{m}"
+    );
+    std::fs::write(dir.join("cameras.bin"), good).unwrap();
+
+    // images.bin: count (8), then the image with the lowest id: id 4, QW QX QY QZ TX TY TZ.
+    let first_image = *rec.images.keys().next().unwrap();
+    let good = patch("images.bin", 8 + 4 + 8 * 5, f64::INFINITY);
+    let (loc, _, m) = refused(dir, Format::Binary, "images.bin");
+    assert_eq!(loc, Location::Offset(52));
+    assert!(
+        m.ends_with(&format!(
+            "image {first_image}, TY: inf is not a finite number"
+        )),
+        "{m}"
+    );
+    std::fs::write(dir.join("images.bin"), good).unwrap();
+
+    // points3D.bin: count (8), then the point with the lowest id: id 8, X Y Z.
+    let first_point = *rec.points3d.keys().next().unwrap();
+    patch("points3D.bin", 8 + 8 + 16, f64::NEG_INFINITY);
+    let (loc, _, m) = refused(dir, Format::Binary, "points3D.bin");
+    assert_eq!(loc, Location::Offset(32));
+    assert!(
+        m.ends_with(&format!(
+            "point3D {first_point}, Z: -inf is not a finite number"
+        )),
+        "{m}"
+    );
+}
