@@ -3,7 +3,12 @@
 //! Layout (little endian): the 8 bytes `SPLTCKPT`, a u32 version, a u64 header length, a JSON
 //! header (run state including the generator, splat count, SH degree, lengths), then f32 blocks:
 //! means, log-scales, rotations, opacity logits, SH; the Adam first and second moments of each
-//! in the same order; the strategy's statistics. Values are stored bit-exactly.
+//! in the same order; the strategy's statistics; last, a u64 checksum of every byte before it.
+//! Values are stored bit-exactly.
+//!
+//! Files are written through a temporary sibling and renamed, so a killed writer leaves the
+//! previous checkpoint whole; the exact length and the checksum catch a file that was truncated
+//! or altered afterwards, which is refused rather than resumed from.
 
 use std::fs;
 use std::io::Write;
@@ -20,7 +25,10 @@ use crate::trainer::{RunState, Trainer};
 use crate::view::View;
 
 const MAGIC: &[u8; 8] = b"SPLTCKPT";
-const VERSION: u32 = 1;
+/// Version 2 added the trailing checksum.
+const VERSION: u32 = 2;
+/// Bytes of the trailing checksum.
+const CHECKSUM_LEN: usize = 8;
 /// Refuse headers beyond this size before allocating (a corrupt length must not allocate GiBs).
 const MAX_HEADER: u64 = 1 << 30;
 
@@ -81,6 +89,8 @@ pub(crate) fn save(trainer: &Trainer, path: &Path) -> Result<(), Error> {
             buf.extend_from_slice(&v.to_le_bytes());
         }
     }
+    let sum = checksum(&buf);
+    buf.extend_from_slice(&sum.to_le_bytes());
     write_atomic(path, &buf).map_err(|source| Error::Io {
         path: path.to_path_buf(),
         source,
@@ -98,7 +108,7 @@ pub(crate) fn load(path: &Path, views: Vec<View>, config: TrainConfig) -> Result
         offset: offset as u64,
         problem,
     };
-    if bytes.len() < 20 || &bytes[..8] != MAGIC {
+    if bytes.len() < 20 + CHECKSUM_LEN || &bytes[..8] != MAGIC {
         return Err(bad(
             0,
             "not a splat-train checkpoint (magic SPLTCKPT missing)".into(),
@@ -111,6 +121,17 @@ pub(crate) fn load(path: &Path, views: Vec<View>, config: TrainConfig) -> Result
             format!("version {version}, this build reads {VERSION}"),
         ));
     }
+    // The checksum first: a damaged file must not be half-read before it is refused.
+    let body = bytes.len() - CHECKSUM_LEN;
+    let mut sum8 = [0u8; 8];
+    sum8.copy_from_slice(&bytes[body..]);
+    if u64::from_le_bytes(sum8) != checksum(&bytes[..body]) {
+        return Err(bad(
+            body,
+            "checksum mismatch: the file is truncated or damaged".into(),
+        ));
+    }
+    let bytes = &bytes[..body];
     let mut len8 = [0u8; 8];
     len8.copy_from_slice(&bytes[12..20]);
     let hlen = u64::from_le_bytes(len8);
@@ -204,6 +225,30 @@ pub(crate) fn load(path: &Path, views: Vec<View>, config: TrainConfig) -> Result
         .restore(ParamState { splats, moments }, header.run, &strategy)
         .map_err(|p| bad(hend, p))?;
     Ok(trainer)
+}
+
+/// FNV-1a over little-endian 64-bit words (the tail zero-padded), seeded with the length.
+///
+/// Each step (xor a word, multiply by an odd constant) is a bijection of the running value, so a
+/// change confined to one word always changes the result; that and the exact length check are
+/// what a damaged file has to get past. It guards against accidents, not against forgery.
+fn checksum(bytes: &[u8]) -> u64 {
+    const OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
+    const PRIME: u64 = 0x0000_0100_0000_01b3;
+    let mut h = OFFSET ^ bytes.len() as u64;
+    let mut words = bytes.chunks_exact(8);
+    for w in &mut words {
+        let mut b = [0u8; 8];
+        b.copy_from_slice(w);
+        h = (h ^ u64::from_le_bytes(b)).wrapping_mul(PRIME);
+    }
+    let rest = words.remainder();
+    if !rest.is_empty() {
+        let mut b = [0u8; 8];
+        b[..rest.len()].copy_from_slice(rest);
+        h = (h ^ u64::from_le_bytes(b)).wrapping_mul(PRIME);
+    }
+    h
 }
 
 /// Writes `bytes` to `path` through a temporary sibling renamed over it.

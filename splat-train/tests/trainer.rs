@@ -296,6 +296,19 @@ fn corrupt_checkpoints_are_refused_with_a_place() {
     assert!(matches!(e, splat_train::Error::Checkpoint { .. }), "{e}");
     std::fs::write(&p, b"not a checkpoint at all").unwrap();
     assert!(Trainer::resume(&p, views.clone(), densify_config(10)).is_err());
+    // One flipped bit anywhere (header, parameters, moments, checksum) is caught by the checksum,
+    // not read as a whole checkpoint with a slightly different value.
+    for at in [25, bytes.len() / 2, bytes.len() - 20, bytes.len() - 1] {
+        let mut damaged = bytes.clone();
+        damaged[at] ^= 0x10;
+        std::fs::write(&p, &damaged).unwrap();
+        let e = Trainer::resume(&p, views.clone(), densify_config(10)).unwrap_err();
+        assert!(
+            matches!(e, splat_train::Error::Checkpoint { .. })
+                && e.to_string().contains("checksum"),
+            "byte {at}: {e}"
+        );
+    }
     std::fs::write(&p, &bytes).unwrap();
     assert!(Trainer::resume(&p, views[..3].to_vec(), densify_config(10)).is_err());
 }

@@ -11,5 +11,6 @@ pub mod eval;
 pub mod init;
 pub mod pipeline;
 pub mod report;
+pub mod resume;
 pub mod scene;
 pub mod views;

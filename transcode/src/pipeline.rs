@@ -1,9 +1,14 @@
 //! The whole pipeline, input model to 3DGS model with a report, stage by stage.
 //!
 //! `load → rig → render training and held-out views → COLMAP dataset → initialise → train →
-//! model PLY → evaluate → report`. Every file is written atomically, and the files that mark a
-//! run as finished (the model and the report) are removed before a run starts, so an interrupted
-//! or failed run never leaves output that looks complete.
+//! evaluate → model PLY → report`. Every file is written atomically, and the files that mark a
+//! run as finished (the model and the report) are removed before a run starts and written last,
+//! so an interrupted or failed run never leaves output that looks complete.
+//!
+//! A run records its progress in `DIR/state.json` and checkpoints its training at a bounded
+//! interval of wall time ([`crate::resume`]), so [`run_with`] can continue a killed run: the
+//! dataset is reused, training continues from its checkpoint on the schedule chosen before it
+//! began, and what is cheap and deterministic (views in memory, evaluation, report) is redone.
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -21,6 +26,9 @@ use crate::eval::{EvalOptions, Metrics, ReferenceView, RenderedView, evaluate};
 use crate::init::{self, SurfacePoints};
 use crate::report::{
     CurvePoint, InputInfo, Report, RunReport, StageTiming, ViewPictures, write_report,
+};
+use crate::resume::{
+    self, InputStamp, ModeState, ResumeError, RunState, Schedule, Status, TrainedState,
 };
 use crate::views::{self, ViewImage};
 
@@ -78,6 +86,9 @@ pub enum PipelineError {
         /// The cause.
         source: std::io::Error,
     },
+    /// The saved run cannot be resumed, or its state cannot be saved.
+    #[error(transparent)]
+    Resume(#[from] ResumeError),
 }
 
 /// Boxes the large error types of the stages into [`PipelineError`].
@@ -288,8 +299,81 @@ pub struct Outcome {
     pub model: PathBuf,
 }
 
-/// Runs the whole pipeline on `input`, writing into `out`. Progress goes to stderr unless `quiet`.
+/// How [`run_with`] starts.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct RunOptions {
+    /// Print nothing (progress goes to stderr otherwise).
+    pub quiet: bool,
+    /// Continue the run saved in the output folder, if there is one (else start afresh).
+    pub resume: bool,
+}
+
+/// How [`run_with`] ended.
+#[derive(Debug, Clone)]
+pub enum Finish {
+    /// The run is complete; this call did the rest of its work.
+    Completed(Box<Outcome>),
+    /// Asked to resume a run that had already finished: nothing was redone.
+    AlreadyFinished {
+        /// `DIR/model/splats.ply`.
+        model: PathBuf,
+        /// `DIR/report/report.html`.
+        html: PathBuf,
+    },
+}
+
+/// Runs the whole pipeline on `input` from the start, writing into `out`. Progress goes to stderr
+/// unless `quiet`.
 pub fn run(input: &Path, out: &Path, cfg: &Config, quiet: bool) -> Result<Outcome, PipelineError> {
+    execute(input, out, cfg, quiet, None)
+}
+
+/// Runs the pipeline, or with `opts.resume` continues the run saved in `out`: a run with the same
+/// input and configuration (else [`ResumeError::Mismatch`]) that was interrupted continues from
+/// its last checkpoint, a finished one is left as it is ([`Finish::AlreadyFinished`]), and without
+/// a saved run it starts from the beginning.
+pub fn run_with(
+    input: &Path,
+    out: &Path,
+    cfg: &Config,
+    opts: RunOptions,
+) -> Result<Finish, PipelineError> {
+    let saved = if opts.resume {
+        cfg.validate()?;
+        RunState::load(out)?
+    } else {
+        None
+    };
+    if let Some(state) = &saved {
+        let stamp = InputStamp::of(input).map_err(|source| ResumeError::Io {
+            path: input.to_path_buf(),
+            source,
+        })?;
+        state.check_same_run(out, &stamp, cfg)?;
+        if state.status == Status::Finished {
+            let model = out.join("model").join("splats.ply");
+            let html = out.join("report").join("report.html");
+            if model.is_file() && html.is_file() {
+                return Ok(Finish::AlreadyFinished { model, html });
+            }
+            return Err(ResumeError::Malformed {
+                path: out.join(resume::STATE_FILE),
+                problem: "the run finished but its model or report is gone".into(),
+            }
+            .into());
+        }
+    }
+    execute(input, out, cfg, opts.quiet, saved).map(|o| Finish::Completed(Box::new(o)))
+}
+
+/// The stages, from the beginning or continuing `saved`.
+fn execute(
+    input: &Path,
+    out: &Path,
+    cfg: &Config,
+    quiet: bool,
+    saved: Option<RunState>,
+) -> Result<Outcome, PipelineError> {
     cfg.validate()?;
     let started = Instant::now();
     let say = |msg: String| {
@@ -316,6 +400,12 @@ pub fn run(input: &Path, out: &Path, cfg: &Config, quiet: bool) -> Result<Outcom
             Err(e) => return Err(io_err(&marker)(e)),
         }
     }
+    let checkpoints = out.join(resume::CHECKPOINT_DIR);
+    if saved.is_none() {
+        // A fresh run must not pick up an earlier run's state or checkpoints.
+        remove_file_if_present(&out.join(resume::STATE_FILE))?;
+        remove_dir_if_present(&checkpoints)?;
+    }
     let mut timings = Vec::new();
     let mut stage = Instant::now();
     let mut lap = |name: &str, timings: &mut Vec<StageTiming>| {
@@ -334,9 +424,29 @@ pub fn run(input: &Path, out: &Path, cfg: &Config, quiet: bool) -> Result<Outcom
     }
     crate::degenerate::check_model(input, &model)?;
     lap("load", &mut timings);
-    for d in [&model_dir, &report_dir, &dataset_dir] {
+    for d in [&model_dir, &report_dir, &dataset_dir, &checkpoints] {
         std::fs::create_dir_all(d).map_err(io_err(d))?;
     }
+    let mut state = match saved {
+        Some(s) => {
+            say(format!(
+                "      resuming the run in {} ({})",
+                out.display(),
+                resume_summary(&s)
+            ));
+            s
+        }
+        None => {
+            let stamp = InputStamp::of(input).map_err(|source| ResumeError::Io {
+                path: input.to_path_buf(),
+                source,
+            })?;
+            RunState::start(stamp, cfg)
+        }
+    };
+    // From here until the end the folder says "running".
+    state.status = Status::Running;
+    state.save(out)?;
 
     let rig = build_rig(&model, &cfg.rig)?;
     lap("rig", &mut timings);
@@ -359,19 +469,31 @@ pub fn run(input: &Path, out: &Path, cfg: &Config, quiet: bool) -> Result<Outcom
         masks: true,
         depth: false,
     };
-    let bar = progress_bar(rig.train.len() as u64, quiet, "views");
-    let train_images = views::write_dataset(
-        &dataset_dir,
-        &model,
-        &rig.train,
-        &opts,
-        &dataset_opts,
-        &|| {
-            bar.inc(1);
-        },
-    )?;
-    bar.finish_and_clear();
-    lap("render training views + write dataset", &mut timings);
+    let train_images = if state.dataset_written {
+        // The dataset's PNGs are quantised: training needs the renders themselves, which are
+        // deterministic, so they are made again in memory.
+        say("      the dataset is already written: rendering the training views in memory".into());
+        let images = views::render_views(&model, &rig.train, &opts)?;
+        lap("render training views", &mut timings);
+        images
+    } else {
+        let bar = progress_bar(rig.train.len() as u64, quiet, "views");
+        let images = views::write_dataset(
+            &dataset_dir,
+            &model,
+            &rig.train,
+            &opts,
+            &dataset_opts,
+            &|| {
+                bar.inc(1);
+            },
+        )?;
+        bar.finish_and_clear();
+        state.dataset_written = true;
+        state.save(out)?;
+        lap("render training views + write dataset", &mut timings);
+        images
+    };
     let heldout_images = views::render_views(&model, &rig.heldout, &opts)?;
     crate::degenerate::check_views(
         input,
@@ -429,14 +551,14 @@ pub fn run(input: &Path, out: &Path, cfg: &Config, quiet: bool) -> Result<Outcom
     }
     let mut runs = Vec::new();
     let mut renders_per_run: Vec<Vec<RenderedView>> = Vec::new();
-    let mut main_model = PathBuf::new();
+    let mut trained_models = Vec::new();
     for (k, &mode) in modes.iter().enumerate() {
         let model_path = if k == 0 {
             model_dir.join("splats.ply")
         } else {
             model_dir.join(format!("splats-{mode}.ply"))
         };
-        let (run, renders) = init_train_eval(
+        let (run, renders, trained) = init_train_eval(
             &surface,
             &train_views,
             &heldout,
@@ -444,19 +566,31 @@ pub fn run(input: &Path, out: &Path, cfg: &Config, quiet: bool) -> Result<Outcom
             cfg,
             mode,
             &model_path,
-            k == 0 && cfg.output.splat_file,
+            (out, &mut state, k),
             quiet,
         )?;
-        if k == 0 {
-            main_model = model_path;
-        }
         say(format!(
             "      {mode} init: held-out PSNR {:.2} dB on black, {:.2} dB on white, {} splats",
             run.metrics.psnr_black, run.metrics.psnr_white, run.metrics.splats
         ));
         runs.push(run);
         renders_per_run.push(renders);
+        trained_models.push(trained);
     }
+
+    // The models only now that every run is trained and evaluated, the report after them and the
+    // "finished" state last: whatever a kill leaves behind, a model file is the final one.
+    for (k, (run, trained)) in runs.iter_mut().zip(&trained_models).enumerate() {
+        say(format!("[5/6] writing {}", run.model_path.display()));
+        let t = Instant::now();
+        write_model(&run.model_path, trained, k == 0 && cfg.output.splat_file)?;
+        run.model_bytes = std::fs::metadata(&run.model_path).map_or(0, |m| m.len());
+        run.timings.push(StageTiming {
+            stage: "write model".to_string(),
+            seconds: t.elapsed().as_secs_f64(),
+        });
+    }
+    let main_model = model_dir.join("splats.ply");
 
     say("[6/6] writing the report".to_string());
     let pictures = pick_pictures(&heldout, &renders_per_run, cfg.eval.report_views);
@@ -472,6 +606,9 @@ pub fn run(input: &Path, out: &Path, cfg: &Config, quiet: bool) -> Result<Outcom
     };
     report.total_seconds = started.elapsed().as_secs_f64();
     let html = write_report(&report_dir, &report, &pictures).map_err(io_err(&report_dir))?;
+    state.status = Status::Finished;
+    state.save(out)?;
+    remove_dir_if_present(&checkpoints)?;
     Ok(Outcome {
         report,
         html,
@@ -479,7 +616,9 @@ pub fn run(input: &Path, out: &Path, cfg: &Config, quiet: bool) -> Result<Outcom
     })
 }
 
-/// Initialises, trains, writes and evaluates one model.
+/// Initialises, trains and evaluates one model: the `k`-th init mode of the run in `out`, whose
+/// progress `state` records (and, when resuming, already holds). Returns its report, its held-out
+/// renders and the trained splats, which the caller writes once every mode is done.
 #[allow(clippy::too_many_arguments)]
 fn init_train_eval(
     surface: &SurfacePoints,
@@ -489,9 +628,9 @@ fn init_train_eval(
     cfg: &Config,
     mode: InitMode,
     model_path: &Path,
-    splat_file: bool,
+    (out, state, k): (&Path, &mut RunState, usize),
     quiet: bool,
-) -> Result<(RunReport, Vec<RenderedView>), PipelineError> {
+) -> Result<(RunReport, Vec<RenderedView>, Splats), PipelineError> {
     let mut timings = Vec::new();
     let mut stage = Instant::now();
     let mut lap = |name: &str, timings: &mut Vec<StageTiming>| {
@@ -506,24 +645,81 @@ fn init_train_eval(
             eprintln!("{msg}");
         }
     };
-    say(format!("[3/6] {mode} init"));
-    let mut init_cfg = cfg.init.clone();
-    init_cfg.mode = mode;
-    let (splats, summary) =
-        init::initialise(surface, &init_cfg, cfg.renderer.exponent, cfg.training.seed)?;
-    say(format!(
-        "      {} splats, SH degree {}{}",
-        summary.splats,
-        summary.sh_degree,
-        summary
-            .sh_fit_rms
-            .map(|e| format!(
-                " (SH fit RMS by degree: {:.4} {:.4} {:.4} {:.4})",
-                e[0], e[1], e[2], e[3]
-            ))
-            .unwrap_or_default()
-    ));
-    lap("init", &mut timings);
+    let ckpt = resume::checkpoint_path(out, mode);
+    let saved = state.modes.get(k).cloned();
+    if let Some(m) = &saved
+        && m.mode != mode
+    {
+        return Err(ResumeError::Malformed {
+            path: out.join(resume::STATE_FILE),
+            problem: format!("run {k} is {} init, the configuration says {mode}", m.mode),
+        }
+        .into());
+    }
+    let resume_from_checkpoint = saved.is_some() && ckpt.is_file();
+    if saved.is_none() {
+        // No checkpoint can belong to a mode the state does not list yet.
+        remove_file_if_present(&ckpt)?;
+    }
+    if saved.as_ref().is_some_and(|m| m.trained.is_some()) && !resume_from_checkpoint {
+        return Err(ResumeError::Checkpoint {
+            path: ckpt,
+            problem: "the trained model's checkpoint is missing".into(),
+        }
+        .into());
+    }
+
+    // Initial splats, unless training continues from a checkpoint, and the training schedule.
+    // The schedule is fixed once, before the first step, and saved: a resumed run must train on
+    // the same one even when it came from timed probe steps.
+    let mut fresh = None;
+    let (summary, schedule) = match &saved {
+        Some(m) if resume_from_checkpoint => {
+            say(format!(
+                "[3/6] {mode} init: continuing from {}",
+                ckpt.display()
+            ));
+            lap("init", &mut timings);
+            (m.init.clone(), m.schedule)
+        }
+        _ => {
+            say(format!("[3/6] {mode} init"));
+            let mut init_cfg = cfg.init.clone();
+            init_cfg.mode = mode;
+            let (splats, summary) =
+                init::initialise(surface, &init_cfg, cfg.renderer.exponent, cfg.training.seed)?;
+            say(format!(
+                "      {} splats, SH degree {}{}",
+                summary.splats,
+                summary.sh_degree,
+                summary
+                    .sh_fit_rms
+                    .map(|e| format!(
+                        " (SH fit RMS by degree: {:.4} {:.4} {:.4} {:.4})",
+                        e[0], e[1], e[2], e[3]
+                    ))
+                    .unwrap_or_default()
+            ));
+            lap("init", &mut timings);
+            let schedule = match &saved {
+                Some(m) => m.schedule,
+                None => {
+                    let base = train_config(cfg, mode, summary.sh_degree);
+                    let schedule = plan(&splats, train_views, &base, cfg.training.scale_densify)?;
+                    state.modes.push(ModeState {
+                        mode,
+                        init: summary.clone(),
+                        schedule,
+                        trained: None,
+                    });
+                    state.save(out)?;
+                    schedule
+                }
+            };
+            fresh = Some(splats);
+            (summary, schedule)
+        }
+    };
 
     say(format!(
         "[4/6] training {} iterations{}",
@@ -533,32 +729,54 @@ fn init_train_eval(
             .map(|b| format!(" (budget {b:.0} s)"))
             .unwrap_or_default()
     ));
-    let tc = train_config(cfg, mode, summary.sh_degree);
-    let (trained, train_report) = train(
-        splats,
-        train_views.to_vec(),
-        tc,
-        cfg.training.scale_densify,
-        quiet,
-    )?;
+    let base = train_config(cfg, mode, summary.sh_degree);
+    let tc = scheduled_config(base, &schedule);
+    if let (Some(steps), Some(d)) = (schedule.densify_steps, tc.densify) {
+        say(format!(
+            "      densification scaled to ~{steps} steps: from step {} every {} until {}, opacity reset every {}",
+            d.start, d.interval, d.stop, d.opacity_reset_interval
+        ));
+    }
+    let mut trainer = match fresh {
+        Some(splats) => Trainer::new(splats, train_views.to_vec(), tc)?,
+        None => Trainer::resume(&ckpt, train_views.to_vec(), tc).map_err(|e| {
+            ResumeError::Checkpoint {
+                path: ckpt.clone(),
+                problem: e.to_string(),
+            }
+        })?,
+    };
+    let train_report = match saved.and_then(|m| m.trained) {
+        Some(t) => {
+            say(format!(
+                "      trained already ({} steps)",
+                trainer.iteration()
+            ));
+            trainer.report(t.stopped_by_budget)
+        }
+        None => {
+            if trainer.iteration() > 0 {
+                say(format!(
+                    "      continuing from step {}",
+                    trainer.iteration()
+                ));
+            }
+            let every = Duration::from_secs_f64(cfg.output.checkpoint_interval_s);
+            let report = train(&mut trainer, &ckpt, every, quiet)?;
+            if let Some(m) = state.modes.get_mut(k) {
+                m.trained = Some(TrainedState {
+                    stopped_by_budget: report.stopped_by_budget,
+                });
+            }
+            state.save(out)?;
+            report
+        }
+    };
+    let trained = trainer.splats().clone();
+    drop(trainer);
     lap("train", &mut timings);
 
-    say(format!(
-        "[5/6] writing {} and evaluating",
-        model_path.display()
-    ));
-    splat_core::ply::write_splats(model_path, &trained).map_err(|source| PipelineError::Model {
-        path: model_path.to_path_buf(),
-        source: Box::new(source),
-    })?;
-    if splat_file {
-        let p = model_path.with_extension("splat");
-        splat_core::export::write_splat(&p, &trained).map_err(|source| PipelineError::Model {
-            path: p,
-            source: Box::new(source),
-        })?;
-    }
-    lap("write model", &mut timings);
+    say(format!("[5/6] evaluating the {mode} model"));
     let (metrics, renders): (Metrics, Vec<RenderedView>) = evaluate(
         &trained,
         heldout,
@@ -583,48 +801,138 @@ fn init_train_eval(
             .collect(),
         metrics,
         model_path: model_path.to_path_buf(),
-        model_bytes: std::fs::metadata(model_path).map_or(0, |m| m.len()),
+        // Filled in when the model is written, after every run is done.
+        model_bytes: 0,
         timings,
     };
-    Ok((run, renders))
+    Ok((run, renders, trained))
 }
 
-/// Trains with a progress bar; returns the splats and the trainer's report.
-fn train(
-    splats: Splats,
-    views: Vec<View>,
-    mut tc: TrainConfig,
-    scale_schedule: bool,
-    quiet: bool,
-) -> Result<(Splats, splat_train::TrainReport), PipelineError> {
-    if scale_schedule && let Some(d) = tc.densify {
-        let (steps, left) = step_budget(&splats, &views, &tc)?;
-        let scaled = scale_densify(&d, steps, tc.lr.opacity);
-        if !quiet {
-            eprintln!(
-                "      densification scaled to ~{steps} steps: from step {} every {} until {}, opacity reset every {}",
-                scaled.start, scaled.interval, scaled.stop, scaled.opacity_reset_interval
-            );
-        }
-        tc.densify = Some(scaled);
-        if left.is_some() {
-            tc.time_budget = left;
-        }
+/// Writes the model PLY (and the `.splat` file when asked), each atomically.
+fn write_model(path: &Path, splats: &Splats, splat_file: bool) -> Result<(), PipelineError> {
+    splat_core::ply::write_splats(path, splats).map_err(|source| PipelineError::Model {
+        path: path.to_path_buf(),
+        source: Box::new(source),
+    })?;
+    if splat_file {
+        let p = path.with_extension("splat");
+        splat_core::export::write_splat(&p, splats).map_err(|source| PipelineError::Model {
+            path: p,
+            source: Box::new(source),
+        })?;
     }
-    let total = u64::from(tc.iterations);
-    let mut trainer = Trainer::new(splats, views, tc)?;
-    let bar = progress_bar(total, quiet, "steps");
-    let report = trainer.run(|p| {
-        bar.set_position(u64::from(p.step.iteration));
-        if p.step.iteration % 25 == 0 {
-            bar.set_message(format!(
-                "PSNR {:.2} dB, {} splats",
-                p.step.psnr, p.step.splats
-            ));
+    Ok(())
+}
+
+/// The schedule of a run about to start: with `scale_schedule` and densification, the steps the
+/// densification schedule is scaled to ([`step_budget`]: timed probe steps under a time budget)
+/// and the budget left after the probe; otherwise the configuration's own.
+fn plan(
+    splats: &Splats,
+    views: &[View],
+    tc: &TrainConfig,
+    scale_schedule: bool,
+) -> Result<Schedule, PipelineError> {
+    if scale_schedule && tc.densify.is_some() {
+        let (steps, left) = step_budget(splats, views, tc)?;
+        Ok(Schedule {
+            densify_steps: Some(steps),
+            time_budget: left,
+        })
+    } else {
+        Ok(Schedule {
+            densify_steps: None,
+            time_budget: tc.time_budget,
+        })
+    }
+}
+
+/// `tc` on `schedule`: the densification scaled to its steps, its time budget.
+fn scheduled_config(mut tc: TrainConfig, schedule: &Schedule) -> TrainConfig {
+    if let (Some(steps), Some(d)) = (schedule.densify_steps, tc.densify) {
+        tc.densify = Some(scale_densify(&d, steps, tc.lr.opacity));
+    }
+    if schedule.time_budget.is_some() {
+        tc.time_budget = schedule.time_budget;
+    }
+    tc
+}
+
+/// Trains to the end with a progress bar, saving the trainer's state to `ckpt` whenever `every`
+/// has passed since the last save, and once more at the end (the later stages resume from that).
+///
+/// The trainer pauses between two steps to save, which changes nothing it computes: a run
+/// checkpointed at any moments ends bit-identical to one that never stopped.
+fn train(
+    trainer: &mut Trainer,
+    ckpt: &Path,
+    every: Duration,
+    quiet: bool,
+) -> Result<splat_train::TrainReport, PipelineError> {
+    let total = trainer.config().iterations;
+    let bar = progress_bar(u64::from(total), quiet, "steps");
+    bar.set_position(u64::from(trainer.iteration()));
+    let mut saved_at = Instant::now();
+    let report = loop {
+        let r = trainer.run_until(trainer.iteration() + 1, |p| {
+            bar.set_position(u64::from(p.step.iteration));
+            if p.step.iteration % 25 == 0 {
+                bar.set_message(format!(
+                    "PSNR {:.2} dB, {} splats",
+                    p.step.psnr, p.step.splats
+                ));
+            }
+        });
+        if r.iterations >= total || r.stopped_by_budget {
+            break r;
         }
-    });
+        if saved_at.elapsed() >= every {
+            trainer.save_checkpoint(ckpt)?;
+            saved_at = Instant::now();
+        }
+    };
+    trainer.save_checkpoint(ckpt)?;
     bar.finish_and_clear();
-    Ok((trainer.splats().clone(), report))
+    Ok(report)
+}
+
+/// Removes `path` (a file) unless it is not there.
+fn remove_file_if_present(path: &Path) -> Result<(), PipelineError> {
+    match std::fs::remove_file(path) {
+        Ok(()) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+        Err(e) => Err(io_err(path)(e)),
+    }
+}
+
+/// Removes the folder `path` and its contents unless it is not there.
+fn remove_dir_if_present(path: &Path) -> Result<(), PipelineError> {
+    match std::fs::remove_dir_all(path) {
+        Ok(()) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+        Err(e) => Err(io_err(path)(e)),
+    }
+}
+
+/// One line on what a saved run has done.
+fn resume_summary(s: &RunState) -> String {
+    let mut parts = vec![if s.dataset_written {
+        "dataset written".to_string()
+    } else {
+        "dataset not written".to_string()
+    }];
+    for m in &s.modes {
+        parts.push(format!(
+            "{} {}",
+            m.mode,
+            if m.trained.is_some() {
+                "trained"
+            } else {
+                "training"
+            }
+        ));
+    }
+    parts.join(", ")
 }
 
 /// A progress bar on stderr (hidden when `quiet`) counting `unit`.

@@ -3,6 +3,7 @@
 use std::path::PathBuf;
 
 use transcode::config::Config;
+use transcode::pipeline::{Finish, RunOptions};
 
 use super::config::{Overrides, flat, require_file};
 
@@ -16,6 +17,14 @@ pub struct Args {
     out: PathBuf,
     #[command(flatten)]
     overrides: Overrides,
+    /// Continue the run saved in DIR (after a crash or kill) from its last checkpoint, with the
+    /// same input and settings; a finished run is left as it is.
+    #[arg(long)]
+    resume: bool,
+    /// Save the training state at most this many seconds apart (`output.checkpoint_interval_s`,
+    /// default 60; 0 = after every step).
+    #[arg(long, value_name = "SECONDS")]
+    checkpoint_interval: Option<f64>,
     /// Print nothing but errors.
     #[arg(long)]
     quiet: bool,
@@ -24,10 +33,28 @@ pub struct Args {
 /// Runs `transcode run`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     require_file(&args.input, "input")?;
-    let config = args.overrides.resolve(Config::default())?;
-    let outcome =
-        transcode::pipeline::run(&args.input, &args.out, &config, args.quiet).map_err(flat)?;
-    print_outcome(&outcome);
+    let mut config = args.overrides.resolve(Config::default())?;
+    if let Some(s) = args.checkpoint_interval {
+        config.output.checkpoint_interval_s = s;
+        config
+            .validate()
+            .map_err(|e| anyhow::anyhow!("{e} (from --checkpoint-interval)"))?;
+    }
+    let opts = RunOptions {
+        quiet: args.quiet,
+        resume: args.resume,
+    };
+    match transcode::pipeline::run_with(&args.input, &args.out, &config, opts).map_err(flat)? {
+        Finish::Completed(outcome) => print_outcome(&outcome),
+        Finish::AlreadyFinished { model, html } => {
+            println!(
+                "the run in {} is already finished; nothing to resume",
+                args.out.display()
+            );
+            println!("model:  {}", model.display());
+            println!("report: {}", html.display());
+        }
+    }
     Ok(())
 }
 

@@ -74,12 +74,17 @@ pub struct Args {
     /// A second COLMAP dataset of held-out views to evaluate on (default: the training views).
     #[arg(long)]
     pub heldout: Option<PathBuf>,
-    /// Continue from `OUT/checkpoint.bin` up to `--iterations`.
+    /// Continue from `OUT/checkpoint.bin` up to `--iterations`, with the same other settings
+    /// (a finished run is left as it is).
     #[arg(long)]
     pub resume: bool,
-    /// Write `OUT/checkpoint.bin` every K iterations (0: only at the end).
+    /// Write `OUT/checkpoint.bin` every K iterations (0: only by wall time and at the end).
     #[arg(long, default_value_t = 0)]
     pub checkpoint_every: u32,
+    /// Also write `OUT/checkpoint.bin` whenever this many seconds of wall time have passed since
+    /// the last one (0: after every step).
+    #[arg(long, value_name = "SECONDS", default_value_t = transcode::config::DEFAULT_CHECKPOINT_INTERVAL_S)]
+    pub checkpoint_interval: f64,
     /// Divide the image size by this factor (intrinsics are scaled to match).
     #[arg(long, default_value_t = 1.0)]
     pub downscale: f64,
@@ -147,6 +152,46 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if !(args.downscale.is_finite() && args.downscale >= 1.0) {
         bail!("--downscale {} must be at least 1", args.downscale);
     }
+    if !(args.checkpoint_interval.is_finite() && args.checkpoint_interval >= 0.0) {
+        bail!(
+            "--checkpoint-interval {} must be a number of seconds ≥ 0",
+            args.checkpoint_interval
+        );
+    }
+    let settings = Settings::of(&args);
+    let settings_path = args.out.join(SETTINGS_FILE);
+    let ckpt = args.out.join("checkpoint.bin");
+    // Killed before its first checkpoint, a run has nothing to continue from: it starts again.
+    let resume = args.resume && ckpt.is_file();
+    if args.resume && !resume && !args.quiet {
+        eprintln!(
+            "no checkpoint in {}: starting from the beginning",
+            args.out.display()
+        );
+    }
+    if resume {
+        let saved = std::fs::read(&settings_path).with_context(|| {
+            format!(
+                "cannot read {} (run without --resume to start over)",
+                settings_path.display()
+            )
+        })?;
+        let saved: Settings = serde_json::from_slice(&saved).with_context(|| {
+            format!(
+                "{} is damaged; run without --resume to start over",
+                settings_path.display()
+            )
+        })?;
+        if saved != settings {
+            bail!(
+                "the run in {} was started with other settings ({}); resume it with the same \
+                 ones (only --iterations, --time-budget, --eval-every and the checkpoint flags may \
+                 change), or run without --resume to start over",
+                args.out.display(),
+                saved.differences(&settings).join(", ")
+            );
+        }
+    }
     let (views, rec) = load_dataset(&args.dataset, args.downscale)?;
     let eval_views = match &args.heldout {
         Some(dir) => load_dataset(dir, args.downscale)?.0,
@@ -155,14 +200,51 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
     let config = train_config(&args);
-    let ckpt = args.out.join("checkpoint.bin");
-    let mut trainer = if args.resume {
-        Trainer::resume(&ckpt, views, config)
-            .with_context(|| format!("cannot resume from {}", ckpt.display()))?
+    let ply = args.out.join("splats.ply");
+    let history_path = args.out.join("history.json");
+    let mut trainer = if resume {
+        Trainer::resume(&ckpt, views, config).with_context(|| {
+            format!(
+                "cannot resume from {} (run without --resume to start over)",
+                ckpt.display()
+            )
+        })?
     } else {
         let splats = initial_splats(&args, &rec, &views)?;
         Trainer::new(splats, views, config).context("cannot set up training")?
     };
+    let spent = trainer.report(false).elapsed_s;
+    let over =
+        trainer.iteration() >= args.iterations || args.time_budget.is_some_and(|b| spent >= b);
+    if resume && over && ply.is_file() && history_path.is_file() {
+        println!(
+            "the run in {} is already finished ({} iterations); nothing to resume",
+            args.out.display(),
+            trainer.iteration()
+        );
+        println!("wrote {} and {}", ply.display(), history_path.display());
+        return Ok(());
+    }
+    // The files that mark a finished run go before training and come back only at its end, so
+    // an interrupted run never looks finished.
+    // A fresh run also drops an earlier run's checkpoint, which its settings no longer describe.
+    let stale: &[&PathBuf] = if resume {
+        &[&ply, &history_path]
+    } else {
+        &[&ply, &history_path, &ckpt]
+    };
+    for marker in stale {
+        match std::fs::remove_file(marker) {
+            Ok(()) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => return Err(e).with_context(|| format!("cannot remove {}", marker.display())),
+        }
+    }
+    if !resume {
+        let json = serde_json::to_vec_pretty(&settings).context("cannot encode the settings")?;
+        write_atomic(&settings_path, &json)
+            .with_context(|| format!("cannot write {}", settings_path.display()))?;
+    }
     let background = match args.background {
         BackgroundArg::White => Vec3::ONE,
         BackgroundArg::Black | BackgroundArg::Random => Vec3::ZERO,
@@ -183,15 +265,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut ema: Option<(f64, f64)> = None;
     let mut pending_eval = false;
     let mut pending_ckpt = false;
+    let interval = Duration::from_secs_f64(args.checkpoint_interval);
+    let mut saved_at = Instant::now();
     // The trainer pauses at each evaluation or checkpoint point so that both happen outside its
-    // timed steps.
+    // timed steps; it pauses after every step to look at the clock for the wall-time checkpoints
+    // (pausing changes nothing it computes).
     let report = loop {
         let stop_at = next_stop(
             trainer.iteration(),
             args.iterations,
             args.eval_every,
             args.checkpoint_every,
-        );
+        )
+        .min(trainer.iteration() + 1);
         let r = trainer.run_until(stop_at, |p| {
             let (l, q) = ema.map_or((p.step.loss, p.step.psnr), |(l, q)| {
                 (0.95 * l + 0.05 * p.step.loss, 0.95 * q + 0.05 * p.step.psnr)
@@ -208,6 +294,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let it = r.iterations;
         pending_eval |= args.eval_every > 0 && it.is_multiple_of(args.eval_every);
         pending_ckpt |= args.checkpoint_every > 0 && it.is_multiple_of(args.checkpoint_every);
+        pending_ckpt |= saved_at.elapsed() >= interval;
         let done = it >= args.iterations || r.stopped_by_budget;
         if pending_eval || done {
             let e = evaluate(trainer.splats(), &eval_views, background);
@@ -238,6 +325,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 .save_checkpoint(&ckpt)
                 .context("cannot write the checkpoint")?;
             pending_ckpt = false;
+            saved_at = Instant::now();
         }
         if done {
             break r;
@@ -245,10 +333,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     bar.finish_and_clear();
 
-    let ply = args.out.join("splats.ply");
     splat_core::ply::write_splats(&ply, trainer.splats())
         .with_context(|| format!("cannot write {}", ply.display()))?;
-    let history_path = args.out.join("history.json");
     write_history(
         &history_path,
         &args,
@@ -261,6 +347,72 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let last: Option<&EvalPoint> = evals.last();
     summary(&report, last, &ply, &history_path, wall.elapsed());
     Ok(())
+}
+
+/// Name of the file in `OUT` that records the settings a run was started with.
+const SETTINGS_FILE: &str = "train-settings.json";
+
+/// The settings that define a run of `transcode train`: `--resume` refuses others. Floats are
+/// kept as their shortest decimal text, which reads back exactly.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, serde::Deserialize)]
+struct Settings {
+    dataset: String,
+    heldout: Option<String>,
+    init: String,
+    random_points: usize,
+    freeze_positions: bool,
+    densify: bool,
+    max_splats: usize,
+    sh_degree: u32,
+    downscale: String,
+    background: String,
+    seed: u64,
+    warmup_factor: u32,
+    warmup_steps: u32,
+}
+
+impl Settings {
+    fn of(args: &Args) -> Self {
+        let path = |p: &Path| {
+            std::fs::canonicalize(p)
+                .unwrap_or_else(|_| p.to_path_buf())
+                .display()
+                .to_string()
+        };
+        Self {
+            dataset: path(&args.dataset),
+            heldout: args.heldout.as_deref().map(path),
+            init: format!("{:?}", args.init),
+            random_points: args.random_points,
+            freeze_positions: args.freeze_positions,
+            densify: !args.no_densify && !args.freeze_positions,
+            max_splats: args.max_splats,
+            sh_degree: args.sh_degree,
+            downscale: args.downscale.to_string(),
+            background: format!("{:?}", args.background),
+            seed: args.seed,
+            warmup_factor: args.warmup_factor,
+            warmup_steps: args.warmup_steps,
+        }
+    }
+
+    /// `name: saved → now` for each setting that differs.
+    fn differences(&self, now: &Self) -> Vec<String> {
+        let (Ok(serde_json::Value::Object(a)), Ok(serde_json::Value::Object(b))) =
+            (serde_json::to_value(self), serde_json::to_value(now))
+        else {
+            return Vec::new();
+        };
+        a.iter()
+            .filter(|(k, v)| b.get(*k) != Some(*v))
+            .map(|(k, v)| {
+                format!(
+                    "{k}: {v} → {}",
+                    b.get(k).unwrap_or(&serde_json::Value::Null)
+                )
+            })
+            .collect()
+    }
 }
 
 /// The next iteration at which to pause: the next multiple of either interval, or the end.

@@ -49,7 +49,7 @@ pub enum InitError {
 }
 
 /// What initialisation did, for the report.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize)]
 pub struct InitSummary {
     /// Surface or sparse.
     pub mode: InitMode,
