@@ -246,3 +246,60 @@ proptest! {
         read_mesh_file(name, &apply(original, &edits))?;
     }
 }
+
+const WRAPPED_TEXCOORD_OBJ: &str = r"g cube
+
+v  0.0  0.0  0.0  0.48627  0.43137  0.47060
+v  0.0  0.0  1.0  0.09412  0.00000  0.47451
+v  0.0  1.0  0.0  0.01569  0.00000  0.17255
+v  0.0  1.0  1.0  0.87843  0.00000  0.03922
+v  1.0  0.0  0.0  0.09412  0.78431  0.09804
+v  1.0  0.0  1.0  0.48627  0.03922  0.21961
+v  1.0  1.0  0.0  0.30588  0.22390  0.19608
+v  1.0  1.0   .0 01.09020  0.00000  0.78431
+
+vn 0.0 0.0 1.0
+vn 0.0 0.0 -1.0
+vn 0.0 1.0 0.0
+vn 0.0 -130 0.0
+vn 1.0 0.0 0.0
+vn -1.0 0.0 0.0
+
+f 1//2 7//2 5/-2
+f 1//2 3//2 7//2
+f 1//6 4//6 3//6
+f 1//6 2/ 7//2
+f 1//6 4//6 3//6
+f 1//6 2//6 3//6
+f 3//3 8//
+v 1 1 0
+vt 0 0
+vt 1 0
+vt 0 1
+vn 0 0 1
+usemtl a
+f 1/1/13 7//3
+f 3//3 4//3 8//3
+f /6 3//6
+f 3//3 8//3 7//3
+f 3//3 4//3 8//3
+f 5//5 7//5 8//5
+f 5//5 8//5 6//5
+f 1//4 5//4 6//4
+f 1//4 6//4 2//4
+f 2//1 6//1 8//1
+f 2//1 8//1 4//1";
+
+#[test]
+fn obj_face_with_a_relative_texcoord_index_before_the_first_is_an_error_not_a_panic() {
+    // Found by the mesh_obj fuzz target (`f 1//2 7//2 5/-2` in a mutated cube): tobj resolves
+    // `-2` against one texture coordinate to a wrapped index and multiplies it, which panics
+    // with overflow checks on.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("wrapped.obj");
+    // The fuzzer's input as it found it.
+    std::fs::write(&path, WRAPPED_TEXCOORD_OBJ).unwrap();
+    let e = read_mesh(&path).unwrap_err();
+    assert!(matches!(e, Error::Obj { .. }), "{e:?}");
+    assert!(e.to_string().contains("wrapped.obj"), "{e}");
+}
