@@ -29,17 +29,22 @@ pub fn scratch_file(name: &str, bytes: &[u8]) -> PathBuf {
     path
 }
 
-/// plenoptic-io runs `gltf::import` inside `catch_unwind` (the importer has panicked on
-/// malformed input before) and turns a panic there into `Error::Gltf`. libFuzzer's panic hook
-/// aborts on every panic, caught or not, so this hook lets through (silently) only panics
-/// raised under `gltf::import`; every other panic still goes to libFuzzer's hook and is a crash.
-pub fn allow_caught_gltf_panics() {
+/// plenoptic-io runs `gltf::import` and `tobj::load_obj` inside `catch_unwind` (both have
+/// panicked on malformed input) and turns a panic there into `Error::Gltf` / `Error::Obj`.
+/// libFuzzer's panic hook aborts on every panic, caught or not, so this hook lets through
+/// (silently) only panics whose backtrace has that `catch_unwind` frame; every other panic
+/// still goes to libFuzzer's hook and is a crash. cargo-fuzz builds with line-tables-only debug
+/// information, where the frame reads `catch_unwind<plenoptic_io::gltf_mesh::read_gltf::…>`.
+pub fn allow_caught_reader_panics() {
     let fuzzer_hook = std::panic::take_hook();
     std::panic::set_hook(Box::new(move |info| {
         let trace = std::backtrace::Backtrace::force_capture().to_string();
-        if trace.contains("gltf::import::") && trace.contains("catch_unwind") {
-            return;
+        let caught = trace.lines().any(|frame| {
+            frame.contains("catch_unwind<plenoptic_io::gltf_mesh::read_gltf")
+                || frame.contains("catch_unwind<plenoptic_io::obj::read_obj")
+        });
+        if !caught {
+            fuzzer_hook(info);
         }
-        fuzzer_hook(info);
     }));
 }
