@@ -127,6 +127,30 @@ fn missing_resource(path: &Path) -> Option<String> {
         .map(|(what, _)| format!("{what}, which does not exist in {}", dir.display()))
 }
 
+/// An accessor's component type and dimensions.
+type Layout = (gltf::accessor::DataType, gltf::accessor::Dimensions);
+
+/// The layouts glTF allows for the attributes we read (`None`: the indices); empty for others.
+fn layouts(semantic: Option<&gltf::Semantic>) -> &'static [Layout] {
+    use gltf::Semantic;
+    use gltf::accessor::DataType::{F32, U8, U16, U32};
+    use gltf::accessor::Dimensions::{Scalar, Vec2, Vec3, Vec4};
+    match semantic {
+        None => &[(U8, Scalar), (U16, Scalar), (U32, Scalar)],
+        Some(Semantic::Positions | Semantic::Normals) => &[(F32, Vec3)],
+        Some(Semantic::TexCoords(0)) => &[(U8, Vec2), (U16, Vec2), (F32, Vec2)],
+        Some(Semantic::Colors(0)) => &[
+            (U8, Vec3),
+            (U16, Vec3),
+            (F32, Vec3),
+            (U8, Vec4),
+            (U16, Vec4),
+            (F32, Vec4),
+        ],
+        Some(_) => &[],
+    }
+}
+
 /// Most items a sparse accessor without a buffer view may declare (16.7 M; 200 MB of positions).
 const MAX_VIEWLESS_ITEMS: usize = 1 << 24;
 
@@ -157,10 +181,13 @@ impl Builder<'_> {
     /// Refuses accessor counts that gltf's readers would trust: a count of 0 underflows their
     /// bounds arithmetic, and a sparse accessor without a buffer view yields `count` items (zeros
     /// plus the sparse values) from no data at all, so a tiny file could claim billions.
+    /// A layout outside `layouts` (when not empty) is refused too: gltf's readers assert or hit
+    /// `unreachable!` on component types and dimensions glTF does not allow for the attribute.
     fn check_accessor(
         &self,
         what: &str,
         role: &str,
+        layouts: &[Layout],
         accessor: &gltf::Accessor<'_>,
     ) -> Result<(), Error> {
         let bad = |problem: String| {
@@ -169,6 +196,13 @@ impl Builder<'_> {
                 accessor.index()
             ))
         };
+        let layout = (accessor.data_type(), accessor.dimensions());
+        if !layouts.is_empty() && !layouts.contains(&layout) {
+            return Err(bad(format!(
+                "{:?} {:?} is not a layout glTF allows here",
+                layout.0, layout.1
+            )));
+        }
         if accessor.count() == 0 {
             return Err(bad("count is 0 (glTF requires at least 1)".into()));
         }
@@ -201,10 +235,14 @@ impl Builder<'_> {
         }
         let accessors = primitive
             .attributes()
-            .map(|(semantic, a)| (format!("{semantic:?}"), a))
-            .chain(primitive.indices().map(|a| ("indices".to_string(), a)));
-        for (role, accessor) in accessors {
-            self.check_accessor(&what, &role, &accessor)?;
+            .map(|(semantic, a)| (format!("{semantic:?}"), layouts(Some(&semantic)), a))
+            .chain(
+                primitive
+                    .indices()
+                    .map(|a| ("indices".to_string(), layouts(None), a)),
+            );
+        for (role, layouts, accessor) in accessors {
+            self.check_accessor(&what, &role, layouts, &accessor)?;
         }
         let reader = primitive.reader(|b| self.buffers.get(b.index()).map(|d| &d.0[..]));
         let positions: Vec<Vec3> = reader

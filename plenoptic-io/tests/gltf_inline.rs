@@ -176,6 +176,13 @@ fn accessor_counts_the_file_cannot_back_are_errors() {
             r#"{"componentType": 5126, "count": 4000000000, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0], "sparse": {"count": 1, "indices": {"bufferView": 2, "componentType": 5125}, "values": {"bufferView": 0}}}"#,
             "4000000000 items with no buffer view",
         ),
+        // Found by the mesh_gltf fuzz target (on NORMAL): gltf's reader asserts that the
+        // layout matches the attribute; without debug assertions it read 12-byte items from
+        // 2-byte ones.
+        (
+            r#"{"bufferView": 0, "componentType": 5123, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]}"#,
+            "U16 Vec3 is not a layout glTF allows here",
+        ),
         (
             r#"{"componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0], "sparse": {"count": 0, "indices": {"bufferView": 2, "componentType": 5125}, "values": {"bufferView": 0}}}"#,
             "sparse count is 0",
