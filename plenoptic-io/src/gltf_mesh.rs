@@ -206,6 +206,15 @@ impl Builder<'_> {
         if accessor.count() == 0 {
             return Err(bad("count is 0 (glTF requires at least 1)".into()));
         }
+        // gltf asserts the stride holds an item; without debug assertions items would overlap.
+        if let Some(stride) = accessor.view().and_then(|v| v.stride())
+            && stride < accessor.size()
+        {
+            return Err(bad(format!(
+                "byte stride {stride} is smaller than one item ({} bytes)",
+                accessor.size()
+            )));
+        }
         if let Some(sparse) = accessor.sparse() {
             if sparse.count() == 0 {
                 return Err(bad("sparse count is 0 (glTF requires at least 1)".into()));

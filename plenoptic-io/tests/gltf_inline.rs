@@ -183,6 +183,11 @@ fn accessor_counts_the_file_cannot_back_are_errors() {
             r#"{"bufferView": 0, "componentType": 5123, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]}"#,
             "U16 Vec3 is not a layout glTF allows here",
         ),
+        // Found by the mesh_gltf fuzz target too: a byteStride of 8 under 12-byte items.
+        (
+            r#"{"bufferView": 3, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]}"#,
+            "byte stride 8 is smaller than one item (12 bytes)",
+        ),
         (
             r#"{"componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0], "sparse": {"count": 0, "indices": {"bufferView": 2, "componentType": 5125}, "values": {"bufferView": 0}}}"#,
             "sparse count is 0",
@@ -190,7 +195,7 @@ fn accessor_counts_the_file_cannot_back_are_errors() {
     ] {
         let text = document(4, "2.0").replace(positions, accessor).replace(
             views,
-            r#"{"buffer": 0, "byteOffset": 36, "byteLength": 36}, {"buffer": 0, "byteOffset": 0, "byteLength": 4}]"#,
+            r#"{"buffer": 0, "byteOffset": 36, "byteLength": 36}, {"buffer": 0, "byteOffset": 0, "byteLength": 4}, {"buffer": 0, "byteOffset": 0, "byteLength": 36, "byteStride": 8}]"#,
         );
         assert!(text.contains(accessor), "the test document changed");
         let e = read_with_deadline(text).unwrap_err();
