@@ -45,7 +45,18 @@ pub(crate) fn read_gltf(path: &Path) -> Result<Mesh, Error> {
     };
     let mut stack: Vec<(gltf::Node<'_>, Mat4)> =
         scene.nodes().map(|n| (n, Mat4::IDENTITY)).collect();
+    // The node hierarchy must be a set of disjoint trees (glTF 2.0, "Nodes and Hierarchy"); a node reached a
+    // second time means a cycle (or a shared child), which would otherwise loop forever.
+    let mut reached = vec![false; document.nodes().len()];
     while let Some((node, parent)) = stack.pop() {
+        if std::mem::replace(&mut reached[node.index()], true) {
+            return Err(err(format!(
+                "node {} is reached twice from scene {}: the node hierarchy has a cycle or a \
+                 node with two parents",
+                node.index(),
+                scene.index()
+            )));
+        }
         let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
         if let Some(mesh) = node.mesh() {
             for primitive in mesh.primitives() {
@@ -116,6 +127,33 @@ fn missing_resource(path: &Path) -> Option<String> {
         .map(|(what, _)| format!("{what}, which does not exist in {}", dir.display()))
 }
 
+/// An accessor's component type and dimensions.
+type Layout = (gltf::accessor::DataType, gltf::accessor::Dimensions);
+
+/// The layouts glTF allows for the attributes we read (`None`: the indices); empty for others.
+fn layouts(semantic: Option<&gltf::Semantic>) -> &'static [Layout] {
+    use gltf::Semantic;
+    use gltf::accessor::DataType::{F32, U8, U16, U32};
+    use gltf::accessor::Dimensions::{Scalar, Vec2, Vec3, Vec4};
+    match semantic {
+        None => &[(U8, Scalar), (U16, Scalar), (U32, Scalar)],
+        Some(Semantic::Positions | Semantic::Normals) => &[(F32, Vec3)],
+        Some(Semantic::TexCoords(0)) => &[(U8, Vec2), (U16, Vec2), (F32, Vec2)],
+        Some(Semantic::Colors(0)) => &[
+            (U8, Vec3),
+            (U16, Vec3),
+            (F32, Vec3),
+            (U8, Vec4),
+            (U16, Vec4),
+            (F32, Vec4),
+        ],
+        Some(_) => &[],
+    }
+}
+
+/// Most items a sparse accessor without a buffer view may declare (16.7 M; 200 MB of positions).
+const MAX_VIEWLESS_ITEMS: usize = 1 << 24;
+
 /// Accumulates primitives into one mesh.
 struct Builder<'a> {
     path: &'a Path,
@@ -140,6 +178,57 @@ impl Builder<'_> {
         }
     }
 
+    /// Refuses accessor counts that gltf's readers would trust: a count of 0 underflows their
+    /// bounds arithmetic, and a sparse accessor without a buffer view yields `count` items (zeros
+    /// plus the sparse values) from no data at all, so a tiny file could claim billions.
+    /// A layout outside `layouts` (when not empty) is refused too: gltf's readers assert or hit
+    /// `unreachable!` on component types and dimensions glTF does not allow for the attribute.
+    fn check_accessor(
+        &self,
+        what: &str,
+        role: &str,
+        layouts: &[Layout],
+        accessor: &gltf::Accessor<'_>,
+    ) -> Result<(), Error> {
+        let bad = |problem: String| {
+            self.err(format!(
+                "{what} {role} (accessor {}): {problem}",
+                accessor.index()
+            ))
+        };
+        let layout = (accessor.data_type(), accessor.dimensions());
+        if !layouts.is_empty() && !layouts.contains(&layout) {
+            return Err(bad(format!(
+                "{:?} {:?} is not a layout glTF allows here",
+                layout.0, layout.1
+            )));
+        }
+        if accessor.count() == 0 {
+            return Err(bad("count is 0 (glTF requires at least 1)".into()));
+        }
+        // gltf asserts the stride holds an item; without debug assertions items would overlap.
+        if let Some(stride) = accessor.view().and_then(|v| v.stride())
+            && stride < accessor.size()
+        {
+            return Err(bad(format!(
+                "byte stride {stride} is smaller than one item ({} bytes)",
+                accessor.size()
+            )));
+        }
+        if let Some(sparse) = accessor.sparse() {
+            if sparse.count() == 0 {
+                return Err(bad("sparse count is 0 (glTF requires at least 1)".into()));
+            }
+            if accessor.view().is_none() && accessor.count() > MAX_VIEWLESS_ITEMS {
+                return Err(bad(format!(
+                    "{} items with no buffer view behind them (at most {MAX_VIEWLESS_ITEMS} are accepted)",
+                    accessor.count()
+                )));
+            }
+        }
+        Ok(())
+    }
+
     fn primitive(
         &mut self,
         mesh: &gltf::Mesh<'_>,
@@ -152,6 +241,17 @@ impl Builder<'_> {
                 "{what} has mode {:?}; only TRIANGLES is supported",
                 primitive.mode()
             )));
+        }
+        let accessors = primitive
+            .attributes()
+            .map(|(semantic, a)| (format!("{semantic:?}"), layouts(Some(&semantic)), a))
+            .chain(
+                primitive
+                    .indices()
+                    .map(|a| ("indices".to_string(), layouts(None), a)),
+            );
+        for (role, layouts, accessor) in accessors {
+            self.check_accessor(&what, &role, layouts, &accessor)?;
         }
         let reader = primitive.reader(|b| self.buffers.get(b.index()).map(|d| &d.0[..]));
         let positions: Vec<[f32; 3]> = reader

@@ -17,8 +17,12 @@ pub(crate) fn read_obj(path: &Path) -> Result<Mesh, Error> {
     Error::require_file(path)?;
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     check_finite_lines(path, &String::from_utf8_lossy(&bytes))?;
+    // tobj's index arithmetic overflows on some malformed faces (`f 1//2 7//2 5/-2` multiplies
+    // a wrapped relative index), a panic where overflow checks are on; turn any into an error.
     let (models, materials) =
-        tobj::load_obj(path, &tobj::GPU_LOAD_OPTIONS).map_err(|e| err(e.to_string()))?;
+        std::panic::catch_unwind(|| tobj::load_obj(path, &tobj::GPU_LOAD_OPTIONS))
+            .map_err(|_| err("the OBJ parser failed on malformed input".into()))?
+            .map_err(|e| err(e.to_string()))?;
     let obj_materials = match materials {
         Ok(m) => m,
         Err(e) => {

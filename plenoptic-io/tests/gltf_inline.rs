@@ -110,3 +110,101 @@ fn gltf_1_is_refused() {
         "{m}"
     );
 }
+
+/// `read_mesh` on `text` in a thread, failing the test (instead of hanging it) after 30 s.
+fn read_with_deadline(text: String) -> Result<plenoptic_io::Mesh, Error> {
+    let (send, receive) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let (_dir, path) = write(&text);
+        let _ = send.send(read_mesh(&path));
+    });
+    receive
+        .recv_timeout(std::time::Duration::from_secs(30))
+        .expect("read_mesh did not return within 30 s")
+}
+
+#[test]
+fn node_cycles_and_shared_children_are_errors_not_endless_loops() {
+    // Found by the mesh_gltf fuzz target: the traversal followed a cycle forever, adding the
+    // mesh's triangles on every lap until memory ran out.
+    let tree = r#""nodes": [{"translation": [1, 2, 3], "children": [1]}, {"scale": [2, 2, 2], "mesh": 0}]"#;
+    for (nodes, scene_roots, node) in [
+        // 0 → 1 → 0.
+        (
+            r#""nodes": [{"children": [1]}, {"mesh": 0, "children": [0]}]"#,
+            "[0]",
+            0,
+        ),
+        // 0 → 0, with no mesh on the way (a hang without any allocation).
+        (r#""nodes": [{"children": [0]}, {"mesh": 0}]"#, "[0]", 0),
+        // Two roots sharing the child 1.
+        (
+            r#""nodes": [{"children": [1]}, {"mesh": 0}, {"children": [1]}]"#,
+            "[0, 2]",
+            1,
+        ),
+    ] {
+        let text = document(4, "2.0")
+            .replace(tree, nodes)
+            .replace(r#""nodes": [0]"#, &format!(r#""nodes": {scene_roots}"#));
+        assert!(text.contains(nodes), "the test document changed");
+        let e = read_with_deadline(text).unwrap_err();
+        assert!(matches!(e, Error::Gltf { .. }), "{e:?}");
+        let message = e.to_string();
+        assert!(
+            message.contains(&format!("node {node} is reached twice")),
+            "{message}"
+        );
+    }
+    // The tree itself still reads.
+    assert!(read_with_deadline(document(4, "2.0")).is_ok());
+}
+
+#[test]
+fn accessor_counts_the_file_cannot_back_are_errors() {
+    let positions = r#"{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]}"#;
+    let views = r#"{"buffer": 0, "byteOffset": 36, "byteLength": 36}]"#;
+    for (accessor, expected) in [
+        // A count of 0 underflowed gltf's bounds arithmetic (a panic with overflow checks).
+        (
+            r#"{"bufferView": 0, "componentType": 5126, "count": 0, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]}"#,
+            "count is 0",
+        ),
+        // Four billion zeros from a sparse accessor without a buffer view: 48 GB asked for
+        // by a 1 KB file.
+        (
+            r#"{"componentType": 5126, "count": 4000000000, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0], "sparse": {"count": 1, "indices": {"bufferView": 2, "componentType": 5125}, "values": {"bufferView": 0}}}"#,
+            "4000000000 items with no buffer view",
+        ),
+        // Found by the mesh_gltf fuzz target (on NORMAL): gltf's reader asserts that the
+        // layout matches the attribute; without debug assertions it read 12-byte items from
+        // 2-byte ones.
+        (
+            r#"{"bufferView": 0, "componentType": 5123, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]}"#,
+            "U16 Vec3 is not a layout glTF allows here",
+        ),
+        // Found by the mesh_gltf fuzz target too: a byteStride of 8 under 12-byte items.
+        (
+            r#"{"bufferView": 3, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]}"#,
+            "byte stride 8 is smaller than one item (12 bytes)",
+        ),
+        (
+            r#"{"componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0], "sparse": {"count": 0, "indices": {"bufferView": 2, "componentType": 5125}, "values": {"bufferView": 0}}}"#,
+            "sparse count is 0",
+        ),
+    ] {
+        let text = document(4, "2.0").replace(positions, accessor).replace(
+            views,
+            r#"{"buffer": 0, "byteOffset": 36, "byteLength": 36}, {"buffer": 0, "byteOffset": 0, "byteLength": 4}, {"buffer": 0, "byteOffset": 0, "byteLength": 36, "byteStride": 8}]"#,
+        );
+        assert!(text.contains(accessor), "the test document changed");
+        let e = read_with_deadline(text).unwrap_err();
+        assert!(matches!(e, Error::Gltf { .. }), "{e:?}");
+        let message = e.to_string();
+        assert!(
+            message.contains("mesh 0 primitive 0 Positions (accessor 0)")
+                && message.contains(expected),
+            "{message}"
+        );
+    }
+}

@@ -388,10 +388,18 @@ pub fn parse_splats(path: &Path, data: &[u8]) -> Result<Splats, Error> {
                 message: "ASCII body is not text".into(),
             })?;
             let mut lines = text.lines().filter(|l| !l.trim().is_empty());
-            // Skip elements before the vertex element (one line per item).
-            for e in &header.elements[..vi] {
+            // Skip elements before the vertex element (one line per item); stop at the end of
+            // the text, or a huge claimed count would spin for ever.
+            for (ei, e) in header.elements[..vi].iter().enumerate() {
                 for _ in 0..e.count {
-                    lines.next();
+                    if lines.next().is_none() {
+                        return Err(Error::Body {
+                            path: path.to_path_buf(),
+                            offset: data.len() as u64,
+                            index: ei,
+                            message: format!("element `{}` runs past the end of the file", e.name),
+                        });
+                    }
                 }
             }
             for i in 0..n {

@@ -239,6 +239,35 @@ fn bad_files_give_clear_errors() {
 }
 
 #[test]
+fn an_ascii_element_before_the_vertices_that_claims_too_many_rows_is_an_error_not_a_hang() {
+    // The ASCII path skipped the rows of earlier elements one by one, counting on past the end
+    // of the text: `element face 10^18` kept it busy for ever.
+    let good = std::fs::read(gt_path()).unwrap();
+    let header = String::from_utf8_lossy(
+        &good[..good.windows(11).position(|w| w == b"end_header\n").unwrap()],
+    )
+    .replace("binary_little_endian", "ascii")
+    .replace(
+        "element vertex 4000",
+        "element face 1000000000000000000\nproperty float a\nelement vertex 1",
+    );
+    let bytes = format!("{header}end_header\n1\n2\n");
+    let (send, receive) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let _ = send.send(ply::parse_splats(Path::new("bad.ply"), bytes.as_bytes()).map(|_| ()));
+    });
+    let e = receive
+        .recv_timeout(std::time::Duration::from_secs(30))
+        .expect("parse_splats did not return within 30 s")
+        .unwrap_err();
+    let msg = e.to_string();
+    assert!(
+        msg.contains("bad.ply") && msg.contains("element `face` runs past the end of the file"),
+        "{msg}"
+    );
+}
+
+#[test]
 fn splat_export_writes_32_bytes_per_splat_sorted_by_size_times_opacity() {
     let mut rng = Rng::new(77);
     let s = random_splats(&mut rng, 33, Vec3::ZERO, 1.0, (-3.0, 0.0), (0.1, 0.9), 2);

@@ -1,0 +1,166 @@
+//! Property tests over the 3DGS PLY reader (the stable-toolchain companion of the cargo-fuzz
+//! target in `fuzz/`, see `docs/fuzzing.md`): arbitrary bytes and randomly mutated real files
+//! go into `ply::parse_splats`. It must return `Ok` or an `Error` that names the file; a panic,
+//! a hang or an allocation the file cannot justify fails the test.
+
+use std::path::Path;
+
+use proptest::prelude::*;
+use splat_core::{Error, ply};
+
+/// The first `n` splats of the test scene's `gt.ply` (Inria's layout: 62 floats per splat),
+/// with the header's vertex count set to `n`.
+fn gt_cut(n: usize) -> Vec<u8> {
+    let gt = include_bytes!("../../testdata/splat-scene/gt.ply");
+    let body = gt.windows(11).position(|w| w == b"end_header\n").unwrap() + 11;
+    let header = std::str::from_utf8(&gt[..body])
+        .unwrap()
+        .replace("element vertex 4000\n", &format!("element vertex {n}\n"));
+    assert!(
+        header.contains(&format!("element vertex {n}\n")),
+        "gt.ply's header changed"
+    );
+    let mut out = header.into_bytes();
+    out.extend(&gt[body..body + n * 62 * 4]);
+    out
+}
+
+/// A two-splat ASCII file with SH degree 0.
+const ASCII_SEED: &[u8] = b"ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\n\
+property float y\nproperty float z\nproperty float f_dc_0\nproperty float f_dc_1\n\
+property float f_dc_2\nproperty float opacity\nproperty float scale_0\nproperty float scale_1\n\
+property float scale_2\nproperty float rot_0\nproperty float rot_1\nproperty float rot_2\n\
+property float rot_3\nend_header\n0 0 0 0.1 0.2 0.3 0 -3 -3 -3 1 0 0 0\n\
+1 1 1 -0.1 0 0.5 2 -2 -4 -1 0.7 0.7 0 0\n";
+
+/// Numbers that make readers misbehave when they trust a file.
+const NASTY_NUMBERS: &[&str] = &[
+    "0",
+    "-1",
+    "255",
+    "4294967295",
+    "4294967296",
+    "18446744073709551615",
+    "1000000000000",
+    "nan",
+    "inf",
+    "1e309",
+];
+
+/// One random edit of a file.
+#[derive(Debug, Clone)]
+enum Edit {
+    /// Sets the byte at (position mod length).
+    Set(usize, u8),
+    /// Inserts bytes at (position mod length + 1).
+    Insert(usize, Vec<u8>),
+    /// Removes up to n bytes at (position mod length).
+    Remove(usize, usize),
+    /// Cuts the file at (position mod length + 1).
+    Truncate(usize),
+    /// Replaces the k-th run of ASCII digits (mod their number) with a nasty number.
+    Number(usize, usize),
+}
+
+fn edit() -> impl Strategy<Value = Edit> {
+    prop_oneof![
+        (any::<usize>(), any::<u8>()).prop_map(|(p, b)| Edit::Set(p, b)),
+        (any::<usize>(), prop::collection::vec(any::<u8>(), 1..16))
+            .prop_map(|(p, b)| Edit::Insert(p, b)),
+        (any::<usize>(), 1usize..64).prop_map(|(p, n)| Edit::Remove(p, n)),
+        any::<usize>().prop_map(Edit::Truncate),
+        (any::<usize>(), 0..NASTY_NUMBERS.len()).prop_map(|(k, n)| Edit::Number(k, n)),
+    ]
+}
+
+fn apply(mut data: Vec<u8>, edits: &[Edit]) -> Vec<u8> {
+    for e in edits {
+        let len = data.len().max(1);
+        match e {
+            Edit::Set(p, b) => {
+                if !data.is_empty() {
+                    data[p % len] = *b;
+                }
+            }
+            Edit::Insert(p, b) => {
+                let at = (p % len + 1).min(data.len());
+                data.splice(at..at, b.iter().copied());
+            }
+            Edit::Remove(p, n) => {
+                let at = (p % len).min(data.len());
+                let end = (at + n).min(data.len());
+                data.drain(at..end);
+            }
+            Edit::Truncate(p) => data.truncate(p % len + 1),
+            Edit::Number(k, n) => {
+                let runs: Vec<(usize, usize)> = digit_runs(&data);
+                if !runs.is_empty() {
+                    let (start, end) = runs[k % runs.len()];
+                    data.splice(start..end, NASTY_NUMBERS[*n].bytes());
+                }
+            }
+        }
+    }
+    data
+}
+
+/// Byte ranges of the runs of ASCII digits.
+fn digit_runs(data: &[u8]) -> Vec<(usize, usize)> {
+    let mut runs = Vec::new();
+    let mut start = None;
+    for (i, b) in data.iter().enumerate() {
+        match (b.is_ascii_digit(), start) {
+            (true, None) => start = Some(i),
+            (false, Some(s)) => {
+                runs.push((s, i));
+                start = None;
+            }
+            _ => {}
+        }
+    }
+    if let Some(s) = start {
+        runs.push((s, data.len()));
+    }
+    runs
+}
+
+/// Parses `bytes`; an error must name the file.
+fn parse(bytes: &[u8]) -> Result<(), TestCaseError> {
+    if let Err(e) = ply::parse_splats(Path::new("props-input.ply"), bytes) {
+        let message = e.to_string();
+        prop_assert!(
+            message.contains("props-input.ply"),
+            "error does not name the file: {message}"
+        );
+        prop_assert!(!matches!(e, Error::Inconsistent(_)), "{e:?}");
+    }
+    Ok(())
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+
+    #[test]
+    fn reader_survives_arbitrary_bytes(
+        header in prop::sample::select(vec![
+            Vec::new(),
+            b"ply\n".to_vec(),
+            gt_cut(0),
+            ASCII_SEED[..ASCII_SEED.windows(11).position(|w| w == b"end_header\n").unwrap() + 11].to_vec(),
+        ]),
+        body in prop::collection::vec(any::<u8>(), 0..768),
+    ) {
+        let mut bytes = header;
+        bytes.extend(body);
+        parse(&bytes)?;
+    }
+
+    #[test]
+    fn reader_survives_mutated_files(
+        ascii in any::<bool>(),
+        edits in prop::collection::vec(edit(), 1..8),
+    ) {
+        let original = if ascii { ASCII_SEED.to_vec() } else { gt_cut(3) };
+        parse(&apply(original, &edits))?;
+    }
+}
