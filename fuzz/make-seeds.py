@@ -5,6 +5,7 @@ Seeds are kept small (a few KB each): big test files are cut to their first reco
 declared counts rewritten to match, so the mutator spends its time on structure, not bulk.
 """
 import pathlib
+import gzip
 import re
 import shutil
 import struct
@@ -123,6 +124,22 @@ def main():
          "rot_0", "rot_1", "rot_2", "rot_3"]) + b"end_header\n")
     put("splat_ply", "sh0-ascii.ply", head + b"0 0 0 0.1 0.2 0.3 0 -3 -3 -3 1 0 0 0\n"
         b"1 1 1 -0.1 0 0.5 2 -2 -4 -1 0.7 0.7 0 0\n")
+    # SPZ: a version-3 stream of two degree-1 splats, as content (mode byte 0: the target
+    # compresses it) and as a gzip file (mode byte 1), plus a version-2 one.
+    n = 2
+    payload = struct.pack("<IIIBBBB", 0x5053474E, 3, n, 1, 12, 0, 0)
+    payload += bytes([0, 16, 0, 0, 240, 255, 128, 0, 0]) + bytes([1, 2, 3, 4, 5, 6, 7, 8, 9])
+    payload += bytes([200, 100])  # alphas
+    payload += bytes([127, 140, 100, 50, 60, 70])  # colours
+    payload += bytes([96, 96, 80, 120, 100, 90])  # log-scales
+    payload += struct.pack("<II", 3 << 30, (1 << 30) | 0x12345)  # smallest-three rotations
+    payload += bytes(range(120, 129)) + bytes(range(64, 73))  # degree-1 SH
+    put("splat_spz", "v3-content.bin", b"\x00" + payload)
+    put("splat_spz", "v3.spz", b"\x01" + gzip.compress(payload, mtime=0))
+    v2 = bytearray(payload[: 16 + 9 * n + n + 3 * n + 3 * n])
+    v2[4] = 2
+    v2 += bytes([127, 127, 127, 200, 90, 30]) + payload[16 + 9 * n + 7 * n + 4 * n:]
+    put("splat_spz", "v2-content.bin", b"\x00" + bytes(v2))
 
 
 if __name__ == "__main__":

@@ -1,7 +1,8 @@
-//! Property tests over the 3DGS PLY reader (the stable-toolchain companion of the cargo-fuzz
-//! target in `fuzz/`, see `docs/fuzzing.md`): arbitrary bytes and randomly mutated real files
-//! go into `ply::parse_splats`. It must return `Ok` or an `Error` that names the file; a panic,
-//! a hang or an allocation the file cannot justify fails the test.
+//! Property tests over the 3DGS PLY and SPZ readers (the stable-toolchain companions of the
+//! cargo-fuzz targets `splat_ply` and `splat_spz` in `fuzz/`, see `docs/fuzzing.md`): arbitrary
+//! bytes and randomly mutated real files go into `ply::parse_splats` and `spz::decode_spz`. Each
+//! must return `Ok` or an `Error` that names the file; a panic, a hang or an allocation the file
+//! cannot justify fails the test.
 
 use std::path::Path;
 
@@ -137,8 +138,52 @@ fn parse(bytes: &[u8]) -> Result<(), TestCaseError> {
     Ok(())
 }
 
+/// The content (header and attributes, before gzip) of an SPZ of `n` splats of the test scene.
+fn spz_content(n: usize) -> Vec<u8> {
+    let splats = ply::parse_splats(Path::new("gt-cut.ply"), &gt_cut(n)).unwrap();
+    let spz = splat_core::spz::encode_spz(&splats, &Default::default()).unwrap();
+    let mut content = Vec::new();
+    std::io::Read::read_to_end(&mut flate2::read::GzDecoder::new(&spz[..]), &mut content).unwrap();
+    content
+}
+
+/// Compresses `content` as an SPZ file and decodes it; an error must name the file.
+fn decode_spz(content: &[u8]) -> Result<(), TestCaseError> {
+    let mut gz = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+    std::io::Write::write_all(&mut gz, content).unwrap();
+    let file = gz.finish().unwrap();
+    if let Err(e) = splat_core::spz::decode_spz(Path::new("props-input.spz"), &file) {
+        let message = e.to_string();
+        prop_assert!(
+            message.contains("props-input.spz"),
+            "error does not name the file: {message}"
+        );
+    }
+    Ok(())
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(256))]
+
+    #[test]
+    fn spz_reader_survives_mutated_content(edits in prop::collection::vec(edit(), 1..8)) {
+        decode_spz(&apply(spz_content(3), &edits))?;
+    }
+
+    #[test]
+    fn spz_reader_survives_arbitrary_bytes(
+        header in prop::sample::select(vec![Vec::new(), spz_content(0)]),
+        body in prop::collection::vec(any::<u8>(), 0..512),
+        compress in any::<bool>(),
+    ) {
+        let mut bytes = header;
+        bytes.extend(body);
+        if compress {
+            decode_spz(&bytes)?;
+        } else if let Err(e) = splat_core::spz::decode_spz(Path::new("props-input.spz"), &bytes) {
+            prop_assert!(e.to_string().contains("props-input.spz"), "{e}");
+        }
+    }
 
     #[test]
     fn reader_survives_arbitrary_bytes(
