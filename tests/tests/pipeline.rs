@@ -66,6 +66,24 @@ fn pipeline_on_a_small_plenoptic_cloud() {
     let splats = splat_core::ply::read_splats(&out.join("model/splats.ply")).unwrap();
     assert_eq!(splats.len(), main.metrics.splats);
     assert!(out.join("model/splats-sparse.ply").is_file());
+    // SPZ is written beside every PLY by default: the same splats, to its quantisation.
+    let spz = splat_core::spz::read_spz(&out.join("model/splats.spz")).unwrap();
+    assert_eq!(spz.splats.len(), splats.len());
+    let worst = (0..splats.len())
+        .map(|i| (spz.splats.means[i] - splats.means[i]).abs().max_element())
+        .fold(0.0_f32, f32::max);
+    assert!(
+        worst <= 0.5 / (1_u32 << spz.fractional_bits) as f32,
+        "{worst}"
+    );
+    assert!(out.join("model/splats-sparse.spz").is_file());
+    assert_eq!(main.compact_files.len(), 1);
+    assert_eq!(
+        main.compact_files[0].1,
+        std::fs::metadata(out.join("model/splats.spz"))
+            .unwrap()
+            .len()
+    );
 
     // Metrics against thresholds (measured on this input: see docs/benchmarks/pipeline.md).
     let m = &main.metrics;
@@ -167,12 +185,16 @@ fn bad_input_fails_clearly_and_leaves_no_complete_looking_output() {
     std::fs::create_dir_all(out.join("model")).unwrap();
     std::fs::create_dir_all(out.join("report")).unwrap();
     std::fs::write(out.join("model/splats.ply"), b"old").unwrap();
+    std::fs::write(out.join("model/splats.spz"), b"old").unwrap();
+    std::fs::write(out.join("model/splats-sparse.glb"), b"old").unwrap();
     std::fs::write(out.join("report/report.html"), b"old").unwrap();
     let bad = data().join("bad/pond.0.ply");
     let err = transcode::pipeline::run(&bad, &out, &small_config(), true).unwrap_err();
     let msg = err.to_string();
     assert!(msg.contains("pond.0.ply"), "{msg}");
     assert!(!out.join("model/splats.ply").exists());
+    assert!(!out.join("model/splats.spz").exists());
+    assert!(!out.join("model/splats-sparse.glb").exists());
     assert!(!out.join("report/report.html").exists());
 
     let missing = tmp.path().join("nope.ply");

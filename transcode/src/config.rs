@@ -342,6 +342,11 @@ pub struct OutputConfig {
     pub png16: bool,
     /// Also write the model as an antimatter15 `.splat` file.
     pub splat_file: bool,
+    /// Also write every model as SPZ (`splats.spz`: Niantic's compressed format, about a tenth of
+    /// the PLY, read by most web viewers).
+    pub spz: bool,
+    /// Also write every model as binary glTF with `KHR_gaussian_splatting` (`splats.glb`).
+    pub glb: bool,
     /// Also train from the other init mode and compare both in the report.
     pub compare_init: bool,
     /// Save the trainer's state at most this many seconds of wall time apart, so that a killed
@@ -354,6 +359,8 @@ impl Default for OutputConfig {
         Self {
             png16: false,
             splat_file: false,
+            spz: true,
+            glb: false,
             compare_init: false,
             checkpoint_interval_s: DEFAULT_CHECKPOINT_INTERVAL_S,
         }

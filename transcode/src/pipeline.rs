@@ -386,14 +386,14 @@ fn execute(
     let dataset_dir = out.join("dataset");
     // Markers of a finished run go first, so a failure below cannot leave an old, complete-looking
     // model or report beside new, partial data.
-    for marker in [
-        model_dir.join("splats.ply"),
-        model_dir.join("splats.splat"),
-        model_dir.join("splats-sparse.ply"),
-        model_dir.join("splats-surface.ply"),
+    let models = ["splats", "splats-sparse", "splats-surface"]
+        .into_iter()
+        .flat_map(|stem| MODEL_EXTENSIONS.map(|ext| model_dir.join(format!("{stem}.{ext}"))));
+    let reports = [
         report_dir.join("report.json"),
         report_dir.join("report.html"),
-    ] {
+    ];
+    for marker in models.chain(reports) {
         match std::fs::remove_file(&marker) {
             Ok(()) => {}
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
@@ -583,8 +583,20 @@ fn execute(
     for (k, (run, trained)) in runs.iter_mut().zip(&trained_models).enumerate() {
         say(format!("[5/6] writing {}", run.model_path.display()));
         let t = Instant::now();
-        write_model(&run.model_path, trained, k == 0 && cfg.output.splat_file)?;
+        let formats = ModelFormats {
+            splat: k == 0 && cfg.output.splat_file,
+            spz: cfg.output.spz,
+            glb: cfg.output.glb,
+        };
+        let compact = write_model(&run.model_path, trained, formats)?;
         run.model_bytes = std::fs::metadata(&run.model_path).map_or(0, |m| m.len());
+        run.compact_files = compact
+            .into_iter()
+            .map(|p| {
+                let bytes = std::fs::metadata(&p).map_or(0, |m| m.len());
+                (p, bytes)
+            })
+            .collect();
         run.timings.push(StageTiming {
             stage: "write model".to_string(),
             seconds: t.elapsed().as_secs_f64(),
@@ -803,25 +815,56 @@ fn init_train_eval(
         model_path: model_path.to_path_buf(),
         // Filled in when the model is written, after every run is done.
         model_bytes: 0,
+        compact_files: Vec::new(),
         timings,
     };
     Ok((run, renders, trained))
 }
 
-/// Writes the model PLY (and the `.splat` file when asked), each atomically.
-fn write_model(path: &Path, splats: &Splats, splat_file: bool) -> Result<(), PipelineError> {
-    splat_core::ply::write_splats(path, splats).map_err(|source| PipelineError::Model {
-        path: path.to_path_buf(),
-        source: Box::new(source),
-    })?;
-    if splat_file {
-        let p = path.with_extension("splat");
-        splat_core::export::write_splat(&p, splats).map_err(|source| PipelineError::Model {
+/// Every extension a model file of a run may have: a run deletes them all before it starts.
+const MODEL_EXTENSIONS: [&str; 4] = ["ply", "splat", "spz", "glb"];
+
+/// The files written beside a model's PLY.
+#[derive(Clone, Copy, Debug)]
+struct ModelFormats {
+    splat: bool,
+    spz: bool,
+    glb: bool,
+}
+
+/// Writes the model PLY and the other formats asked for, each atomically, beside it; returns the
+/// paths of the others.
+fn write_model(
+    path: &Path,
+    splats: &Splats,
+    formats: ModelFormats,
+) -> Result<Vec<PathBuf>, PipelineError> {
+    let model_err = |p: &Path| {
+        let p = p.to_path_buf();
+        move |source: splat_core::Error| PipelineError::Model {
             path: p,
             source: Box::new(source),
-        })?;
+        }
+    };
+    splat_core::ply::write_splats(path, splats).map_err(model_err(path))?;
+    let mut written = Vec::new();
+    if formats.splat {
+        let p = path.with_extension("splat");
+        splat_core::export::write_splat(&p, splats).map_err(model_err(&p))?;
+        written.push(p);
     }
-    Ok(())
+    if formats.spz {
+        let p = path.with_extension("spz");
+        splat_core::spz::write_spz(&p, splats, &splat_core::spz::SpzOptions::default())
+            .map_err(model_err(&p))?;
+        written.push(p);
+    }
+    if formats.glb {
+        let p = path.with_extension("glb");
+        splat_core::glb::write_glb(&p, splats).map_err(model_err(&p))?;
+        written.push(p);
+    }
+    Ok(written)
 }
 
 /// The schedule of a run about to start: with `scale_schedule` and densification, the steps the

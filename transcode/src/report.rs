@@ -74,6 +74,8 @@ pub struct RunReport {
     pub model_path: PathBuf,
     /// Its size in bytes.
     pub model_bytes: u64,
+    /// The other files of the same model (SPZ, glTF, `.splat`) and their sizes in bytes.
+    pub compact_files: Vec<(PathBuf, u64)>,
     /// Times of this run's stages (init, train, write, eval).
     pub timings: Vec<StageTiming>,
 }
@@ -220,7 +222,7 @@ fn metrics_table(h: &mut String, report: &Report, names: &[String]) {
     }
     h.push_str("</tr>\n");
     type Row = (&'static str, fn(&RunReport) -> String);
-    let rows: [Row; 17] = [
+    let rows: [Row; 18] = [
         ("PSNR, black background (dB)", |r| {
             format!("{:.2}", r.metrics.psnr_black)
         }),
@@ -254,6 +256,21 @@ fn metrics_table(h: &mut String, report: &Report, names: &[String]) {
         ("iterations", |r| r.iterations.to_string()),
         ("training time (s)", |r| format!("{:.1}", r.train_seconds)),
         ("model file", |r| human_bytes(r.model_bytes)),
+        ("compact files", |r| {
+            if r.compact_files.is_empty() {
+                return "–".into();
+            }
+            r.compact_files
+                .iter()
+                .map(|(p, bytes)| {
+                    let ext = p
+                        .extension()
+                        .map_or(String::new(), |e| e.to_string_lossy().into());
+                    format!("{ext} {}", human_bytes(*bytes))
+                })
+                .collect::<Vec<_>>()
+                .join(", ")
+        }),
         ("SH fit RMS, degree 0/1/2/3", |r| {
             r.init.sh_fit_rms.map_or("–".into(), |e| {
                 format!("{:.4} / {:.4} / {:.4} / {:.4}", e[0], e[1], e[2], e[3])

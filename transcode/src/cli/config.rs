@@ -80,6 +80,12 @@ pub struct Overrides {
     /// Also write the model as a .splat file.
     #[arg(long)]
     pub splat_file: bool,
+    /// Do not write the models as SPZ (written by default beside each PLY).
+    #[arg(long)]
+    pub no_spz: bool,
+    /// Also write the models as binary glTF with KHR_gaussian_splatting (.glb).
+    #[arg(long)]
+    pub glb: bool,
     /// Also train from the other init mode and compare both in the report.
     #[arg(long)]
     pub compare_init: bool,
@@ -133,6 +139,8 @@ impl Overrides {
         c.init.free_positions |= o.free_positions;
         c.init.densify_surface |= o.densify;
         c.output.splat_file |= o.splat_file;
+        c.output.spz &= !o.no_spz;
+        c.output.glb |= o.glb;
         c.output.compare_init |= o.compare_init;
         c.validate()
             .map_err(|e| anyhow::anyhow!("{e} (after applying the command-line flags)"))?;
