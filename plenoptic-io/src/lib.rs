@@ -21,7 +21,7 @@ pub mod view_color;
 
 pub use cloud::{CaptureCamera, ExtraProperty, PlenopticCloud, PlyLayout};
 pub use error::Error;
-pub use mesh::{Material, Mesh, Texture};
+pub use mesh::{Material, Mesh, Texture, barycentric_mix};
 pub use ply::{PlyFormat, ScalarType};
 
 use std::path::Path;

@@ -3,8 +3,8 @@
 
 use std::path::{Path, PathBuf};
 
+use plenoptic_scenes::{DemoConfig, demo_scene};
 use transcode::config::{Config, InitMode};
-use transcode::scene::{DemoConfig, demo_scene};
 
 fn data() -> PathBuf {
     PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../testdata"))

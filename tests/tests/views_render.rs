@@ -6,9 +6,9 @@ use std::path::PathBuf;
 use camera_model::{Camera, Intrinsics, Pose};
 use glam::{DVec2, DVec3, Vec2, Vec3};
 use plenoptic_io::{Model, PlenopticCloud};
-use transcode::config::RigConfig;
-use transcode::scene::{DemoConfig, SynthConfig, demo_scene, synth_from_mesh};
-use transcode::views::{self, ViewOptions};
+use plenoptic_render::RigConfig;
+use plenoptic_render::{self as views, ViewOptions};
+use plenoptic_scenes::{DemoConfig, SynthConfig, demo_scene, synth_from_mesh};
 
 fn data(rel: &str) -> PathBuf {
     PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../testdata")).join(rel)
@@ -77,7 +77,7 @@ fn textured_box_shows_its_texture_where_camera_model_projects_it() {
                 .map(|(&v, w)| uvs[v as usize] * w as f32)
                 .sum();
             let mat = &mesh.materials[mesh.triangle_materials[t] as usize];
-            let s = views::sample_bilinear(tex, uv);
+            let s = tex.sample_bilinear(uv);
             let expected: [f32; 3] = std::array::from_fn(|k| mat.base_color[k] * s[k]);
             let got = img.rgb_at(x, y);
             for k in 0..3 {

@@ -5,10 +5,13 @@
 //! key is optional (missing keys keep their defaults, unknown keys are errors so that typos are
 //! caught); command-line flags are applied last.
 
-use std::fmt;
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
+
+// The settings of each stage are defined by the crate that runs it; the configuration composes them.
+pub use plenoptic_render::{RigConfig, ViewOptions};
+pub use splat_init::{InitConfig, InitMode, MeshPoints, Sampling, ShDegree};
 
 /// Errors from loading or checking a configuration.
 #[derive(Debug, thiserror::Error)]
@@ -55,7 +58,7 @@ pub struct Config {
     pub rig: RigConfig,
     /// The reference renderer of the input (background is always black: references are
     /// composited on other backgrounds with their alpha).
-    pub renderer: crate::views::ViewOptions,
+    pub renderer: ViewOptions,
     /// Initial splats.
     pub init: InitConfig,
     /// The trainer.
@@ -64,203 +67,6 @@ pub struct Config {
     pub eval: EvalConfig,
     /// What is written besides the model.
     pub output: OutputConfig,
-}
-
-/// Training and held-out camera rigs.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct RigConfig {
-    /// Training cameras on a Fibonacci sphere around the object.
-    pub cameras: usize,
-    /// Image width in pixels.
-    pub width: u32,
-    /// Image height in pixels.
-    pub height: u32,
-    /// Vertical field of view in degrees (PccAppRenderer's default is 20°).
-    pub fov_y_deg: f64,
-    /// Share of the half image left free around the object's bounding sphere.
-    pub margin: f64,
-    /// Held-out cameras (evaluation only), on directions between the training ones.
-    pub heldout_cameras: usize,
-    /// Distances of the held-out cameras as multiples of the training distance, used in turn.
-    pub heldout_distances: Vec<f64>,
-}
-
-impl Default for RigConfig {
-    fn default() -> Self {
-        Self {
-            cameras: 44,
-            width: 512,
-            height: 512,
-            fov_y_deg: camera_model::DEFAULT_FOV_Y_DEG,
-            margin: 0.05,
-            heldout_cameras: 8,
-            heldout_distances: vec![0.8, 1.25],
-        }
-    }
-}
-
-/// Where initial splats come from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum InitMode {
-    /// On the input's surface, SH fitted to its colours, positions frozen.
-    Surface,
-    /// From sparse points (COLMAP points3D or random in the bounds), with densification.
-    Sparse,
-}
-
-impl fmt::Display for InitMode {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(match self {
-            Self::Surface => "surface",
-            Self::Sparse => "sparse",
-        })
-    }
-}
-
-/// How a subset of K points is chosen from the input.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Sampling {
-    /// One point per cell of a voxel grid sized to give about K cells.
-    Voxel,
-    /// Farthest-point sampling (O(N·K): for moderate inputs).
-    Farthest,
-}
-
-/// Which points of a mesh carry the surface splats.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum MeshPoints {
-    /// The vertices.
-    Vertices,
-    /// The face centres.
-    Faces,
-    /// Area-uniform samples on the faces (`init.splats` of them, or `init.mesh_samples`).
-    Samples,
-}
-
-/// SH degree: fixed, or chosen from the fit errors.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum ShDegree {
-    /// A fixed degree 0..=3.
-    Fixed(u32),
-    /// The lowest degree whose fit error is within `init.sh_tolerance` of degree 3's.
-    Auto,
-}
-
-impl fmt::Display for ShDegree {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            Self::Fixed(d) => write!(f, "{d}"),
-            Self::Auto => f.write_str("auto"),
-        }
-    }
-}
-
-impl std::str::FromStr for ShDegree {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        if s.eq_ignore_ascii_case("auto") {
-            return Ok(Self::Auto);
-        }
-        match s.parse::<u32>() {
-            Ok(d) if d <= 3 => Ok(Self::Fixed(d)),
-            _ => Err(format!("SH degree must be 0, 1, 2, 3 or auto, got {s:?}")),
-        }
-    }
-}
-
-impl Serialize for ShDegree {
-    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
-        match self {
-            Self::Fixed(d) => s.serialize_u32(*d),
-            Self::Auto => s.serialize_str("auto"),
-        }
-    }
-}
-
-impl<'de> Deserialize<'de> for ShDegree {
-    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        #[derive(Deserialize)]
-        #[serde(untagged)]
-        enum Raw {
-            Int(i64),
-            Str(String),
-        }
-        match Raw::deserialize(d)? {
-            Raw::Int(i) if (0..=3).contains(&i) => Ok(Self::Fixed(i as u32)),
-            Raw::Int(i) => Err(serde::de::Error::custom(format!(
-                "SH degree must be 0..=3 or \"auto\", got {i}"
-            ))),
-            Raw::Str(s) => s.parse().map_err(serde::de::Error::custom),
-        }
-    }
-}
-
-/// Initialisation settings.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct InitConfig {
-    /// Surface or sparse initialisation.
-    pub mode: InitMode,
-    /// Number of splats K (a subset of the input points); all points when absent.
-    pub splats: Option<usize>,
-    /// How the subset of K points is chosen.
-    pub sampling: Sampling,
-    /// Which mesh points carry splats.
-    pub mesh_points: MeshPoints,
-    /// Surface samples on a mesh when `splats` is absent and `mesh_points` is `samples`.
-    pub mesh_samples: usize,
-    /// SH degree of the model.
-    pub sh_degree: ShDegree,
-    /// For `sh_degree = "auto"`: accepted excess RMS fit error over degree 3 (colour units).
-    pub sh_tolerance: f64,
-    /// View directions on the sphere used by the SH fit.
-    pub fit_directions: usize,
-    /// Ridge weight on the non-constant SH coefficients (per mean squared residual).
-    pub ridge: f64,
-    /// Neighbours for normals by PCA when the input has none.
-    pub normal_neighbours: usize,
-    /// Thickness of a surface splat along its normal, as a share of its in-plane scale.
-    pub thin_ratio: f32,
-    /// Initial opacity of surface splats.
-    pub surface_opacity: f32,
-    /// Initial opacity of sparse splats (Inria: 0.1).
-    pub sparse_opacity: f32,
-    /// Sparse init: a COLMAP model folder whose points3D seed the splats.
-    pub points3d: Option<PathBuf>,
-    /// Sparse init without `points3d`: random points in the input's bounding box.
-    pub random_points: usize,
-    /// Let surface splats move (they are frozen by default).
-    pub free_positions: bool,
-    /// Densify surface splats too (sparse init always densifies).
-    pub densify_surface: bool,
-}
-
-impl Default for InitConfig {
-    fn default() -> Self {
-        Self {
-            mode: InitMode::Surface,
-            splats: None,
-            sampling: Sampling::Voxel,
-            mesh_points: MeshPoints::Samples,
-            mesh_samples: 20_000,
-            sh_degree: ShDegree::Auto,
-            sh_tolerance: 0.002,
-            fit_directions: 128,
-            ridge: 1e-3,
-            normal_neighbours: 12,
-            thin_ratio: 0.1,
-            surface_opacity: 0.8,
-            sparse_opacity: 0.1,
-            points3d: None,
-            random_points: 5_000,
-            free_positions: false,
-            densify_surface: false,
-        }
-    }
 }
 
 /// Trainer settings; learning rates and densification are `splat_train`'s own structures.

@@ -13,7 +13,7 @@ use serde::{Deserialize, Serialize};
 use splat_core::{Rasterizer, RenderCamera, RenderOptions, Splats};
 use splat_train::metrics;
 
-use crate::init::PointIndex;
+use splat_init::PointIndex;
 
 /// Errors of reading reference views.
 #[derive(Debug, thiserror::Error)]

@@ -6,11 +6,7 @@
 
 pub mod atomic;
 pub mod config;
-pub mod degenerate;
 pub mod eval;
-pub mod init;
 pub mod pipeline;
 pub mod report;
 pub mod resume;
-pub mod scene;
-pub mod views;

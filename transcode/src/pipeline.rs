@@ -13,9 +13,8 @@
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use camera_model::rig::{WORLD_UP, fibonacci_sphere, framing_distance, look_at_rig};
-use camera_model::{Camera, Intrinsics};
-use glam::{DVec3, Vec3};
+use camera_model::Camera;
+use glam::Vec3;
 use indicatif::{ProgressBar, ProgressStyle};
 use plenoptic_io::Model;
 use splat_core::Splats;
@@ -23,14 +22,14 @@ use splat_train::{Background, DensifyConfig, TrainConfig, Trainer, View};
 
 use crate::config::{Config, InitMode};
 use crate::eval::{EvalOptions, Metrics, ReferenceView, RenderedView, evaluate};
-use crate::init::{self, SurfacePoints};
 use crate::report::{
     CurvePoint, InputInfo, Report, RunReport, StageTiming, ViewPictures, write_report,
 };
 use crate::resume::{
     self, InputStamp, ModeState, ResumeError, RunState, Schedule, Status, TrainedState,
 };
-use crate::views::{self, ViewImage};
+use plenoptic_render::{self as views, ViewImage};
+use splat_init::{self as init, SurfacePoints};
 
 /// Errors of the pipeline, each naming the stage and the file.
 #[derive(Debug, thiserror::Error)]
@@ -43,7 +42,7 @@ pub enum PipelineError {
     EmptyInput(PathBuf),
     /// The input cannot make a model (no extent, too few points, no area, nothing visible).
     #[error("{0}")]
-    Degenerate(#[from] crate::degenerate::DegenerateError),
+    Degenerate(#[from] plenoptic_render::degenerate::DegenerateError),
     /// The configuration is invalid.
     #[error(transparent)]
     Config(#[from] crate::config::ConfigError),
@@ -110,65 +109,13 @@ fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> PipelineError + '_ {
     }
 }
 
-/// The virtual cameras of a run.
-#[derive(Debug, Clone)]
-pub struct Rig {
-    /// Training cameras.
-    pub train: Vec<Camera>,
-    /// Held-out cameras (evaluation only).
-    pub heldout: Vec<Camera>,
-    /// Centre of the object's bounding sphere.
-    pub center: DVec3,
-    /// Radius of the object's bounding sphere.
-    pub radius: f64,
-}
-
-/// Training cameras from [`views::fibonacci_rig`] (a Fibonacci sphere framing the object), and
-/// held-out cameras on the directions of a second lattice turned by half the golden angle about
-/// the up axis (so they fall between the training ones), at the configured multiples of the
-/// training distance.
-pub fn build_rig(model: &Model, cfg: &crate::config::RigConfig) -> Result<Rig, PipelineError> {
-    let (center, radius) = views::bounding_sphere(model)?;
-    let train = views::fibonacci_rig(center, radius, cfg)?;
-    let intrinsics = Intrinsics::from_fov_y(cfg.width, cfg.height, cfg.fov_y_deg);
-    let distance = framing_distance(radius, &intrinsics, cfg.margin)?;
-    // Half the golden angle (≈ 68.75°) about +y moves every lattice point off the training ones.
-    let turn = glam::DQuat::from_rotation_y(1.199_981_614_864_326_5);
-    let heldout = fibonacci_sphere(cfg.heldout_cameras)
-        .into_iter()
-        .enumerate()
-        .flat_map(|(i, d)| {
-            let factor = cfg.heldout_distances[i % cfg.heldout_distances.len().max(1)];
-            look_at_rig(&[turn * d], center, distance * factor, intrinsics, WORLD_UP)
-        })
-        .collect();
-    Ok(Rig {
-        train,
-        heldout,
-        center,
-        radius,
-    })
-}
-
 /// A reference view as the trainer wants it: straight (un-premultiplied) colour and its mask.
 #[must_use]
 pub fn training_view(name: String, camera: Camera, image: &ViewImage) -> View {
-    let straight = image
-        .rgb
-        .chunks_exact(3)
-        .zip(&image.alpha)
-        .flat_map(|(px, &a)| {
-            if a > 1e-6 {
-                [0, 1, 2].map(|c| (px[c] / a).clamp(0.0, 1.0))
-            } else {
-                [0.0; 3]
-            }
-        })
-        .collect();
     View {
         name,
         camera,
-        image: straight,
+        image: image.straight_rgb(),
         mask: Some(image.alpha.clone()),
     }
 }
@@ -422,7 +369,7 @@ fn execute(
     if info.points == 0 {
         return Err(PipelineError::EmptyInput(input.to_path_buf()));
     }
-    crate::degenerate::check_model(input, &model)?;
+    plenoptic_render::degenerate::check_model(input, &model)?;
     lap("load", &mut timings);
     for d in [&model_dir, &report_dir, &dataset_dir, &checkpoints] {
         std::fs::create_dir_all(d).map_err(io_err(d))?;
@@ -448,7 +395,7 @@ fn execute(
     state.status = Status::Running;
     state.save(out)?;
 
-    let rig = build_rig(&model, &cfg.rig)?;
+    let rig = views::build_rig(&model, &cfg.rig)?;
     lap("rig", &mut timings);
 
     say(format!(
@@ -495,7 +442,7 @@ fn execute(
         images
     };
     let heldout_images = views::render_views(&model, &rig.heldout, &opts)?;
-    crate::degenerate::check_views(
+    plenoptic_render::degenerate::check_views(
         input,
         "held-out",
         heldout_images.iter().map(|v| v.alpha.as_slice()),

@@ -14,7 +14,7 @@ use serde::Serialize;
 use crate::atomic::write_atomic;
 use crate::config::Config;
 use crate::eval::Metrics;
-use crate::init::InitSummary;
+use splat_init::InitSummary;
 
 /// What the input was.
 #[derive(Debug, Clone, Serialize)]

@@ -17,7 +17,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::atomic::write_atomic;
 use crate::config::{Config, InitMode};
-use crate::init::InitSummary;
+use splat_init::InitSummary;
 
 /// Name of the state file in the output folder.
 pub const STATE_FILE: &str = "state.json";

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-use transcode::scene::{DemoConfig, demo_scene};
+use plenoptic_scenes::{DemoConfig, demo_scene};
 
 const BIN: &str = env!("CARGO_BIN_EXE_transcode");
 

@@ -3,8 +3,8 @@
 use std::path::PathBuf;
 
 use anyhow::Context as _;
+use plenoptic_scenes::{DemoConfig, demo_scene};
 use transcode::config::Config;
-use transcode::scene::{DemoConfig, demo_scene};
 
 use super::config::{Overrides, flat};
 

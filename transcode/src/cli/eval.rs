@@ -3,9 +3,9 @@
 use std::path::PathBuf;
 
 use anyhow::Context as _;
+use splat_init::{self as init, SurfacePoints};
 use transcode::config::Config;
 use transcode::eval::{EvalOptions, evaluate, load_reference_views};
-use transcode::init::{self, SurfacePoints};
 
 use super::config::{Overrides, flat, require_file};
 

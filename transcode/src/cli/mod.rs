@@ -4,11 +4,13 @@ use clap::{Parser, Subcommand};
 
 mod colmap;
 mod config;
+#[cfg(feature = "scenes")]
 mod demo;
 mod eval;
 mod info;
 mod render;
 mod run;
+#[cfg(feature = "scenes")]
 mod synth;
 mod train;
 mod views;
@@ -39,8 +41,10 @@ enum Command {
     /// Evaluate a 3DGS model against reference views with their COLMAP cameras.
     Eval(eval::Args),
     /// Generate the built-in plenoptic demo scene and run the pipeline on it.
+    #[cfg(feature = "scenes")]
     Demo(demo::Args),
     /// Generate a synthetic plenoptic cloud from a real mesh.
+    #[cfg(feature = "scenes")]
     Synth(synth::Args),
     /// Print or check the configuration shared by all subcommands.
     Config(config::Args),
@@ -56,7 +60,9 @@ pub fn dispatch(cli: Cli) -> anyhow::Result<()> {
         Command::Run(a) => run::run(a),
         Command::Views(a) => views::run(a),
         Command::Eval(a) => eval::run(a),
+        #[cfg(feature = "scenes")]
         Command::Demo(a) => demo::run(a),
+        #[cfg(feature = "scenes")]
         Command::Synth(a) => synth::run(a),
         Command::Config(a) => config::run(a),
     }

@@ -5,7 +5,7 @@ use std::time::Duration;
 
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
-use transcode::scene::{AUTO_GRID, SynthConfig, synth_from_mesh};
+use plenoptic_scenes::{AUTO_GRID, SynthConfig, synth_from_mesh};
 
 /// Arguments of `transcode synth`.
 #[derive(Debug, clap::Args)]

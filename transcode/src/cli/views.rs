@@ -5,8 +5,8 @@ use std::path::PathBuf;
 
 use anyhow::Context as _;
 use indicatif::{ProgressBar, ProgressStyle};
+use plenoptic_render::{self as views, BitDepth, DatasetOptions, PointShape};
 use transcode::config::Config;
-use transcode::views::{self, BitDepth, DatasetOptions, PointShape};
 
 use super::config::{Overrides, require_file};
 
@@ -70,7 +70,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
     let model = plenoptic_io::load(&args.input)
         .with_context(|| format!("cannot read {}", args.input.display()))?;
-    transcode::degenerate::check_model(&args.input, &model)?;
+    plenoptic_render::degenerate::check_model(&args.input, &model)?;
     let (center, radius) = views::bounding_sphere(&model)?;
     let cameras = views::fibonacci_rig(center, radius, &config.rig)?;
 

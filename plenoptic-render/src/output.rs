@@ -5,8 +5,8 @@ use std::path::{Path, PathBuf};
 use image::codecs::png::PngEncoder;
 use image::{ExtendedColorType, ImageEncoder};
 
-use super::{Error, ViewImage};
 use crate::atomic::{write_atomic, write_atomic_with};
+use crate::{Error, ViewImage};
 
 /// Bits per channel of a PNG.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]

@@ -4,9 +4,84 @@ use camera_model::rig::{WORLD_UP, fibonacci_sphere, framing_distance, look_at_ri
 use camera_model::{Camera, Intrinsics};
 use glam::DVec3;
 use plenoptic_io::Model;
+use serde::{Deserialize, Serialize};
 
-use super::Error;
-use crate::config::RigConfig;
+use crate::Error;
+
+/// Training and held-out camera rigs.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RigConfig {
+    /// Training cameras on a Fibonacci sphere around the object.
+    pub cameras: usize,
+    /// Image width in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+    /// Vertical field of view in degrees (PccAppRenderer's default is 20°).
+    pub fov_y_deg: f64,
+    /// Share of the half image left free around the object's bounding sphere.
+    pub margin: f64,
+    /// Held-out cameras (evaluation only), on directions between the training ones.
+    pub heldout_cameras: usize,
+    /// Distances of the held-out cameras as multiples of the training distance, used in turn.
+    pub heldout_distances: Vec<f64>,
+}
+
+impl Default for RigConfig {
+    fn default() -> Self {
+        Self {
+            cameras: 44,
+            width: 512,
+            height: 512,
+            fov_y_deg: camera_model::DEFAULT_FOV_Y_DEG,
+            margin: 0.05,
+            heldout_cameras: 8,
+            heldout_distances: vec![0.8, 1.25],
+        }
+    }
+}
+
+/// The virtual cameras of a run.
+#[derive(Debug, Clone)]
+pub struct Rig {
+    /// Training cameras.
+    pub train: Vec<Camera>,
+    /// Held-out cameras (evaluation only).
+    pub heldout: Vec<Camera>,
+    /// Centre of the object's bounding sphere.
+    pub center: DVec3,
+    /// Radius of the object's bounding sphere.
+    pub radius: f64,
+}
+
+/// Training cameras from [`fibonacci_rig`] (a Fibonacci sphere framing the object), and
+/// held-out cameras on the directions of a second lattice turned by half the golden angle about
+/// the up axis (so they fall between the training ones), at the configured multiples of the
+/// training distance.
+pub fn build_rig(model: &Model, cfg: &RigConfig) -> Result<Rig, Error> {
+    let (center, radius) = bounding_sphere(model)?;
+    let train = fibonacci_rig(center, radius, cfg)?;
+    let intrinsics = Intrinsics::from_fov_y(cfg.width, cfg.height, cfg.fov_y_deg);
+    let distance = framing_distance(radius, &intrinsics, cfg.margin)
+        .map_err(|e| Error::InvalidOption(e.to_string()))?;
+    // Half the golden angle (≈ 68.75°) about +y moves every lattice point off the training ones.
+    let turn = glam::DQuat::from_rotation_y(1.199_981_614_864_326_5);
+    let heldout = fibonacci_sphere(cfg.heldout_cameras)
+        .into_iter()
+        .enumerate()
+        .flat_map(|(i, d)| {
+            let factor = cfg.heldout_distances[i % cfg.heldout_distances.len().max(1)];
+            look_at_rig(&[turn * d], center, distance * factor, intrinsics, WORLD_UP)
+        })
+        .collect();
+    Ok(Rig {
+        train,
+        heldout,
+        center,
+        radius,
+    })
+}
 
 /// Centre (of the bounding box) and radius (farthest point from it) of a cloud's points or a
 /// mesh's vertices, in the input's own units.

@@ -10,9 +10,8 @@ use glam::Vec3;
 use plenoptic_io::{Model, PlenopticCloud};
 use rayon::prelude::*;
 
-use super::mesh::albedo_at;
-use super::output::{encode_png_rgb, write_alpha_png, write_depth_exr};
-use super::{BitDepth, Error, ViewImage, ViewOptions, render_model};
+use crate::output::{encode_png_rgb, write_alpha_png, write_depth_exr};
+use crate::{BitDepth, Error, ViewImage, ViewOptions, render_model};
 
 /// What [`write_dataset`] writes besides `images/` and `sparse/0/`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -186,7 +185,7 @@ fn input_points(model: &Model) -> PlenopticCloud {
                     if slot.is_none() {
                         let mut bary = [0.0; 3];
                         bary[corner] = 1.0;
-                        *slot = Some(albedo_at(m, t, bary));
+                        *slot = Some(m.albedo_at(t, bary));
                     }
                 }
             }
@@ -205,76 +204,5 @@ fn input_points(model: &Model) -> PlenopticCloud {
             }
             out
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::config::RigConfig;
-    use crate::views::{bounding_sphere, fibonacci_rig};
-
-    #[test]
-    fn dataset_round_trips_through_colmap_io() {
-        let cloud = crate::scene::demo_scene(&crate::scene::DemoConfig {
-            grid: 32,
-            ..Default::default()
-        })
-        .unwrap();
-        let model = Model::Cloud(cloud.clone());
-        let (c, r) = bounding_sphere(&model).unwrap();
-        let cams = fibonacci_rig(
-            c,
-            r,
-            &RigConfig {
-                cameras: 5,
-                width: 64,
-                height: 48,
-                ..RigConfig::default()
-            },
-        )
-        .unwrap();
-        let dir = tempfile::tempdir().unwrap();
-        let count = std::sync::atomic::AtomicUsize::new(0);
-        let opts = DatasetOptions {
-            depth: true,
-            ..DatasetOptions::default()
-        };
-        let images = write_dataset(
-            dir.path(),
-            &model,
-            &cams,
-            &ViewOptions::default(),
-            &opts,
-            &|| {
-                count.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-            },
-        )
-        .unwrap();
-        assert_eq!(count.into_inner(), 5);
-        assert_eq!(images.len(), 5);
-        for fmt in [Format::Text, Format::Binary] {
-            let rec = colmap_io::read_model_as(&dir.path().join("sparse/0"), fmt).unwrap();
-            assert_eq!(rec.images.len(), 5);
-            assert_eq!(rec.points3d.len(), cloud.len());
-            for (i, cam) in cams.iter().enumerate() {
-                let got = rec.camera_of(i as u32 + 1).unwrap();
-                assert!((got.center() - cam.center()).length() < 1e-6);
-                assert_eq!(rec.images[&(i as u32 + 1)].name, dataset_image_name(i));
-            }
-        }
-        // The PNG on disk is the returned image, quantised.
-        let png = image::open(dir.path().join("images/view_002.png"))
-            .unwrap()
-            .to_rgb8();
-        assert_eq!(png.dimensions(), (64, 48));
-        for (a, b) in png.as_raw().iter().zip(&images[2].rgb) {
-            assert_eq!(*a, (b * 255.0).round() as u8);
-        }
-        assert!(dir.path().join("masks/view_002.png").is_file());
-        assert!(dir.path().join("depth/view_002.exr").is_file());
-        let ply = plenoptic_io::read_cloud(&dir.path().join("sparse/0/points3D.ply")).unwrap();
-        assert_eq!(ply.positions, cloud.positions);
-        assert!(ply.normals.is_some());
     }
 }

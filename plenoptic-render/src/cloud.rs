@@ -7,10 +7,10 @@ use plenoptic_io::PlenopticCloud;
 use plenoptic_io::view_color::interpolate;
 use rayon::prelude::*;
 
-use super::zbuffer::ZBuffer;
-use super::{
-    Error, PointShape, ViewCamera, ViewImage, ViewOptions, render_supersampled, shade_pixels,
-};
+use crate::camera::ViewCamera;
+use crate::render::{render_supersampled, shade_pixels};
+use crate::zbuffer::ZBuffer;
+use crate::{Error, PointShape, ViewImage, ViewOptions};
 
 /// Points per parallel work item of the visibility pass.
 const CHUNK: usize = 16_384;

@@ -6,7 +6,6 @@ use plenoptic_io::{Mesh, Model, PlenopticCloud};
 use rand::{RngExt, SeedableRng};
 
 use crate::config::MeshPoints;
-use crate::views::albedo_at;
 
 /// Points on the input's surface with their colours, the data every initialiser and the
 /// surface-distance metric work from.
@@ -220,7 +219,7 @@ fn at_spots(mesh: &Mesh, spots: &[(usize, [f32; 3])]) -> SurfacePoints {
             _ => face,
         };
         normals.push(n);
-        out.colors.push(albedo_at(mesh, t, b));
+        out.colors.push(mesh.albedo_at(t, b));
         for k in 0..ncam {
             let c = tri.map(|v| mesh.camera_colors[v as usize * ncam + k]);
             out.camera_colors.push(std::array::from_fn(|ch| {

@@ -10,7 +10,7 @@ use rand::{RngExt, SeedableRng};
 use rayon::prelude::*;
 
 use super::{Error, Gloss, Shading, capture_cameras, capture_directions, to_u8_grid};
-use crate::views::{self, ViewImage, ViewOptions};
+use plenoptic_render::{self as views, ViewImage, ViewOptions};
 
 /// Parameters of [`synth_from_mesh`].
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -113,7 +113,7 @@ struct Sample {
 /// Samples `config.points` points on the mesh (area-weighted), shades them towards 13 (or
 /// `config.cameras`) capture cameras on two rings, and voxelises them into an 8iVSLF-layout cloud.
 ///
-/// Albedo is [`views::albedo_at`] (base colour × texture × vertex colour). A capture camera sees a
+/// Albedo is [`Mesh::albedo_at`] (base colour × texture × vertex colour). A capture camera sees a
 /// sample when the sample is not farther than the camera's depth map of the mesh (rendered with
 /// [`views::render_mesh`]) by more than the map's resolution allows; hidden samples get the main
 /// colour. Samples in the same voxel are merged by averaging (as PccAppRenderer's
@@ -364,7 +364,7 @@ fn sample_surface(mesh: &Mesh, count: usize, seed: u64) -> Result<Vec<Sample>, E
             Sample {
                 position,
                 normal,
-                albedo: views::albedo_at(mesh, t, bary),
+                albedo: mesh.albedo_at(t, bary),
             }
         })
         .collect())

@@ -7,9 +7,9 @@ use std::time::Duration;
 use criterion::{Criterion, criterion_group, criterion_main};
 use glam::{DVec3, Vec3};
 use plenoptic_io::{CaptureCamera, Model, PlenopticCloud};
+use plenoptic_render::RigConfig;
+use plenoptic_render::{self as views, ViewOptions};
 use rand::{RngExt, SeedableRng};
-use transcode::config::RigConfig;
-use transcode::views::{self, ViewOptions};
 
 /// A closed voxelised sphere shell of radius `r` (voxels inside the ball with a 6-neighbour
 /// outside), built column by column, centred in a 12-bit grid: ≈ 3.0 million points at r = 536.

@@ -4,11 +4,13 @@
 use camera_model::Camera;
 use glam::{Vec2, Vec3};
 use plenoptic_io::view_color::interpolate;
-use plenoptic_io::{Mesh, Texture};
+use plenoptic_io::{Mesh, barycentric_mix};
 use rayon::prelude::*;
 
-use super::zbuffer::ZBuffer;
-use super::{Error, ViewCamera, ViewImage, ViewOptions, render_supersampled, shade_pixels};
+use crate::camera::ViewCamera;
+use crate::render::{render_supersampled, shade_pixels};
+use crate::zbuffer::ZBuffer;
+use crate::{Error, ViewImage, ViewOptions};
 
 /// Triangles per parallel work item of the visibility pass.
 const CHUNK: usize = 4_096;
@@ -26,14 +28,14 @@ const NEAR: f32 = 1e-4;
 /// triangle, which is exactly perspective-correct. Colour: for a mesh with per-vertex plenoptic
 /// colours, each vertex's colour is [`interpolate`]d towards the viewer and the result is
 /// interpolated across the triangle (the PccAppRenderer's surface shader); otherwise
-/// [`albedo_at`]: material base colour × bilinear texture × vertex colour.
+/// [`Mesh::albedo_at`]: material base colour × bilinear texture × vertex colour.
 pub fn render_mesh(mesh: &Mesh, camera: &Camera, opts: &ViewOptions) -> Result<ViewImage, Error> {
     check_mesh(mesh)?;
     render_supersampled(camera, opts, |cam| render_once(mesh, cam, opts))
 }
 
 /// Checks every index and array length the renderer relies on.
-pub(crate) fn check_mesh(mesh: &Mesh) -> Result<(), Error> {
+pub fn check_mesh(mesh: &Mesh) -> Result<(), Error> {
     let nv = mesh.positions.len();
     let nt = mesh.triangles.len();
     if nt >= u32::MAX as usize {
@@ -129,8 +131,8 @@ fn render_once(mesh: &Mesh, camera: &Camera, opts: &ViewOptions) -> Result<ViewI
         let bary =
             intersect(view.camera_ray(x, y), a, b, c).map_or([1.0 / 3.0; 3], |(_, bary)| bary);
         match &plenoptic {
-            Some(colors) => mix(tri.map(|v| colors[v as usize]), bary),
-            None => albedo_at(mesh, t, bary),
+            Some(colors) => barycentric_mix(tri.map(|v| colors[v as usize]), bary),
+            None => mesh.albedo_at(t, bary),
         }
     }))
 }
@@ -244,83 +246,12 @@ fn intersect(d: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Option<(f32, [f32; 3])> {
     Some((t, [1.0 - u - v, u, v]))
 }
 
-/// Barycentric mix of three colours.
-#[inline]
-fn mix(c: [[f32; 3]; 3], bary: [f32; 3]) -> [f32; 3] {
-    std::array::from_fn(|k| bary[0] * c[0][k] + bary[1] * c[1][k] + bary[2] * c[2][k])
-}
-
-/// The view-independent colour of triangle `t` at barycentrics `bary`: material base colour ×
-/// bilinear texture (when the material has one and the mesh has texture coordinates) × vertex
-/// colour (when present); white when none is given (glTF's default base colour).
-#[must_use]
-pub fn albedo_at(mesh: &Mesh, t: usize, bary: [f32; 3]) -> [f32; 3] {
-    let tri = mesh.triangles[t];
-    let mut color = [1.0f32; 3];
-    if let Some(material) = mesh
-        .triangle_materials
-        .get(t)
-        .and_then(|&m| mesh.materials.get(m as usize))
-    {
-        for (k, c) in color.iter_mut().enumerate() {
-            *c *= material.base_color[k];
-        }
-        if let (Some(tex), Some(uvs)) = (
-            material.texture.and_then(|i| mesh.textures.get(i)),
-            &mesh.uvs,
-        ) {
-            let uv = bary[0] * uvs[tri[0] as usize]
-                + bary[1] * uvs[tri[1] as usize]
-                + bary[2] * uvs[tri[2] as usize];
-            let s = sample_bilinear(tex, uv);
-            for (k, c) in color.iter_mut().enumerate() {
-                *c *= s[k];
-            }
-        }
-    }
-    if let Some(colors) = &mesh.colors {
-        let v = mix(tri.map(|v| colors[v as usize]), bary);
-        for (k, c) in color.iter_mut().enumerate() {
-            *c *= v[k];
-        }
-    }
-    color
-}
-
-/// Bilinear sample of a texture at `uv` (image convention: (0, 0) is the top-left corner of the
-/// texture, texel (i, j)'s centre at ((i + 0.5)/W, (j + 0.5)/H)), wrapping around (glTF's default
-/// REPEAT sampler).
-#[must_use]
-pub fn sample_bilinear(tex: &Texture, uv: Vec2) -> [f32; 4] {
-    let (w, h) = (tex.width as i64, tex.height as i64);
-    let x = uv.x * w as f32 - 0.5;
-    let y = uv.y * h as f32 - 0.5;
-    if !(x.is_finite() && y.is_finite()) {
-        return tex.pixels[0];
-    }
-    let (x0, y0) = (x.floor(), y.floor());
-    let (fx, fy) = (x - x0, y - y0);
-    let texel = |i: i64, j: i64| tex.pixels[(j.rem_euclid(h) * w + i.rem_euclid(w)) as usize];
-    let (i, j) = (x0 as i64, y0 as i64);
-    let (c00, c10, c01, c11) = (
-        texel(i, j),
-        texel(i + 1, j),
-        texel(i, j + 1),
-        texel(i + 1, j + 1),
-    );
-    std::array::from_fn(|k| {
-        let top = c00[k] + fx * (c10[k] - c00[k]);
-        let bottom = c01[k] + fx * (c11[k] - c01[k]);
-        top + fy * (bottom - top)
-    })
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use camera_model::{Intrinsics, Pose};
     use glam::DVec3;
-    use plenoptic_io::{CaptureCamera, Material};
+    use plenoptic_io::CaptureCamera;
 
     fn quad(colors: Option<Vec<[f32; 3]>>) -> Mesh {
         Mesh {
@@ -494,7 +425,7 @@ mod tests {
                     ],
                 )
             };
-            let expected = mix(tri.map(|v| vc[v]), bary);
+            let expected = barycentric_mix(tri.map(|v| vc[v]), bary);
             let got = img.rgb_at(x, y);
             for k in 0..3 {
                 assert!(
@@ -503,66 +434,6 @@ mod tests {
                 );
             }
         }
-    }
-
-    #[test]
-    fn bilinear_sampling_matches_hand_values() {
-        let tex = Texture {
-            width: 2,
-            height: 2,
-            pixels: vec![
-                [0.0, 0.0, 0.0, 1.0],
-                [1.0, 0.0, 0.0, 1.0],
-                [0.0, 1.0, 0.0, 1.0],
-                [1.0, 1.0, 1.0, 1.0],
-            ],
-        };
-        // Texel centres give the texels.
-        assert_eq!(
-            sample_bilinear(&tex, Vec2::new(0.25, 0.25)),
-            [0.0, 0.0, 0.0, 1.0]
-        );
-        assert_eq!(
-            sample_bilinear(&tex, Vec2::new(0.75, 0.75)),
-            [1.0, 1.0, 1.0, 1.0]
-        );
-        // The middle is the mean of the four.
-        assert_eq!(
-            sample_bilinear(&tex, Vec2::new(0.5, 0.5)),
-            [0.5, 0.5, 0.25, 1.0]
-        );
-        // Wrapping: u = 1.25 is u = 0.25.
-        assert_eq!(
-            sample_bilinear(&tex, Vec2::new(1.25, 0.75)),
-            sample_bilinear(&tex, Vec2::new(0.25, 0.75))
-        );
-        // A quarter of the way from texel (0,0) to (1,0).
-        let s = sample_bilinear(&tex, Vec2::new(0.375, 0.25));
-        assert!((s[0] - 0.25).abs() < 1e-6);
-    }
-
-    #[test]
-    fn material_texture_and_vertex_colours_multiply() {
-        let mut mesh = quad(Some(vec![[0.5, 1.0, 1.0]; 4]));
-        mesh.uvs = Some(vec![
-            Vec2::new(0.0, 1.0),
-            Vec2::new(1.0, 1.0),
-            Vec2::new(1.0, 0.0),
-            Vec2::new(0.0, 0.0),
-        ]);
-        mesh.textures = vec![Texture {
-            width: 1,
-            height: 1,
-            pixels: vec![[1.0, 0.5, 1.0, 1.0]],
-        }];
-        mesh.materials = vec![Material {
-            name: "m".into(),
-            base_color: [1.0, 1.0, 0.5, 1.0],
-            texture: Some(0),
-        }];
-        mesh.triangle_materials = vec![0, 0];
-        let c = albedo_at(&mesh, 1, [0.2, 0.3, 0.5]);
-        assert_eq!(c, [0.5, 0.5, 0.5]);
     }
 
     #[test]

@@ -1,0 +1,95 @@
+//! Splat initialisation: from the input's surface (with a closed-form SH fit) or from sparse points.
+//!
+//! Surface init puts one flat splat at each chosen surface point (all input points, mesh samples,
+//! or a subset of K by voxel-grid or farthest-point sampling), turned into the surface plane by its
+//! normal (from the file or by k-nearest-neighbour PCA), with its in-plane scale from the local point
+//! spacing and a thin normal axis. Its SH coefficients are the ridge-regularised least-squares fit
+//! of the plenoptic colour ([`plenoptic_io::view_color::interpolate`]) over many view directions,
+//! in `splat_core::sh`'s basis: because the directions are the same for every point, the fit is one
+//! precomputed matrix applied to each point's samples.
+//!
+//! Sparse init follows the usual 3DGS pipeline: COLMAP points3D or random points in the bounds,
+//! isotropic scales from the 3 nearest neighbours, low opacity, then densification while training.
+//!
+//! - [`InitConfig`] and its enums: the settings (serde, as in the transcoder's `[init]` table).
+//! - [`SurfacePoints`]: the input's points, normals and colours (cloud points or mesh samples).
+//! - [`sampling`]: which K points carry splats; [`neighbours`]: k-d tree, spacing, PCA normals.
+//! - [`sh_fit`]: the SH fit and the automatic SH degree.
+//! - [`surface_init`], [`sparse_init`], [`initialise`]: the splats and an [`InitSummary`].
+
+use std::path::PathBuf;
+
+use serde::Serialize;
+use splat_core::Splats;
+
+pub mod config;
+pub mod neighbours;
+pub mod points;
+pub mod sampling;
+pub mod sh_fit;
+mod sparse;
+mod surface;
+#[cfg(test)]
+mod tests;
+
+pub use config::{InitConfig, InitMode, MeshPoints, Sampling, ShDegree};
+pub use neighbours::{PointIndex, pca_normals, point_spacing};
+pub use points::{SurfacePoints, sample_mesh};
+pub use sampling::{bounds, choose_points, farthest_point_sample, voxel_subsample};
+pub use sh_fit::{ShFit, auto_degree, decide_sh_degree, sh_fit_errors};
+pub use sparse::sparse_init;
+pub use surface::surface_init;
+
+/// Errors of initialisation.
+#[derive(Debug, thiserror::Error)]
+pub enum InitError {
+    /// The input has no points to put splats on.
+    #[error("the input has no points to initialise splats from")]
+    Empty,
+    /// The COLMAP model given for sparse init could not be read.
+    #[error("sparse init from COLMAP points3D: {source}")]
+    Colmap {
+        /// The model folder.
+        path: PathBuf,
+        /// The cause (boxed: COLMAP errors are large).
+        source: Box<colmap_io::Error>,
+    },
+    /// The COLMAP model has no 3D points.
+    #[error("the COLMAP model in {0} has no 3D points")]
+    NoColmapPoints(PathBuf),
+    /// splat-core refused the splats (a bug if it happens: the arrays are built together).
+    #[error("building splats: {0}")]
+    Splats(#[from] splat_core::Error),
+}
+
+/// What initialisation did, for the report.
+#[derive(Debug, Clone, Serialize, serde::Deserialize)]
+pub struct InitSummary {
+    /// Surface or sparse.
+    pub mode: InitMode,
+    /// Number of splats made.
+    pub splats: usize,
+    /// SH degree of the model.
+    pub sh_degree: u32,
+    /// RMS error (colour units) of the SH fit at degrees 0..=3 on a sample of points, when fitted.
+    pub sh_fit_rms: Option<[f64; 4]>,
+    /// Median distance between neighbouring input points (file units).
+    pub point_spacing: f32,
+    /// Where the normals came from: "file", "pca" or "none".
+    pub normals: String,
+    /// Where sparse points came from: "surface", "colmap" or "random".
+    pub source: String,
+}
+
+/// Initialises splats from the input's surface points as `cfg.mode` says.
+pub fn initialise(
+    input: &SurfacePoints,
+    cfg: &InitConfig,
+    exponent: i32,
+    seed: u64,
+) -> Result<(Splats, InitSummary), InitError> {
+    match cfg.mode {
+        InitMode::Surface => surface_init(&choose_points(input, cfg), cfg, exponent),
+        InitMode::Sparse => sparse_init(input, cfg, exponent, seed),
+    }
+}

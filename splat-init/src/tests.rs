@@ -1,0 +1,288 @@
+use glam::Vec3;
+
+use crate::*;
+
+/// One point at the origin seen by `n` capture cameras on two rings (as the 8iVSLF rigs),
+/// each with its own colour.
+fn plenoptic_point(n: usize) -> SurfacePoints {
+    let rings = camera_model::rig::rings(&[
+        camera_model::rig::Ring {
+            elevation_deg: 10.0,
+            count: n.div_ceil(2),
+            azimuth_offset_deg: 0.0,
+        },
+        camera_model::rig::Ring {
+            elevation_deg: 45.0,
+            count: n / 2,
+            azimuth_offset_deg: 15.0,
+        },
+    ]);
+    let cams: Vec<Vec3> = rings.iter().map(|d| (d * 2000.0).as_vec3()).collect();
+    let colors: Vec<[f32; 3]> = (0..cams.len())
+        .map(|k| {
+            let t = k as f32 / cams.len() as f32;
+            [0.2 + 0.6 * t, 0.8 - 0.5 * t, 0.5 + 0.3 * (6.0 * t).sin()]
+        })
+        .collect();
+    SurfacePoints {
+        positions: vec![Vec3::ZERO],
+        normals: Some(vec![Vec3::Y]),
+        colors: vec![[0.5, 0.5, 0.5]],
+        camera_positions: cams,
+        camera_colors: colors,
+    }
+}
+
+/// RMS difference between the fitted SH colour (splat-core's evaluation, +0.5, clamped at 0)
+/// and the interpolated colour over `dirs` SH directions that the fit did not use.
+fn rms_against_interpolation(p: &SurfacePoints, degree: u32, coeffs: &[[f32; 3]]) -> f64 {
+    let dirs = camera_model::rig::fibonacci_sphere(997);
+    let mut sse = 0.0f64;
+    for d in &dirs {
+        let d = d.as_vec3();
+        let want = plenoptic_io::view_color::interpolate(
+            Vec3::ZERO,
+            -d,
+            &p.camera_positions,
+            p.camera_colors_of(0),
+            p.colors[0],
+            10,
+        );
+        let got = splat_core::sh::color(degree, d, coeffs);
+        for c in 0..3 {
+            sse += f64::from(got[c] - want[c]).powi(2);
+        }
+    }
+    (sse / (3.0 * dirs.len() as f64)).sqrt()
+}
+
+#[test]
+fn sh_fit_residual_is_orthogonal_to_the_basis() {
+    // Least squares without ridge: Bᵀ(B a − y) = 0, checked directly from the residuals.
+    let p = plenoptic_point(13);
+    let fit = ShFit::new(3, 256, 0.0);
+    let (coeffs, _) = fit.fit_point(&p, 0, 10);
+    let mut grad = [[0.0f64; 3]; 16];
+    let mut b = [0.0f32; 16];
+    for d in &fit.dirs {
+        splat_core::sh::basis(3, *d, &mut b);
+        let y = plenoptic_io::view_color::interpolate(
+            Vec3::ZERO,
+            -*d,
+            &p.camera_positions,
+            p.camera_colors_of(0),
+            p.colors[0],
+            10,
+        );
+        for c in 0..3 {
+            let r: f32 = b.iter().zip(&coeffs).map(|(bk, a)| bk * a[c]).sum::<f32>() + 0.5 - y[c];
+            for k in 0..16 {
+                grad[k][c] += f64::from(b[k] * r);
+            }
+        }
+    }
+    for g in grad.iter().flatten() {
+        assert!(g.abs() / 256.0 < 1e-5, "normal equations violated: {g}");
+    }
+}
+
+#[test]
+fn sh_fit_reproduces_interpolated_colours() {
+    // 13 cameras as in 8iVSLF. Measured RMS error against the interpolated colour on 997
+    // directions the fit never saw, with neighbouring cameras of very different colours:
+    // degree 0/1/2/3 ≈ 0.139/0.090/0.045/0.037 (colour units in [0, 1]).
+    let p = plenoptic_point(13);
+    let cfg = InitConfig::default();
+    let mut errs = [0.0; 4];
+    for (degree, e) in errs.iter_mut().enumerate() {
+        let (coeffs, fit_rms) =
+            ShFit::new(degree as u32, cfg.fit_directions, cfg.ridge).fit_all(&p, 10);
+        *e = rms_against_interpolation(&p, degree as u32, &coeffs);
+        // The fit's own residual predicts the error on unseen directions.
+        assert!(
+            (*e - fit_rms).abs() < 0.01,
+            "degree {degree}: {e} vs {fit_rms}"
+        );
+    }
+    eprintln!("SH fit RMS error by degree: {errs:?}");
+    assert!(errs[3] < 0.05, "{errs:?}");
+    assert!(
+        errs[0] > errs[1] && errs[1] > errs[2] && errs[2] > errs[3],
+        "{errs:?}"
+    );
+}
+
+#[test]
+fn view_independent_colour_is_fitted_exactly_at_degree_zero() {
+    let mut p = plenoptic_point(13);
+    for c in &mut p.camera_colors {
+        *c = [0.9, 0.3, 0.1];
+    }
+    p.colors[0] = [0.9, 0.3, 0.1];
+    let cfg = InitConfig::default();
+    let errors = sh_fit_errors(&p, &cfg, 10);
+    assert!(errors.iter().all(|e| *e < 1e-6), "{errors:?}");
+    assert_eq!(auto_degree(&errors, cfg.sh_tolerance), 0);
+    let (coeffs, _) = ShFit::new(0, 64, 1e-3).fit_all(&p, 10);
+    let rgb = splat_core::sh_dc_to_rgb(coeffs[0]);
+    for (a, b) in rgb.iter().zip([0.9, 0.3, 0.1]) {
+        assert!((a - b).abs() < 1e-5);
+    }
+}
+
+#[test]
+fn auto_degree_picks_the_lowest_within_tolerance() {
+    assert_eq!(auto_degree(&[0.1, 0.05, 0.031, 0.03], 0.01), 2);
+    assert_eq!(auto_degree(&[0.1, 0.035, 0.031, 0.03], 0.01), 1);
+    assert_eq!(auto_degree(&[0.1, 0.05, 0.035, 0.03], 0.001), 3);
+}
+
+fn grid(n: usize) -> Vec<Vec3> {
+    (0..n * n)
+        .map(|i| Vec3::new((i % n) as f32, (i / n) as f32, 0.0))
+        .collect()
+}
+
+#[test]
+fn pca_normals_of_a_plane_are_its_normal() {
+    for n in pca_normals(&grid(20), 12) {
+        assert!((n.z.abs() - 1.0).abs() < 1e-4, "{n}");
+    }
+}
+
+#[test]
+fn spacing_and_subsampling() {
+    let pts = grid(40);
+    assert!((point_spacing(&pts) - 1.0).abs() < 1e-6);
+    let v = voxel_subsample(&pts, 400);
+    assert!((300..=500).contains(&v.len()), "{}", v.len());
+    let f = farthest_point_sample(&pts, 4);
+    // From corner (0,0): the opposite corner, then the two others.
+    let mut got: Vec<Vec3> = f.iter().map(|&i| pts[i]).collect();
+    got.sort_by(|a, b| (a.x + 100.0 * a.y).total_cmp(&(b.x + 100.0 * b.y)));
+    assert_eq!(
+        got,
+        vec![
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(39.0, 0.0, 0.0),
+            Vec3::new(0.0, 39.0, 0.0),
+            Vec3::new(39.0, 39.0, 0.0)
+        ]
+    );
+}
+
+#[test]
+fn surface_init_makes_flat_discs_on_the_points() {
+    let pts = grid(10);
+    let sp = SurfacePoints {
+        positions: pts.clone(),
+        normals: None,
+        colors: vec![[0.2, 0.4, 0.6]; pts.len()],
+        ..SurfacePoints::default()
+    };
+    let (s, summary) = surface_init(&sp, &InitConfig::default(), 10).unwrap();
+    assert_eq!(s.means, pts);
+    assert_eq!(summary.sh_degree, 0);
+    assert_eq!(summary.normals, "pca");
+    for i in 0..s.len() {
+        let scale = s.scale(i);
+        // Spacing 1: in-plane σ = √(mean of 3-NN squared distances) ∈ [1, √2], normal σ a tenth.
+        assert!(scale.x >= 0.99 && scale.x <= 1.42 && (scale.z / scale.x - 0.1).abs() < 1e-4);
+        let normal = s.rotation(i) * Vec3::Z;
+        assert!((normal.z.abs() - 1.0).abs() < 1e-4);
+        let rgb = splat_core::sh_dc_to_rgb(s.sh_of(i)[0]);
+        assert!((rgb[2] - 0.6).abs() < 1e-5);
+    }
+}
+
+#[test]
+fn sparse_init_reads_colmap_points3d() {
+    let dir = std::path::PathBuf::from(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../testdata/colmap/maupertuis/sparse/0"
+    ));
+    // Independent truth: the text file's own data lines (id x y z r g b error track…).
+    let text = std::fs::read_to_string(dir.join("points3D.txt")).unwrap();
+    let mut expected: Vec<([f32; 3], [f32; 3])> = text
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
+        .map(|l| {
+            let f: Vec<f32> = l
+                .split_whitespace()
+                .take(7)
+                .map(|v| v.parse().unwrap())
+                .collect();
+            (
+                [f[1], f[2], f[3]],
+                [f[4] / 255.0, f[5] / 255.0, f[6] / 255.0],
+            )
+        })
+        .collect();
+    assert_eq!(expected.len(), 1039);
+    let sp = SurfacePoints {
+        positions: grid(10),
+        colors: vec![[0.5; 3]; 100],
+        ..SurfacePoints::default()
+    };
+    let cfg = InitConfig {
+        mode: InitMode::Sparse,
+        points3d: Some(dir),
+        sh_degree: ShDegree::Fixed(0),
+        ..InitConfig::default()
+    };
+    let (s, summary) = initialise(&sp, &cfg, 10, 3).unwrap();
+    assert_eq!(summary.source, "colmap");
+    assert_eq!(s.len(), expected.len());
+    let mut got: Vec<([f32; 3], [f32; 3])> = (0..s.len())
+        .map(|i| {
+            (
+                s.means[i].to_array(),
+                splat_core::sh_dc_to_rgb(s.sh_of(i)[0]),
+            )
+        })
+        .collect();
+    let key = |a: &([f32; 3], [f32; 3])| (a.0[0], a.0[1], a.0[2]);
+    expected.sort_by(|a, b| key(a).partial_cmp(&key(b)).unwrap());
+    got.sort_by(|a, b| key(a).partial_cmp(&key(b)).unwrap());
+    for (g, e) in got.iter().zip(&expected) {
+        for k in 0..3 {
+            assert!((g.0[k] - e.0[k]).abs() < 1e-5, "{g:?} {e:?}");
+            assert!((g.1[k] - e.1[k]).abs() < 1e-5, "{g:?} {e:?}");
+        }
+    }
+    // Isotropic splats with Inria's initial opacity.
+    for i in 0..s.len() {
+        let sc = s.scale(i);
+        assert!((sc.x - sc.y).abs() < 1e-6 * sc.x && (sc.x - sc.z).abs() < 1e-6 * sc.x);
+        assert!((s.opacity(i) - cfg.sparse_opacity).abs() < 1e-5);
+    }
+    // A folder without a COLMAP model names the folder.
+    let missing = InitConfig {
+        points3d: Some(std::path::PathBuf::from("/nonexistent/sparse/0")),
+        ..cfg
+    };
+    let e = initialise(&sp, &missing, 10, 3).unwrap_err().to_string();
+    assert!(e.contains("/nonexistent/sparse/0"), "{e}");
+}
+
+#[test]
+fn sparse_random_init_fills_the_bounds() {
+    let sp = SurfacePoints {
+        positions: grid(10),
+        colors: vec![[0.5; 3]; 100],
+        ..SurfacePoints::default()
+    };
+    let cfg = InitConfig {
+        mode: InitMode::Sparse,
+        random_points: 500,
+        ..InitConfig::default()
+    };
+    let (s, summary) = initialise(&sp, &cfg, 10, 3).unwrap();
+    assert_eq!(s.len(), 500);
+    assert_eq!(summary.source, "random");
+    assert!(
+        s.means
+            .iter()
+            .all(|m| m.x >= 0.0 && m.x <= 9.0 && m.z == 0.0)
+    );
+}
