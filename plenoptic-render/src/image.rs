@@ -34,23 +34,4 @@ impl ViewImage {
     pub fn depth_at(&self, x: u32, y: u32) -> f32 {
         self.depth[y as usize * self.width as usize + x as usize]
     }
-
-    /// Straight (un-premultiplied) colour: `rgb` is composited on a black background, so a pixel
-    /// with coverage `a` holds `a·colour`; dividing by `a` (clamped to [0, 1]) recovers the
-    /// colour, and uncovered pixels are black. This is what a trainer compositing its own
-    /// backgrounds under the coverage mask wants.
-    #[must_use]
-    pub fn straight_rgb(&self) -> Vec<f32> {
-        self.rgb
-            .chunks_exact(3)
-            .zip(&self.alpha)
-            .flat_map(|(px, &a)| {
-                if a > 1e-6 {
-                    [0, 1, 2].map(|c| (px[c] / a).clamp(0.0, 1.0))
-                } else {
-                    [0.0; 3]
-                }
-            })
-            .collect()
-    }
 }

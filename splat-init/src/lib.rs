@@ -33,7 +33,7 @@ mod surface;
 mod tests;
 
 pub use config::{InitConfig, InitMode, MeshPoints, Sampling, ShDegree};
-pub use neighbours::{PointIndex, pca_normals, point_spacing};
+pub use neighbours::{pca_normals, point_spacing};
 pub use points::{SurfacePoints, sample_mesh};
 pub use sampling::{bounds, choose_points, farthest_point_sample, voxel_subsample};
 pub use sh_fit::{ShFit, auto_degree, decide_sh_degree, sh_fit_errors};

@@ -1,56 +1,9 @@
 //! Nearest neighbours of input points: a k-d tree, the point spacing and PCA normals.
 
-use std::num::NonZero;
-
 use glam::Vec3;
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
-
-/// A k-d tree over points for nearest-neighbour queries.
-pub struct PointIndex {
-    tree: ImmutableKdTree<f32, 3>,
-    len: usize,
-}
-
-impl PointIndex {
-    /// Builds the index; `None` for an empty or unindexable set.
-    #[must_use]
-    pub fn new(points: &[Vec3]) -> Option<Self> {
-        if points.is_empty() {
-            return None;
-        }
-        let coords: Vec<[f32; 3]> = points.iter().map(|p| p.to_array()).collect();
-        let tree = ImmutableKdTree::<f32, 3>::new_from_slice(&coords).ok()?;
-        Some(Self {
-            tree,
-            len: points.len(),
-        })
-    }
-
-    /// Distance from `p` to the nearest indexed point.
-    #[must_use]
-    pub fn nearest_distance(&self, p: Vec3) -> f32 {
-        self.tree
-            .query(&p.to_array())
-            .nearest_one::<SquaredEuclidean<f32>>()
-            .execute()
-            .distance
-            .sqrt()
-    }
-
-    /// Indices of the `k` nearest indexed points to `p` (nearest first; includes `p` itself if indexed).
-    #[must_use]
-    pub fn nearest_n(&self, p: Vec3, k: usize) -> Vec<usize> {
-        let want = NonZero::new(k.min(self.len).max(1)).unwrap_or(NonZero::<usize>::MIN);
-        self.tree
-            .query(&p.to_array())
-            .nearest_n::<SquaredEuclidean<f32>>(want)
-            .execute()
-            .iter()
-            .map(|r| r.item as usize)
-            .collect()
-    }
-}
+// The k-d tree is splat-train's: its kNN scales and the evaluator's surface distance use it too.
+use splat_train::init::PointIndex;
 
 /// Median distance from a point to its nearest other point, on up to 20,000 evenly strided points.
 #[must_use]

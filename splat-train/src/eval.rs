@@ -1,13 +1,41 @@
-//! Evaluation of a model on held-out views: PSNR and SSIM on the model's background.
+//! Evaluation of a model on held-out views: image metrics, coverage, distance to the surface.
+//!
+//! One scoring path serves every caller: a view is rendered over a background (at the model's
+//! full SH degree, without antialiasing), the render is clamped to [0, 1] as Inria's evaluation
+//! does, and it is scored with PSNR and SSIM against the view's colour over the same background
+//! ([`View::on_background`]).
+//!
+//! - [`evaluate`] / [`evaluate_with`] score on one background (the trainer's, during a run).
+//! - [`evaluate_views`] scores on black and on white (a floater that happens to match one
+//!   background shows on the other), measures how well the rendered coverage matches the
+//!   views' masks, and, given the input's surface points, how far the splats are from them.
 
+use std::borrow::Cow;
+
+use glam::Vec3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use splat_core::{Rasterizer, RenderCamera, RenderOptions, Splats};
 
+use crate::init::PointIndex;
 use crate::metrics::{psnr, ssim};
 use crate::view::View;
 
-/// Scores of one view.
+/// Errors of [`evaluate_views`].
+#[derive(Debug, thiserror::Error)]
+pub enum EvalError {
+    /// No view covers a single pixel: an empty render would match every one of them
+    /// (PSNR ∞, SSIM 1), so there is nothing to score.
+    #[error(
+        "none of the {views} reference views has a covered pixel (every mask or alpha is 0): there is nothing to score"
+    )]
+    NothingCovered {
+        /// Number of views.
+        views: usize,
+    },
+}
+
+/// Scores of one view on one background.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ViewScore {
     /// View name.
@@ -18,7 +46,7 @@ pub struct ViewScore {
     pub ssim: f64,
 }
 
-/// Scores over a set of views.
+/// Scores over a set of views on one background.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Evaluation {
     /// Mean PSNR over the views, in dB.
@@ -31,48 +59,442 @@ pub struct Evaluation {
 
 /// Renders `splats` (at their full SH degree, over `background`) from every view, clamps the
 /// render to [0, 1] as Inria's evaluation does, and scores it against the view's image (composited
-/// over `background` where the view has a mask).
+/// over `background` where the view has a mask). The means run over all views.
 #[must_use]
-pub fn evaluate(splats: &Splats, views: &[View], background: glam::Vec3) -> Evaluation {
-    let opts = RenderOptions {
-        background,
-        active_sh_degree: splats.sh_degree,
-        antialiased: false,
-    };
-    evaluate_with(splats, views, &opts)
+pub fn evaluate(splats: &Splats, views: &[View], background: Vec3) -> Evaluation {
+    evaluate_with(splats, views, &render_options(splats, background))
 }
 
 /// [`evaluate`] with explicit render options.
 #[must_use]
 pub fn evaluate_with(splats: &Splats, views: &[View], opts: &RenderOptions) -> Evaluation {
     let mut raster = Rasterizer::new();
-    let mut scores = Vec::with_capacity(views.len());
-    for v in views {
-        let cam = RenderCamera::from(&v.camera);
-        let out = raster.forward(splats, &cam, opts);
-        let render: Vec<f32> = out.rgb.par_iter().map(|x| x.clamp(0.0, 1.0)).collect();
-        let target: Vec<f32> = match &v.mask {
-            Some(mask) => v
-                .image
-                .chunks_exact(3)
-                .zip(mask)
-                .flat_map(|(px, &a)| {
-                    let bg = opts.background.to_array();
-                    [0, 1, 2].map(|c| px[c] * a + bg[c] * (1.0 - a))
-                })
-                .collect(),
-            None => v.image.clone(),
-        };
-        scores.push(ViewScore {
-            name: v.name.clone(),
-            psnr: psnr(&render, &target),
-            ssim: ssim(&render, &target, cam.width, cam.height),
-        });
-    }
+    let scores: Vec<ViewScore> = views
+        .iter()
+        .map(|v| {
+            let s = score(&mut raster, splats, v, opts);
+            ViewScore {
+                name: v.name.clone(),
+                psnr: s.psnr,
+                ssim: s.ssim,
+            }
+        })
+        .collect();
     let n = scores.len().max(1) as f64;
     Evaluation {
         psnr: scores.iter().map(|s| s.psnr).sum::<f64>() / n,
         ssim: scores.iter().map(|s| s.ssim).sum::<f64>() / n,
         views: scores,
+    }
+}
+
+/// Options for rendering `splats` over `background` for evaluation: full SH degree, no
+/// antialiasing.
+fn render_options(splats: &Splats, background: Vec3) -> RenderOptions {
+    RenderOptions {
+        background,
+        active_sh_degree: splats.sh_degree,
+        antialiased: false,
+    }
+}
+
+/// One view scored on one background, with the clamped render and its coverage.
+struct Scored {
+    psnr: f64,
+    ssim: f64,
+    rgb: Vec<f32>,
+    alpha: Vec<f32>,
+}
+
+/// The one scoring path: render over `opts.background`, clamp to [0, 1], PSNR and SSIM against
+/// the view over the same background.
+fn score(raster: &mut Rasterizer, splats: &Splats, view: &View, opts: &RenderOptions) -> Scored {
+    let cam = RenderCamera::from(&view.camera);
+    let out = raster.forward(splats, &cam, opts);
+    let rgb: Vec<f32> = out.rgb.par_iter().map(|x| x.clamp(0.0, 1.0)).collect();
+    let target = view.on_background(opts.background.to_array());
+    Scored {
+        psnr: psnr(&rgb, &target),
+        ssim: ssim(&rgb, &target, cam.width, cam.height),
+        rgb,
+        alpha: out.alpha.clone(),
+    }
+}
+
+/// Scores of one view on both backgrounds, with coverage errors.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ViewMetrics {
+    /// View name.
+    pub name: String,
+    /// PSNR (dB) on a black background.
+    pub psnr_black: f64,
+    /// PSNR (dB) on a white background.
+    pub psnr_white: f64,
+    /// SSIM on a black background.
+    pub ssim_black: f64,
+    /// SSIM on a white background.
+    pub ssim_white: f64,
+    /// Intersection over union of rendered coverage and the reference mask (both thresholded).
+    pub alpha_iou: f64,
+    /// Mean missing coverage (1 − rendered alpha) where the reference is fully covered: holes.
+    pub hole_alpha: f64,
+    /// Mean rendered alpha where the reference is empty: splats in free space.
+    pub free_alpha: f64,
+    /// Pixels the reference covers (alpha > 0). A view with none is scored but left out of the
+    /// means: an empty render matches it perfectly whatever the model.
+    #[serde(default)]
+    pub covered_pixels: usize,
+}
+
+/// Opacity-weighted distance of splat centres to the input surface.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SurfaceDistance {
+    /// Point spacing of the surface points (file units) used as the unit below.
+    pub spacing: f64,
+    /// Weighted mean distance (file units).
+    pub mean: f64,
+    /// Weighted 95th percentile distance (file units).
+    pub p95: f64,
+    /// Share of the total opacity in splats farther than `threshold` ("floaters").
+    pub floater_share: f64,
+    /// The floater threshold: `floater_spacings` × spacing.
+    pub threshold: f64,
+    /// Number of splats farther than `threshold`.
+    pub floaters: usize,
+}
+
+/// All metrics of a model on held-out views.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Metrics {
+    /// Mean PSNR (dB) on black.
+    pub psnr_black: f64,
+    /// Mean PSNR (dB) on white.
+    pub psnr_white: f64,
+    /// Mean SSIM on black.
+    pub ssim_black: f64,
+    /// Mean SSIM on white.
+    pub ssim_white: f64,
+    /// Mean alpha IoU.
+    pub alpha_iou: f64,
+    /// Mean hole alpha (see [`ViewMetrics::hole_alpha`]).
+    pub hole_alpha: f64,
+    /// Mean free-space alpha (see [`ViewMetrics::free_alpha`]).
+    pub free_alpha: f64,
+    /// Distance of splats to the input surface, when the surface is known.
+    pub surface: Option<SurfaceDistance>,
+    /// Number of splats.
+    pub splats: usize,
+    /// Per-view scores.
+    pub views: Vec<ViewMetrics>,
+}
+
+/// The splats' render of one view on black, kept for pictures.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RenderedView {
+    /// Colours on black, clamped to [0, 1].
+    pub rgb: Vec<f32>,
+    /// Coverage.
+    pub alpha: Vec<f32>,
+}
+
+/// Settings of [`evaluate_views`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EvalOptions {
+    /// Coverage above this counts as covered for the IoU.
+    pub alpha_threshold: f32,
+    /// Floater threshold in point spacings.
+    pub floater_spacings: f64,
+}
+
+/// Renders `splats` from every view on black and white and scores them; with the input's
+/// surface points and spacing, also measures the splats' distance to the surface. A view
+/// without a mask covers all its pixels. The means are over the views that cover at least one
+/// pixel; when none does, the result is [`EvalError::NothingCovered`] rather than a
+/// perfect-looking score. Returns the metrics and each view's render on black.
+///
+/// # Errors
+/// [`EvalError::NothingCovered`] when no view covers a pixel.
+pub fn evaluate_views(
+    splats: &Splats,
+    views: &[View],
+    surface: Option<(&[Vec3], f32)>,
+    opts: &EvalOptions,
+) -> Result<(Metrics, Vec<RenderedView>), EvalError> {
+    let coverage: Vec<Cow<'_, [f32]>> = views
+        .iter()
+        .map(|v| match &v.mask {
+            Some(m) => Cow::Borrowed(m.as_slice()),
+            None => {
+                let k = &v.camera.intrinsics;
+                Cow::Owned(vec![1.0; k.width as usize * k.height as usize])
+            }
+        })
+        .collect();
+    let covered: Vec<usize> = coverage
+        .iter()
+        .map(|a| a.iter().filter(|&&a| a > 0.0).count())
+        .collect();
+    if covered.iter().all(|&c| c == 0) {
+        return Err(EvalError::NothingCovered { views: views.len() });
+    }
+    let mut raster = Rasterizer::new();
+    let mut per_view = Vec::with_capacity(views.len());
+    let mut renders = Vec::with_capacity(views.len());
+    for ((v, reference), &covered_pixels) in views.iter().zip(&coverage).zip(&covered) {
+        let black = score(&mut raster, splats, v, &render_options(splats, Vec3::ZERO));
+        let white = score(&mut raster, splats, v, &render_options(splats, Vec3::ONE));
+        let alpha_iou = iou(&black.alpha, reference, opts.alpha_threshold);
+        let (hole_alpha, free_alpha) = coverage_errors(&black.alpha, reference);
+        per_view.push(ViewMetrics {
+            name: v.name.clone(),
+            psnr_black: black.psnr,
+            psnr_white: white.psnr,
+            ssim_black: black.ssim,
+            ssim_white: white.ssim,
+            alpha_iou,
+            hole_alpha,
+            free_alpha,
+            covered_pixels,
+        });
+        renders.push(RenderedView {
+            rgb: black.rgb,
+            alpha: black.alpha,
+        });
+    }
+    let scored: Vec<&ViewMetrics> = per_view.iter().filter(|v| v.covered_pixels > 0).collect();
+    let mean =
+        |f: fn(&ViewMetrics) -> f64| scored.iter().map(|v| f(v)).sum::<f64>() / scored.len() as f64;
+    let metrics = Metrics {
+        psnr_black: mean(|v| v.psnr_black),
+        psnr_white: mean(|v| v.psnr_white),
+        ssim_black: mean(|v| v.ssim_black),
+        ssim_white: mean(|v| v.ssim_white),
+        alpha_iou: mean(|v| v.alpha_iou),
+        hole_alpha: mean(|v| v.hole_alpha),
+        free_alpha: mean(|v| v.free_alpha),
+        surface: surface.and_then(|(points, spacing)| {
+            surface_distance(splats, points, spacing, opts.floater_spacings)
+        }),
+        splats: splats.len(),
+        views: per_view,
+    };
+    Ok((metrics, renders))
+}
+
+/// IoU of two coverage maps thresholded at `threshold` (1 when both are empty).
+#[must_use]
+pub fn iou(a: &[f32], b: &[f32], threshold: f32) -> f64 {
+    let (mut inter, mut union) = (0usize, 0usize);
+    for (&x, &y) in a.iter().zip(b) {
+        let (x, y) = (x > threshold, y > threshold);
+        inter += usize::from(x && y);
+        union += usize::from(x || y);
+    }
+    if union == 0 {
+        1.0
+    } else {
+        inter as f64 / union as f64
+    }
+}
+
+/// Mean of 1 − `rendered` where `reference` ≥ 0.999 (holes) and of `rendered` where `reference`
+/// ≤ 0.001 (free space); 0 for an empty set.
+#[must_use]
+pub fn coverage_errors(rendered: &[f32], reference: &[f32]) -> (f64, f64) {
+    let (mut hole, mut nh, mut free, mut nf) = (0.0f64, 0usize, 0.0f64, 0usize);
+    for (&r, &m) in rendered.iter().zip(reference) {
+        if m >= 0.999 {
+            hole += f64::from(1.0 - r);
+            nh += 1;
+        } else if m <= 0.001 {
+            free += f64::from(r);
+            nf += 1;
+        }
+    }
+    (hole / nh.max(1) as f64, free / nf.max(1) as f64)
+}
+
+/// Opacity-weighted distance of splat centres to the nearest surface point; `None` without
+/// splats or surface points.
+#[must_use]
+pub fn surface_distance(
+    splats: &Splats,
+    surface: &[Vec3],
+    spacing: f32,
+    floater_spacings: f64,
+) -> Option<SurfaceDistance> {
+    let index = PointIndex::new(surface)?;
+    if splats.is_empty() {
+        return None;
+    }
+    let mut d: Vec<(f64, f64)> = splats
+        .means
+        .par_iter()
+        .zip(&splats.opacity_logits)
+        .map(|(m, &o)| {
+            (
+                f64::from(index.nearest_distance(*m)),
+                f64::from(splat_core::sigmoid(o)),
+            )
+        })
+        .collect();
+    let total: f64 = d.iter().map(|x| x.1).sum();
+    let threshold = floater_spacings * f64::from(spacing);
+    let floaters = d.iter().filter(|x| x.0 > threshold).count();
+    if total <= 0.0 {
+        return Some(SurfaceDistance {
+            spacing: f64::from(spacing),
+            mean: 0.0,
+            p95: 0.0,
+            floater_share: 0.0,
+            threshold,
+            floaters,
+        });
+    }
+    let mean = d.iter().map(|x| x.0 * x.1).sum::<f64>() / total;
+    // Adding 0.0 turns the empty sum's −0.0 into 0.0.
+    let beyond = d
+        .iter()
+        .filter(|x| x.0 > threshold)
+        .map(|x| x.1)
+        .sum::<f64>()
+        / total
+        + 0.0;
+    d.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut acc = 0.0;
+    let mut p95 = d.last().map_or(0.0, |x| x.0);
+    for (dist, w) in &d {
+        acc += w;
+        if acc >= 0.95 * total {
+            p95 = *dist;
+            break;
+        }
+    }
+    Some(SurfaceDistance {
+        spacing: f64::from(spacing),
+        mean,
+        p95,
+        floater_share: beyond,
+        threshold,
+        floaters,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use camera_model::{Camera, Intrinsics, Pose};
+
+    #[test]
+    fn iou_counts_overlap() {
+        let a = [1.0, 1.0, 0.0, 0.0];
+        let b = [1.0, 0.0, 1.0, 0.0];
+        assert!((iou(&a, &b, 0.5) - 1.0 / 3.0).abs() < 1e-12);
+        assert_eq!(iou(&[0.0; 3], &[0.0; 3], 0.5), 1.0);
+        let (hole, free) = coverage_errors(&[0.5, 1.0, 0.25, 0.0], &[1.0, 1.0, 0.0, 0.0]);
+        assert_eq!((hole, free), (0.25, 0.125));
+    }
+
+    #[test]
+    fn surface_distance_weights_by_opacity() {
+        // Surface: points on the x axis at spacing 1; splats at distance 0, 0.5 and 10.
+        let surface: Vec<Vec3> = (0..100).map(|i| Vec3::new(i as f32, 0.0, 0.0)).collect();
+        let mut s = Splats::new(0);
+        for (y, o) in [(0.0f32, 0.5f32), (0.5, 0.5), (10.0, 0.5)] {
+            s.push(
+                Vec3::new(50.0, y, 0.0),
+                Vec3::ZERO,
+                [1.0, 0.0, 0.0, 0.0],
+                splat_core::logit(o),
+                &[[0.0; 3]],
+            );
+        }
+        let d = surface_distance(&s, &surface, 1.0, 2.0).unwrap();
+        assert!((d.mean - 10.5 / 3.0).abs() < 1e-5, "{}", d.mean);
+        assert!((d.floater_share - 1.0 / 3.0).abs() < 1e-9);
+        assert_eq!(d.floaters, 1);
+        assert!((d.p95 - 10.0).abs() < 1e-5);
+    }
+
+    /// A `w`×1 view straight down the z axis with the given coverage, grey where covered.
+    fn strip(name: &str, alpha: Vec<f32>) -> View {
+        let w = alpha.len() as u32;
+        let rgb: Vec<f32> = alpha.iter().flat_map(|&a| [0.5 * a; 3]).collect();
+        View::from_premultiplied(
+            name.into(),
+            Camera::new(Intrinsics::centered(w, 1, 1.0, 1.0), Pose::IDENTITY),
+            &rgb,
+            alpha,
+        )
+    }
+
+    #[test]
+    fn views_without_coverage_are_left_out_and_none_at_all_is_an_error() {
+        let splats = Splats::new(0);
+        let opts = EvalOptions {
+            alpha_threshold: 0.5,
+            floater_spacings: 2.0,
+        };
+        // Nothing covered anywhere: an empty model would score PSNR ∞ and SSIM 1; refused.
+        let empty = [strip("a", vec![0.0; 16]), strip("b", vec![0.0; 16])];
+        let e = evaluate_views(&splats, &empty, None, &opts).unwrap_err();
+        assert!(matches!(e, EvalError::NothingCovered { views: 2 }), "{e}");
+        assert!(
+            e.to_string()
+                .contains("none of the 2 reference views has a covered pixel")
+        );
+        // One covered view: the means are its scores, finite; the empty view is listed, unscored.
+        let mut alpha = vec![0.0; 16];
+        alpha[4..12].fill(1.0);
+        let views = [strip("a", vec![0.0; 16]), strip("b", alpha)];
+        let (m, renders) = evaluate_views(&splats, &views, None, &opts).unwrap();
+        assert_eq!(renders.len(), 2);
+        assert_eq!(
+            (m.views[0].covered_pixels, m.views[1].covered_pixels),
+            (0, 8)
+        );
+        // The empty model renders black: MSE on black = 8·3·0.25 / 48 = 1/8.
+        let expected = -10.0 * (1.0f64 / 8.0).log10();
+        assert!((m.psnr_black - expected).abs() < 1e-9, "{}", m.psnr_black);
+        assert_eq!(m.psnr_black, m.views[1].psnr_black);
+        assert!(m.views[0].psnr_black.is_infinite());
+        assert_eq!(m.ssim_black, m.views[1].ssim_black);
+        // On white the uncovered pixels are white in both: MSE = 8·3·0.25 / 48 again.
+        assert!((m.psnr_white - expected).abs() < 1e-9, "{}", m.psnr_white);
+        // Nothing rendered: the 8 covered pixels are all hole, the rest free space with 0.
+        assert_eq!(
+            (
+                m.views[1].alpha_iou,
+                m.views[1].hole_alpha,
+                m.views[1].free_alpha
+            ),
+            (0.0, 1.0, 0.0)
+        );
+    }
+
+    /// A view without a mask covers every pixel, and [`evaluate`] (one background, means over
+    /// all views) scores it as [`evaluate_views`] does on that background.
+    #[test]
+    fn unmasked_views_cover_everything_and_both_entry_points_agree() {
+        let splats = Splats::new(0);
+        let view = View {
+            name: "grey".into(),
+            camera: Camera::new(Intrinsics::centered(16, 1, 1.0, 1.0), Pose::IDENTITY),
+            image: vec![0.25; 48],
+            mask: None,
+        };
+        let opts = EvalOptions {
+            alpha_threshold: 0.5,
+            floater_spacings: 2.0,
+        };
+        let (m, _) = evaluate_views(&splats, std::slice::from_ref(&view), None, &opts).unwrap();
+        assert_eq!(m.views[0].covered_pixels, 16);
+        // Black render against 0.25 grey: MSE 1/16; white render: MSE 9/16.
+        assert!((m.psnr_black - -10.0 * (1.0f64 / 16.0).log10()).abs() < 1e-9);
+        assert!((m.psnr_white - -10.0 * (9.0f64 / 16.0).log10()).abs() < 1e-9);
+        let black = evaluate(&splats, std::slice::from_ref(&view), Vec3::ZERO);
+        let white = evaluate(&splats, std::slice::from_ref(&view), Vec3::ONE);
+        assert_eq!((black.psnr, black.ssim), (m.psnr_black, m.ssim_black));
+        assert_eq!((white.psnr, white.ssim), (m.psnr_white, m.ssim_white));
     }
 }

@@ -1,4 +1,5 @@
-//! Initial splat scales from point spacing.
+//! Initial splat scales from point spacing, and the nearest-neighbour index they and the
+//! evaluator's surface distance use.
 
 use std::num::NonZero;
 
@@ -48,6 +49,53 @@ pub fn scales_from_knn(points: &[glam::Vec3]) -> Vec<glam::Vec3> {
         .collect()
 }
 
+/// A k-d tree over points for nearest-neighbour queries.
+pub struct PointIndex {
+    tree: ImmutableKdTree<f32, 3>,
+    len: usize,
+}
+
+impl PointIndex {
+    /// Builds the index; `None` for an empty or unindexable set.
+    #[must_use]
+    pub fn new(points: &[glam::Vec3]) -> Option<Self> {
+        if points.is_empty() {
+            return None;
+        }
+        let coords: Vec<[f32; 3]> = points.iter().map(|p| p.to_array()).collect();
+        let tree = ImmutableKdTree::<f32, 3>::new_from_slice(&coords).ok()?;
+        Some(Self {
+            tree,
+            len: points.len(),
+        })
+    }
+
+    /// Distance from `p` to the nearest indexed point.
+    #[must_use]
+    pub fn nearest_distance(&self, p: glam::Vec3) -> f32 {
+        self.tree
+            .query(&p.to_array())
+            .nearest_one::<SquaredEuclidean<f32>>()
+            .execute()
+            .distance
+            .sqrt()
+    }
+
+    /// Indices of the `k` nearest indexed points to `p` (nearest first; includes `p` itself if
+    /// indexed).
+    #[must_use]
+    pub fn nearest_n(&self, p: glam::Vec3, k: usize) -> Vec<usize> {
+        let want = NonZero::new(k.min(self.len).max(1)).unwrap_or(NonZero::<usize>::MIN);
+        self.tree
+            .query(&p.to_array())
+            .nearest_n::<SquaredEuclidean<f32>>(want)
+            .execute()
+            .iter()
+            .map(|r| r.item as usize)
+            .collect()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -77,6 +125,33 @@ mod tests {
             assert_eq!(ours[i].x, ours[i].y);
             assert_eq!(ours[i].x, ours[i].z);
         }
+    }
+
+    /// The index's answers against a brute-force search over random points.
+    #[test]
+    fn point_index_matches_brute_force() {
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(9);
+        let pts: Vec<glam::Vec3> = (0..200)
+            .map(|_| glam::Vec3::new(rng.random(), rng.random(), rng.random()))
+            .collect();
+        let index = PointIndex::new(&pts).unwrap();
+        for _ in 0..50 {
+            let q = glam::Vec3::new(rng.random(), rng.random(), rng.random()) * 1.5;
+            let mut by_distance: Vec<(f32, usize)> = pts
+                .iter()
+                .enumerate()
+                .map(|(i, p)| (p.distance_squared(q), i))
+                .collect();
+            by_distance.sort_by(|a, b| a.0.total_cmp(&b.0));
+            let nearest = by_distance[0].0.sqrt();
+            assert!((index.nearest_distance(q) - nearest).abs() < 1e-6);
+            let want: Vec<usize> = by_distance[..5].iter().map(|x| x.1).collect();
+            assert_eq!(index.nearest_n(q, 5), want);
+        }
+        // k is clamped to the points there are; an empty set has no index.
+        assert_eq!(index.nearest_n(pts[3], 1000).len(), 200);
+        assert_eq!(index.nearest_n(pts[3], 1)[0], 3);
+        assert!(PointIndex::new(&[]).is_none());
     }
 
     #[test]

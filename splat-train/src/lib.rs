@@ -1,16 +1,21 @@
 //! CPU trainer for 3D Gaussian splats: L1 + D-SSIM, Adam, schedules, densification, checkpoints.
 //!
 //! - [`Trainer`]: the loop (one view per step: render, [`loss`], backward, [`adam`], refine).
-//! - [`TrainConfig`]: Inria's defaults; [`schedule`]: learning-rate and SH-degree schedules.
+//! - [`TrainConfig`]: Inria's defaults; [`schedule`]: learning-rate, SH-degree and
+//!   densification schedules, time-budgeted run lengths, pause points.
 //! - [`strategy`]: the replaceable densification policy ([`InriaDensify`]).
-//! - [`ssim`], [`metrics`], [`evaluate`]: image quality; [`init`]: kNN scale initialisation.
+//! - [`dataset`]: reading a dataset folder (COLMAP cameras, images, masks) as [`View`]s;
+//!   [`composite`]: colour over a background, the one place it is written.
+//! - [`ssim`], [`metrics`], [`eval`]: image quality and held-out evaluation; [`init`]: kNN scale
+//!   initialisation and the nearest-neighbour index.
 //! - [`checkpoint`]: save and resume a run exactly.
 
 pub mod adam;
 pub mod checkpoint;
 pub mod config;
+pub mod dataset;
 pub mod error;
-mod eval;
+pub mod eval;
 pub mod init;
 pub mod loss;
 pub mod metrics;
@@ -22,8 +27,12 @@ mod trainer;
 mod view;
 
 pub use config::{Background, DensifyConfig, Frozen, LearningRates, TrainConfig, Warmup};
+pub use dataset::{Dataset, DatasetError, read_dataset};
 pub use error::Error;
-pub use eval::{Evaluation, ViewScore, evaluate, evaluate_with};
+pub use eval::{
+    EvalError, EvalOptions, Evaluation, Metrics, RenderedView, SurfaceDistance, ViewMetrics,
+    ViewScore, evaluate, evaluate_views, evaluate_with,
+};
 pub use strategy::{DensifyStrategy, InriaDensify, RefineContext, RefineReport};
 pub use trainer::{HistoryEntry, NonFinite, Progress, StepStats, Timings, TrainReport, Trainer};
-pub use view::{View, load_view, scale_intrinsics};
+pub use view::{View, composite, composite_in_place, composite_into, over, scale_intrinsics};

@@ -1,4 +1,9 @@
-//! Learning-rate and SH-degree schedules of Inria's 3DGS trainer.
+//! Schedules: Inria's learning-rate and SH-degree schedules, its densification schedule scaled
+//! to a run's length, the length of a time-budgeted run, and where a run pauses.
+
+use std::time::Duration;
+
+use crate::config::DensifyConfig;
 
 /// Log-linear interpolation from `init` to `last` over `max_steps` (Inria's `get_expon_lr_func`
 /// without the delay, which its trainer leaves inactive): lr(t) = exp((1−s)·ln init + s·ln last),
@@ -38,9 +43,164 @@ pub fn camera_extent(centres: &[glam::DVec3]) -> f64 {
     if r > 0.0 && r.is_finite() { r } else { 1.0 }
 }
 
+/// Length of the run Inria's densification schedule is written for (`iterations` = 30,000).
+pub const INRIA_ITERATIONS: f64 = 30_000.0;
+
+/// Fewest steps between two densifications: the statistic that selects splats is a splat's
+/// view-space gradient averaged over the steps since the last densification, and with one view
+/// per step fewer than about ten views make it noise.
+pub const MIN_DENSIFY_INTERVAL: u32 = 10;
+
+/// Inria's densification schedule, written for 30,000 steps, scaled to a run of `steps` steps.
+///
+/// `start`, `interval`, `stop` and `opacity_reset_interval` are multiplied by `steps / 30,000`
+/// (so 30,000 steps keep Inria's 500 / 100 / 15,000 / 3,000). Floors keep the result meaningful
+/// for short runs: the interval is at least [`MIN_DENSIFY_INTERVAL`], `start` at least one
+/// interval, `stop` after the first densification (which comes one interval after `start`), and
+/// opacity resets are at least the steps Adam needs to bring a reset
+/// opacity back: a reset sets opacity 0.01 (logit −4.6) and Adam moves a parameter by about its
+/// learning rate per step, so climbing back to 0.5 takes 4.6 / `opacity_lr` steps (92 at Inria's
+/// 0.05). Resets happen only before `stop`, so a run shorter than about twice that floor
+/// densifies without them; the half of the run after `stop` leaves time to recover from the last.
+/// The gradient and opacity thresholds are not changed.
+#[must_use]
+pub fn scale_densify(d: &DensifyConfig, steps: u32, opacity_lr: f32) -> DensifyConfig {
+    let k = f64::from(steps) / INRIA_ITERATIONS;
+    let scale = |v: u32| (f64::from(v) * k).round() as u32;
+    let interval = scale(d.interval).max(MIN_DENSIFY_INTERVAL);
+    let start = scale(d.start).max(interval);
+    // Inria's reset clamps opacity to 0.01; climbing from its logit back to 0 (opacity 0.5).
+    let reset_logit = (0.99f64 / 0.01).ln();
+    let recovery = (reset_logit / f64::from(opacity_lr.max(1e-6))).ceil() as u32;
+    let reset = if d.opacity_reset_interval == 0 {
+        0
+    } else {
+        scale(d.opacity_reset_interval).max(recovery)
+    };
+    DensifyConfig {
+        interval,
+        start,
+        stop: scale(d.stop).max(start + interval + 1),
+        opacity_reset_interval: reset,
+        ..*d
+    }
+}
+
+/// The steps of a time-budgeted run, from steps timed on a probe before it starts.
+///
+/// `timed` is the time `timed_steps` steps took (after an untimed warm-up step), `spent` the whole
+/// time the probe took (it comes out of the budget) and `setup` the part of it spent setting up,
+/// which the real run spends again. Returns the steps that fit in what is left of `budget` at the
+/// timed speed, at most `iterations` and at least 1, and what is left of the budget.
+#[must_use]
+pub fn steps_in_budget(
+    iterations: u32,
+    budget: Duration,
+    spent: Duration,
+    setup: Duration,
+    timed: Duration,
+    timed_steps: u32,
+) -> (u32, Duration) {
+    let per_step = timed.as_secs_f64() / f64::from(timed_steps);
+    let left = budget.saturating_sub(spent);
+    let fit = (left.saturating_sub(setup).as_secs_f64() / per_step.max(1e-9)).floor();
+    (
+        iterations.min(fit.min(f64::from(u32::MAX)) as u32).max(1),
+        left,
+    )
+}
+
+/// The next step count at which a run that has done `done` of `total` steps pauses: the next
+/// multiple of `every_a` or of `every_b` (0: never), or the end.
+#[must_use]
+pub fn next_stop(done: u32, total: u32, every_a: u32, every_b: u32) -> u32 {
+    let next = |k: u32| {
+        done.checked_div(k)
+            .map_or(total, |q| (q + 1).saturating_mul(k))
+    };
+    next(every_a).min(next(every_b)).min(total)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn densify_schedule_scales_to_the_step_budget() {
+        let inria = DensifyConfig::default();
+        // 30,000 steps keep Inria's schedule.
+        assert_eq!(scale_densify(&inria, 30_000, 0.05), inria);
+        // 3,000 steps: a tenth of every step count.
+        let d = scale_densify(&inria, 3_000, 0.05);
+        assert_eq!(
+            (d.start, d.interval, d.stop, d.opacity_reset_interval),
+            (50, 10, 1_500, 300)
+        );
+        assert_eq!(d.grad_threshold, inria.grad_threshold);
+        // 300 steps: the interval floor (10), start one interval in, stop at half the run, and
+        // resets no more often than Adam needs to restore a reset opacity: ⌈4.6 / 0.05⌉ = 92.
+        let d = scale_densify(&inria, 300, 0.05);
+        assert_eq!(
+            (d.start, d.interval, d.stop, d.opacity_reset_interval),
+            (10, 10, 150, 92)
+        );
+        // A short run still densifies once: the trainer densifies at multiples of the interval
+        // after `start` and before `stop`.
+        let d = scale_densify(&inria, 5, 0.05);
+        assert_eq!((d.start, d.interval, d.stop), (10, 10, 21));
+        assert_eq!(
+            (d.start + 1..d.stop)
+                .filter(|i| i % d.interval == 0)
+                .count(),
+            1
+        );
+        // Resets stay off when they were off.
+        let none = DensifyConfig {
+            opacity_reset_interval: 0,
+            ..inria
+        };
+        assert_eq!(scale_densify(&none, 300, 0.05).opacity_reset_interval, 0);
+    }
+
+    #[test]
+    fn budgeted_steps_fit_what_is_left() {
+        let s = Duration::from_secs;
+        let ms = Duration::from_millis;
+        // 4 steps in 2 s: 0.5 s a step. 100 s budget, 3 s spent by the probe, 1 s of which was
+        // setup: 97 s left, 96 s of it for steps → 192 steps.
+        assert_eq!(
+            steps_in_budget(10_000, s(100), s(3), s(1), s(2), 4),
+            (192, s(97))
+        );
+        // Never more than asked for, never fewer than one.
+        assert_eq!(
+            steps_in_budget(50, s(100), s(3), s(1), s(2), 4),
+            (50, s(97))
+        );
+        assert_eq!(
+            steps_in_budget(50, s(1), s(3), s(1), s(2), 4),
+            (1, Duration::ZERO)
+        );
+        // Steps too fast to time still give a finite count, capped at `iterations`.
+        assert_eq!(
+            steps_in_budget(u32::MAX, s(10), ms(1), ms(0), Duration::ZERO, 4).0,
+            u32::MAX
+        );
+    }
+
+    #[test]
+    fn runs_pause_at_multiples_and_at_the_end() {
+        // Evaluate every 100, checkpoint every 30: pauses at 30, 60, 90, 100, 120, ….
+        assert_eq!(next_stop(0, 1000, 100, 30), 30);
+        assert_eq!(next_stop(90, 1000, 100, 30), 100);
+        assert_eq!(next_stop(100, 1000, 100, 30), 120);
+        // 0 means never: only the other interval or the end.
+        assert_eq!(next_stop(0, 1000, 0, 30), 30);
+        assert_eq!(next_stop(0, 1000, 0, 0), 1000);
+        // Never past the end, and no overflow near u32::MAX.
+        assert_eq!(next_stop(990, 1000, 100, 0), 1000);
+        assert_eq!(next_stop(u32::MAX - 1, u32::MAX, u32::MAX - 1, 0), u32::MAX);
+    }
 
     #[test]
     fn lr_endpoints_and_midpoint_are_geometric() {

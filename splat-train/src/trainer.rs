@@ -17,7 +17,7 @@ use crate::schedule::{camera_extent, exponential_lr, sh_degree_at};
 use crate::ssim::SsimTarget;
 use crate::state::ParamState;
 use crate::strategy::{DensifyStrategy, InriaDensify, RefineContext, RefineReport};
-use crate::view::View;
+use crate::view::{View, composite_in_place, composite_into};
 
 /// Log-scale range a splat is clamped to, relative to the scene extent: from a millionth of the
 /// extent (far below a pixel at any sensible distance) to ten extents (larger than the scene).
@@ -268,11 +268,7 @@ impl Trainer {
         if let Background::Fixed(bg) = self.config.background {
             for v in &mut self.levels[0].views {
                 if let Some(mask) = &v.mask {
-                    for (px, &a) in v.image.chunks_exact_mut(3).zip(mask) {
-                        for c in 0..3 {
-                            px[c] = px[c] * a + bg[c] * (1.0 - a);
-                        }
-                    }
+                    composite_in_place(&mut v.image, mask, bg);
                 }
             }
         }
@@ -390,16 +386,7 @@ impl Trainer {
         let (target_img, fresh_target) = match (&view.mask, random_bg) {
             (Some(mask), true) => {
                 self.composite.resize(view.image.len(), 0.0);
-                for ((o, px), &a) in self
-                    .composite
-                    .chunks_exact_mut(3)
-                    .zip(view.image.chunks_exact(3))
-                    .zip(mask)
-                {
-                    for c in 0..3 {
-                        o[c] = px[c] * a + bg[c] * (1.0 - a);
-                    }
-                }
+                composite_into(&mut self.composite, &view.image, mask, bg.to_array());
                 (&self.composite[..], Some(loss.target(&self.composite)))
             }
             _ => {

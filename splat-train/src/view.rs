@@ -1,10 +1,11 @@
-//! A training or evaluation view: a posed camera and its image.
-
-use std::path::Path;
+//! A training or evaluation view: a posed camera and its image, and colour over a background.
+//!
+//! A view's colour is straight (not multiplied by its mask); [`composite`] and its in-place and
+//! buffer variants put it over a background colour. They are the one place where
+//! `colour·a + background·(1 − a)` is written, so the trainer's targets and the evaluator's
+//! references cannot drift apart.
 
 use camera_model::{Camera, Intrinsics};
-
-use crate::error::Error;
 
 /// An image with its camera.
 #[derive(Debug, Clone, PartialEq)]
@@ -68,61 +69,87 @@ impl View {
         }
         Ok(())
     }
+
+    /// A view from colour composited on black (premultiplied by `alpha`, as rendered reference
+    /// views and the images of `transcode views` datasets hold it): the colour is divided by
+    /// the coverage back to straight colour, clamped to [0, 1], and black where the coverage is
+    /// at most 1e-6 (nothing there to divide, and nothing of it shows over any background).
+    /// `alpha` becomes the view's mask.
+    ///
+    /// Pixels `rgb` holds beyond `alpha`'s length are dropped, as `zip` drops them.
+    #[must_use]
+    pub fn from_premultiplied(name: String, camera: Camera, rgb: &[f32], alpha: Vec<f32>) -> Self {
+        let image = rgb
+            .chunks_exact(3)
+            .zip(&alpha)
+            .flat_map(|(px, &a)| {
+                if a > 1e-6 {
+                    [0, 1, 2].map(|c| (px[c] / a).clamp(0.0, 1.0))
+                } else {
+                    [0.0; 3]
+                }
+            })
+            .collect();
+        Self {
+            name,
+            camera,
+            image,
+            mask: Some(alpha),
+        }
+    }
+
+    /// The view's colour as it looks over `background`: the image composited with its mask
+    /// ([`composite`]), or the image itself when it has no mask (it covers every pixel).
+    #[must_use]
+    pub fn on_background(&self, background: [f32; 3]) -> Vec<f32> {
+        match &self.mask {
+            Some(mask) => composite(&self.image, mask, background),
+            None => self.image.clone(),
+        }
+    }
 }
 
-/// Loads a view from a PNG or JPEG file (an alpha channel becomes the mask), reduced by
-/// `downscale` ≥ 1 with the camera's intrinsics scaled to match.
-///
-/// # Errors
-/// [`Error::Image`] when the file cannot be read or decoded, or its size is not the camera's.
-pub fn load_view(path: &Path, name: &str, camera: Camera, downscale: f64) -> Result<View, Error> {
-    let fail = |problem: String| Error::Image {
-        path: path.to_path_buf(),
-        problem,
-    };
-    if !(downscale.is_finite() && downscale >= 1.0) {
-        return Err(fail(format!(
-            "downscale factor {downscale} must be at least 1"
-        )));
+/// One channel of a straight colour `c` with coverage `a` over background channel `bg`:
+/// `c·a + bg·(1 − a)`. Every compositing in the trainer and the evaluator goes through here.
+#[inline(always)]
+#[must_use]
+pub fn over(c: f32, a: f32, bg: f32) -> f32 {
+    c * a + bg * (1.0 - a)
+}
+
+/// Interleaved RGB `image` (3 values a pixel) with per-pixel coverage `alpha` over the colour
+/// `background`, as a new image ([`over`] for each channel). Pixels beyond the shorter of the
+/// two are dropped.
+#[must_use]
+pub fn composite(image: &[f32], alpha: &[f32], background: [f32; 3]) -> Vec<f32> {
+    let mut out = vec![0.0; 3 * (image.len() / 3).min(alpha.len())];
+    composite_into(&mut out, image, alpha, background);
+    out
+}
+
+/// [`composite`] written into `out` (which the trainer reuses from step to step); pixels beyond
+/// the shortest of `out`, `image` and `alpha` are left alone.
+#[inline]
+pub fn composite_into(out: &mut [f32], image: &[f32], alpha: &[f32], background: [f32; 3]) {
+    for ((o, px), &a) in out
+        .chunks_exact_mut(3)
+        .zip(image.chunks_exact(3))
+        .zip(alpha)
+    {
+        for c in 0..3 {
+            o[c] = over(px[c], a, background[c]);
+        }
     }
-    let img = image::ImageReader::open(path)
-        .map_err(|e| fail(e.to_string()))?
-        .with_guessed_format()
-        .map_err(|e| fail(e.to_string()))?
-        .decode()
-        .map_err(|e| fail(e.to_string()))?;
-    let k = camera.intrinsics;
-    if img.width() != k.width || img.height() != k.height {
-        return Err(fail(format!(
-            "image is {}×{} but its camera is {}×{}",
-            img.width(),
-            img.height(),
-            k.width,
-            k.height
-        )));
+}
+
+/// [`composite`] in place: `image` is replaced by itself over `background`.
+#[inline]
+pub fn composite_in_place(image: &mut [f32], alpha: &[f32], background: [f32; 3]) {
+    for (px, &a) in image.chunks_exact_mut(3).zip(alpha) {
+        for c in 0..3 {
+            px[c] = over(px[c], a, background[c]);
+        }
     }
-    let has_alpha = img.color().has_alpha();
-    let mut rgba = img.into_rgba32f();
-    let mut intrinsics = k;
-    if downscale > 1.0 {
-        let w = ((f64::from(k.width) / downscale).round() as u32).max(1);
-        let h = ((f64::from(k.height) / downscale).round() as u32).max(1);
-        // The triangle filter widens its kernel by the reduction factor, so it averages.
-        rgba = image::imageops::resize(&rgba, w, h, image::imageops::FilterType::Triangle);
-        intrinsics = scale_intrinsics(&k, w, h);
-    }
-    let px = rgba.as_raw();
-    let image: Vec<f32> = px
-        .chunks_exact(4)
-        .flat_map(|p| [p[0], p[1], p[2]])
-        .collect();
-    let mask = has_alpha.then(|| px.chunks_exact(4).map(|p| p[3]).collect());
-    Ok(View {
-        name: name.to_string(),
-        camera: Camera::new(intrinsics, camera.pose),
-        image,
-        mask,
-    })
 }
 
 /// Intrinsics of the same camera at a `w × h` image size (pixel-centre convention kept: the
@@ -163,5 +190,53 @@ mod tests {
             "{err}"
         );
         view(4, 3, vec![0.5; 36]).check().unwrap();
+    }
+
+    /// Compositing against hand-computed values; the three variants agree bit for bit.
+    #[test]
+    fn composite_puts_colour_over_the_background() {
+        let image = [0.2, 0.4, 0.6, 1.0, 0.0, 0.5, 0.75, 0.75, 0.75];
+        let alpha = [1.0, 0.0, 0.5];
+        let bg = [0.0, 1.0, 0.25];
+        let out = composite(&image, &alpha, bg);
+        // Full coverage keeps the colour, none gives the background, half averages the two.
+        assert_eq!(out, vec![0.2, 0.4, 0.6, 0.0, 1.0, 0.25, 0.375, 0.875, 0.5]);
+        let mut buf = vec![9.0; 9];
+        composite_into(&mut buf, &image, &alpha, bg);
+        assert_eq!(buf, out);
+        let mut inplace = image.to_vec();
+        composite_in_place(&mut inplace, &alpha, bg);
+        assert_eq!(inplace, out);
+        // A short mask composites only the pixels it covers.
+        assert_eq!(composite(&image, &alpha[..1], bg), vec![0.2, 0.4, 0.6]);
+    }
+
+    /// Straight colour from premultiplied colour: divided by the coverage, clamped, black where
+    /// nothing is covered; composited on black it gives the premultiplied colour back.
+    #[test]
+    fn premultiplied_colour_becomes_straight() {
+        let cam = Camera::new(Intrinsics::centered(4, 1, 1.0, 1.0), Pose::IDENTITY);
+        let rgb = [
+            0.1, 0.2, 0.3, 0.25, 0.5, 0.125, 0.9, 0.9, 0.9, 0.7, 0.0, 0.0,
+        ];
+        let alpha = vec![1.0, 0.5, 0.0, 0.5];
+        let v = View::from_premultiplied("v".into(), cam, &rgb, alpha.clone());
+        assert_eq!(
+            v.image,
+            vec![0.1, 0.2, 0.3, 0.5, 1.0, 0.25, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0]
+        );
+        assert_eq!(v.mask.as_deref(), Some(&alpha[..]));
+        assert_eq!(
+            v.on_background([0.0; 3]),
+            vec![
+                0.1, 0.2, 0.3, 0.25, 0.5, 0.125, 0.0, 0.0, 0.0, 0.5, 0.0, 0.0
+            ]
+        );
+        assert_eq!(
+            v.on_background([1.0; 3])[6..9].to_vec(),
+            vec![1.0, 1.0, 1.0]
+        );
+        let unmasked = View { mask: None, ..v };
+        assert_eq!(unmasked.on_background([1.0; 3]), unmasked.image);
     }
 }

@@ -117,10 +117,13 @@ fn pipeline_on_a_small_plenoptic_cloud() {
 
     // `transcode eval`'s path: the training views read back from the dataset folder (PNG, masks,
     // COLMAP cameras) score the model at least as well as the held-out views do.
-    let refs = transcode::eval::load_reference_views(&out.join("dataset")).unwrap();
+    let refs = splat_train::read_dataset(&out.join("dataset"), 1.0)
+        .unwrap()
+        .views;
     assert_eq!(refs.len(), 16);
-    let opts = transcode::eval::EvalOptions::from(&cfg.eval);
-    let (train_metrics, _) = transcode::eval::evaluate(&splats, &refs, None, &opts).unwrap();
+    assert!(refs.iter().all(|v| v.mask.is_some()));
+    let opts = splat_train::EvalOptions::from(&cfg.eval);
+    let (train_metrics, _) = splat_train::evaluate_views(&splats, &refs, None, &opts).unwrap();
     assert!(
         train_metrics.psnr_black > m.psnr_black - 1.0 && train_metrics.alpha_iou > 0.97,
         "training views: {} dB, IoU {}",

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use glam::Vec3;
 use splat_core::{Splats, logit, rgb_to_sh_dc};
-use splat_train::{DensifyConfig, TrainConfig, Trainer, View, evaluate, load_view};
+use splat_train::{DensifyConfig, TrainConfig, Trainer, View, evaluate, read_dataset};
 
 fn data() -> PathBuf {
     PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../testdata"))
@@ -13,16 +13,8 @@ fn data() -> PathBuf {
 
 /// The views of a COLMAP dataset folder and its model.
 fn load(dir: &Path, downscale: f64) -> (Vec<View>, colmap_io::Reconstruction) {
-    let rec = colmap_io::read_model(&dir.join("sparse/0")).unwrap();
-    let views = rec
-        .images
-        .iter()
-        .map(|(&id, im)| {
-            let cam = rec.camera_of(id).unwrap();
-            load_view(&dir.join("images").join(&im.name), &im.name, cam, downscale).unwrap()
-        })
-        .collect();
-    (views, rec)
+    let d = read_dataset(dir, downscale).unwrap();
+    (d.views, d.reconstruction)
 }
 
 /// Inria's initialisation from SfM points: kNN scales, opacity 0.1, DC colour.

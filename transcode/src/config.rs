@@ -94,7 +94,7 @@ pub struct TrainingConfig {
     /// Adaptive density control, used by sparse init (and surface init when asked). The schedule
     /// (`start`, `interval`, `stop`, `opacity_reset_interval`) is Inria's, meant for 30,000 steps.
     pub densify: splat_train::DensifyConfig,
-    /// Scale the densification schedule to the run's step budget (`pipeline::scale_densify`);
+    /// Scale the densification schedule to the run's step budget (`splat_train::schedule::scale_densify`);
     /// `false` uses `densify` as written.
     pub scale_densify: bool,
 }

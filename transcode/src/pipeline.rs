@@ -18,10 +18,10 @@ use glam::Vec3;
 use indicatif::{ProgressBar, ProgressStyle};
 use plenoptic_io::Model;
 use splat_core::Splats;
-use splat_train::{Background, DensifyConfig, TrainConfig, Trainer, View};
+use splat_train::eval::{EvalOptions, Metrics, RenderedView, evaluate_views};
+use splat_train::{Background, TrainConfig, Trainer, View};
 
 use crate::config::{Config, InitMode};
-use crate::eval::{EvalOptions, Metrics, ReferenceView, RenderedView, evaluate};
 use crate::report::{
     CurvePoint, InputInfo, Report, RunReport, StageTiming, ViewPictures, write_report,
 };
@@ -68,7 +68,7 @@ pub enum PipelineError {
     Train(Box<splat_train::Error>),
     /// The trained model could not be evaluated (e.g. no held-out view covers a pixel).
     #[error("evaluation: {0}")]
-    Eval(Box<crate::eval::EvalError>),
+    Eval(Box<splat_train::EvalError>),
     /// The model could not be written.
     #[error("cannot write the model {path}: {source}")]
     Model {
@@ -100,7 +100,7 @@ macro_rules! boxed_from {
         }
     )*};
 }
-boxed_from!(Load: plenoptic_io::Error, Views: views::Error, Init: init::InitError, Train: splat_train::Error, Eval: crate::eval::EvalError);
+boxed_from!(Load: plenoptic_io::Error, Views: views::Error, Init: init::InitError, Train: splat_train::Error, Eval: splat_train::EvalError);
 
 fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> PipelineError + '_ {
     move |source| PipelineError::Io {
@@ -109,15 +109,11 @@ fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> PipelineError + '_ {
     }
 }
 
-/// A reference view as the trainer wants it: straight (un-premultiplied) colour and its mask.
+/// A reference view as the trainer wants it: straight (un-premultiplied) colour and its mask
+/// ([`View::from_premultiplied`]).
 #[must_use]
 pub fn training_view(name: String, camera: Camera, image: &ViewImage) -> View {
-    View {
-        name,
-        camera,
-        image: image.straight_rgb(),
-        mask: Some(image.alpha.clone()),
-    }
+    View::from_premultiplied(name, camera, &image.rgb, image.alpha.clone())
 }
 
 /// The trainer's configuration for one init mode.
@@ -152,56 +148,14 @@ pub fn train_config(cfg: &Config, mode: InitMode, sh_degree: u32) -> TrainConfig
     tc
 }
 
-/// Length of the run Inria's densification schedule is written for (`iterations` = 30,000).
-const INRIA_ITERATIONS: f64 = 30_000.0;
-
-/// Fewest steps between two densifications: the statistic that selects splats is a splat's
-/// view-space gradient averaged over the steps since the last densification, and with one view
-/// per step fewer than about ten views make it noise.
-const MIN_DENSIFY_INTERVAL: u32 = 10;
-
-/// Inria's densification schedule, written for 30,000 steps, scaled to a run of `steps` steps.
-///
-/// `start`, `interval`, `stop` and `opacity_reset_interval` are multiplied by `steps / 30,000`
-/// (so 30,000 steps keep Inria's 500 / 100 / 15,000 / 3,000). Floors keep the result meaningful
-/// for short runs: the interval is at least [`MIN_DENSIFY_INTERVAL`], `start` at least one
-/// interval, `stop` after the first densification (which comes one interval after `start`), and
-/// opacity resets are at least the steps Adam needs to bring a reset
-/// opacity back: a reset sets opacity 0.01 (logit −4.6) and Adam moves a parameter by about its
-/// learning rate per step, so climbing back to 0.5 takes 4.6 / `opacity_lr` steps (92 at Inria's
-/// 0.05). Resets happen only before `stop`, so a run shorter than about twice that floor
-/// densifies without them; the half of the run after `stop` leaves time to recover from the last.
-/// The gradient and opacity thresholds are not changed.
-#[must_use]
-pub fn scale_densify(d: &DensifyConfig, steps: u32, opacity_lr: f32) -> DensifyConfig {
-    let k = f64::from(steps) / INRIA_ITERATIONS;
-    let scale = |v: u32| (f64::from(v) * k).round() as u32;
-    let interval = scale(d.interval).max(MIN_DENSIFY_INTERVAL);
-    let start = scale(d.start).max(interval);
-    // Inria's reset clamps opacity to 0.01; climbing from its logit back to 0 (opacity 0.5).
-    let reset_logit = (0.99f64 / 0.01).ln();
-    let recovery = (reset_logit / f64::from(opacity_lr.max(1e-6))).ceil() as u32;
-    let reset = if d.opacity_reset_interval == 0 {
-        0
-    } else {
-        scale(d.opacity_reset_interval).max(recovery)
-    };
-    DensifyConfig {
-        interval,
-        start,
-        stop: scale(d.stop).max(start + interval + 1),
-        opacity_reset_interval: reset,
-        ..*d
-    }
-}
-
 /// Steps timed (after one untimed warm-up step) to estimate a time-budgeted run's length before
 /// its densification is scheduled.
 const PROBE_STEPS: u32 = 4;
 
 /// The number of steps a run will take: its iteration count, or, with a time budget, the steps
 /// that fit in the budget at the speed of [`PROBE_STEPS`] steps timed on a throw-away trainer
-/// after a warm-up step (the probe's time is taken from the budget). Returns the steps and the remaining budget.
+/// after a warm-up step (the probe's time is taken from the budget; the arithmetic is
+/// [`splat_train::schedule::steps_in_budget`]). Returns the steps and the remaining budget.
 fn step_budget(
     splats: &Splats,
     views: &[View],
@@ -223,16 +177,16 @@ fn step_budget(
     probe.run_until(1, |_| {});
     let t1 = Instant::now();
     probe.run_until(PROBE_STEPS + 1, |_| {});
-    let per_step = t1.elapsed().as_secs_f64() / f64::from(PROBE_STEPS);
-    let spent = t0.elapsed();
-    let left = budget.saturating_sub(spent);
-    let fit = (left.saturating_sub(setup).as_secs_f64() / per_step.max(1e-9)).floor();
-    Ok((
-        tc.iterations
-            .min(fit.min(f64::from(u32::MAX)) as u32)
-            .max(1),
-        Some(left),
-    ))
+    let timed = t1.elapsed();
+    let (steps, left) = splat_train::schedule::steps_in_budget(
+        tc.iterations,
+        budget,
+        t0.elapsed(),
+        setup,
+        timed,
+        PROBE_STEPS,
+    );
+    Ok((steps, Some(left)))
 }
 
 /// What a finished run produced.
@@ -469,17 +423,12 @@ fn execute(
         .map(|(i, (c, img))| training_view(views::dataset_image_name(i), *c, img))
         .collect();
     drop(train_images);
-    let heldout: Vec<ReferenceView> = rig
+    let heldout: Vec<View> = rig
         .heldout
         .iter()
         .zip(heldout_images)
         .enumerate()
-        .map(|(i, (c, img))| ReferenceView {
-            name: heldout_name(i),
-            camera: *c,
-            rgb: img.rgb,
-            alpha: img.alpha,
-        })
+        .map(|(i, (c, img))| View::from_premultiplied(heldout_name(i), *c, &img.rgb, img.alpha))
         .collect();
 
     // The surface for the distance metric: the cloud itself, or dense samples of the mesh.
@@ -582,7 +531,7 @@ fn execute(
 fn init_train_eval(
     surface: &SurfacePoints,
     train_views: &[View],
-    heldout: &[ReferenceView],
+    heldout: &[View],
     distance_surface: (&[Vec3], f32),
     cfg: &Config,
     mode: InitMode,
@@ -736,7 +685,7 @@ fn init_train_eval(
     lap("train", &mut timings);
 
     say(format!("[5/6] evaluating the {mode} model"));
-    let (metrics, renders): (Metrics, Vec<RenderedView>) = evaluate(
+    let (metrics, renders): (Metrics, Vec<RenderedView>) = evaluate_views(
         &trained,
         heldout,
         Some(distance_surface),
@@ -840,7 +789,11 @@ fn plan(
 /// `tc` on `schedule`: the densification scaled to its steps, its time budget.
 fn scheduled_config(mut tc: TrainConfig, schedule: &Schedule) -> TrainConfig {
     if let (Some(steps), Some(d)) = (schedule.densify_steps, tc.densify) {
-        tc.densify = Some(scale_densify(&d, steps, tc.lr.opacity));
+        tc.densify = Some(splat_train::schedule::scale_densify(
+            &d,
+            steps,
+            tc.lr.opacity,
+        ));
     }
     if schedule.time_budget.is_some() {
         tc.time_budget = schedule.time_budget;
@@ -941,11 +894,7 @@ fn progress_bar(total: u64, quiet: bool, unit: &str) -> ProgressBar {
 }
 
 /// Pictures of up to `n` held-out views spread over the set.
-fn pick_pictures(
-    heldout: &[ReferenceView],
-    renders: &[Vec<RenderedView>],
-    n: usize,
-) -> Vec<ViewPictures> {
+fn pick_pictures(heldout: &[View], renders: &[Vec<RenderedView>], n: usize) -> Vec<ViewPictures> {
     let n = n.min(heldout.len());
     (0..n)
         .map(|k| k * heldout.len() / n.max(1))
@@ -955,7 +904,11 @@ fn pick_pictures(
                 name: v.name.clone(),
                 width: v.camera.intrinsics.width,
                 height: v.camera.intrinsics.height,
-                reference: v.rgb.iter().map(|x| x.clamp(0.0, 1.0)).collect(),
+                reference: v
+                    .on_background([0.0; 3])
+                    .iter()
+                    .map(|x| x.clamp(0.0, 1.0))
+                    .collect(),
                 renders: renders.iter().map(|r| r[i].rgb.clone()).collect(),
             }
         })
@@ -992,47 +945,5 @@ pub fn input_info(path: &Path, model: &Model) -> InputInfo {
             capture_cameras: m.num_cameras,
             bytes,
         },
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn densify_schedule_scales_to_the_step_budget() {
-        let inria = DensifyConfig::default();
-        // 30,000 steps keep Inria's schedule.
-        assert_eq!(scale_densify(&inria, 30_000, 0.05), inria);
-        // 3,000 steps: a tenth of every step count.
-        let d = scale_densify(&inria, 3_000, 0.05);
-        assert_eq!(
-            (d.start, d.interval, d.stop, d.opacity_reset_interval),
-            (50, 10, 1_500, 300)
-        );
-        assert_eq!(d.grad_threshold, inria.grad_threshold);
-        // 300 steps: the interval floor (10), start one interval in, stop at half the run, and
-        // resets no more often than Adam needs to restore a reset opacity: ⌈4.6 / 0.05⌉ = 92.
-        let d = scale_densify(&inria, 300, 0.05);
-        assert_eq!(
-            (d.start, d.interval, d.stop, d.opacity_reset_interval),
-            (10, 10, 150, 92)
-        );
-        // A short run still densifies once: the trainer densifies at multiples of the interval
-        // after `start` and before `stop`.
-        let d = scale_densify(&inria, 5, 0.05);
-        assert_eq!((d.start, d.interval, d.stop), (10, 10, 21));
-        assert_eq!(
-            (d.start + 1..d.stop)
-                .filter(|i| i % d.interval == 0)
-                .count(),
-            1
-        );
-        // Resets stay off when they were off.
-        let none = DensifyConfig {
-            opacity_reset_interval: 0,
-            ..inria
-        };
-        assert_eq!(scale_densify(&none, 300, 0.05).opacity_reset_interval, 0);
     }
 }

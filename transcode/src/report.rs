@@ -13,8 +13,8 @@ use serde::Serialize;
 
 use crate::atomic::write_atomic;
 use crate::config::Config;
-use crate::eval::Metrics;
 use splat_init::InitSummary;
+use splat_train::eval::Metrics;
 
 /// What the input was.
 #[derive(Debug, Clone, Serialize)]
@@ -287,7 +287,7 @@ fn metrics_table(h: &mut String, report: &Report, names: &[String]) {
     h.push_str("</table>\n");
 }
 
-fn surface(r: &RunReport, f: fn(&crate::eval::SurfaceDistance) -> f64) -> String {
+fn surface(r: &RunReport, f: fn(&splat_train::eval::SurfaceDistance) -> f64) -> String {
     r.metrics
         .surface
         .as_ref()

@@ -68,7 +68,7 @@ impl InputStamp {
 /// The training schedule of one init mode, fixed before its first step.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Schedule {
-    /// Steps the densification schedule is scaled to (`pipeline::scale_densify`): the iteration
+    /// Steps the densification schedule is scaled to (`splat_train::schedule::scale_densify`): the iteration
     /// count, or the estimate from the probe steps under a time budget. `None` when the schedule
     /// is used as configured.
     pub densify_steps: Option<u32>,

@@ -1,11 +1,11 @@
 //! `transcode eval MODEL.ply --reference DIR`: metrics of a 3DGS model against reference views.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context as _;
 use splat_init::{self as init, SurfacePoints};
+use splat_train::eval::{EvalOptions, evaluate_views};
 use transcode::config::Config;
-use transcode::eval::{EvalOptions, evaluate, load_reference_views};
 
 use super::config::{Overrides, flat, require_file};
 
@@ -32,7 +32,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     require_file(&args.model, "model")?;
     let config = args.overrides.resolve(Config::default())?;
     let splats = splat_core::ply::read_splats(&args.model).map_err(flat)?;
-    let views = load_reference_views(&args.reference).map_err(flat)?;
+    let mut views = splat_train::read_dataset(&args.reference, 1.0)
+        .map_err(flat)?
+        .views;
+    // Views are listed by their file's stem.
+    for v in &mut views {
+        if let Some(stem) = Path::new(&v.name).file_stem() {
+            v.name = stem.to_string_lossy().into_owned();
+        }
+    }
     let surface = match &args.surface {
         Some(path) => {
             let model = plenoptic_io::load(path).map_err(flat)?;
@@ -45,7 +53,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         None => None,
     };
-    let (metrics, _) = evaluate(
+    let (metrics, _) = evaluate_views(
         &splats,
         &views,
         surface.as_ref().map(|(p, s)| (p.as_slice(), *s)),

@@ -1,4 +1,5 @@
-//! `transcode train`: train splats on a COLMAP dataset folder (`images/` + `sparse/0/`).
+//! `transcode train`: train splats on a COLMAP dataset folder (`images/` + `sparse/0/`, and
+//! `masks/` when there are masks).
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -9,9 +10,10 @@ use indicatif::{ProgressBar, ProgressStyle};
 use rand::{RngExt, SeedableRng};
 use serde::Serialize;
 use splat_core::{Splats, logit, rgb_to_sh_dc};
+use splat_train::schedule::next_stop;
 use splat_train::{
-    Background, DensifyConfig, HistoryEntry, TrainConfig, TrainReport, Trainer, View, Warmup,
-    evaluate, load_view,
+    Background, Dataset, DensifyConfig, HistoryEntry, TrainConfig, TrainReport, Trainer, View,
+    Warmup, evaluate, read_dataset,
 };
 
 use transcode::atomic::write_atomic;
@@ -39,7 +41,9 @@ pub enum BackgroundArg {
 /// Arguments of `transcode train`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// COLMAP dataset folder with `images/` and `sparse/0/` (PINHOLE or SIMPLE_PINHOLE).
+    /// COLMAP dataset folder with `images/` and `sparse/0/` (PINHOLE or SIMPLE_PINHOLE), and
+    /// optionally `masks/` (grey coverage, same names as the images, which then hold colour on
+    /// black): masked views are trained over the chosen background.
     pub dataset: PathBuf,
     /// Output folder for `splats.ply`, `history.json` and `checkpoint.bin`.
     #[arg(long)]
@@ -192,9 +196,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             );
         }
     }
-    let (views, rec) = load_dataset(&args.dataset, args.downscale)?;
+    let Dataset {
+        views,
+        reconstruction: rec,
+    } = read_dataset(&args.dataset, args.downscale)?;
     let eval_views = match &args.heldout {
-        Some(dir) => load_dataset(dir, args.downscale)?.0,
+        Some(dir) => read_dataset(dir, args.downscale)?.views,
         None => views.clone(),
     };
     std::fs::create_dir_all(&args.out)
@@ -415,15 +422,6 @@ impl Settings {
     }
 }
 
-/// The next iteration at which to pause: the next multiple of either interval, or the end.
-fn next_stop(done: u32, total: u32, eval_every: u32, ckpt_every: u32) -> u32 {
-    let next = |k: u32| {
-        done.checked_div(k)
-            .map_or(total, |q| (q + 1).saturating_mul(k))
-    };
-    next(eval_every).min(next(ckpt_every)).min(total)
-}
-
 /// The trainer configuration the arguments ask for.
 fn train_config(args: &Args) -> TrainConfig {
     let densify = !args.no_densify && !args.freeze_positions;
@@ -454,25 +452,6 @@ fn train_config(args: &Args) -> TrainConfig {
         });
     }
     c
-}
-
-/// Reads the COLMAP model and the images of `dir`, downscaled by `factor`.
-fn load_dataset(dir: &Path, factor: f64) -> anyhow::Result<(Vec<View>, colmap_io::Reconstruction)> {
-    let sparse = dir.join("sparse").join("0");
-    let rec = colmap_io::read_model(&sparse)
-        .with_context(|| format!("cannot read the COLMAP model in {}", sparse.display()))?;
-    if rec.images.is_empty() {
-        bail!("{} has no registered images", sparse.display());
-    }
-    let mut views = Vec::with_capacity(rec.images.len());
-    for (&id, image) in &rec.images {
-        let camera = rec
-            .camera_of(id)
-            .with_context(|| format!("image {id} ({}) in {}", image.name, sparse.display()))?;
-        let path = dir.join("images").join(&image.name);
-        views.push(load_view(&path, &image.name, camera, factor)?);
-    }
-    Ok((views, rec))
 }
 
 /// Inria's initial splats: isotropic kNN scales, identity rotation, opacity 0.1, SH DC from the
