@@ -37,7 +37,7 @@ pub use neighbours::{pca_normals, point_spacing};
 pub use points::{SurfacePoints, sample_mesh};
 pub use sampling::{bounds, choose_points, farthest_point_sample, voxel_subsample};
 pub use sh_fit::{ShFit, auto_degree, decide_sh_degree, sh_fit_errors};
-pub use sparse::sparse_init;
+pub use sparse::{colmap_points, random_points, sparse_init, sparse_splats};
 pub use surface::surface_init;
 
 /// Errors of initialisation.

@@ -7,9 +7,8 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, bail};
 use glam::Vec3;
 use indicatif::{ProgressBar, ProgressStyle};
-use rand::{RngExt, SeedableRng};
 use serde::Serialize;
-use splat_core::{Splats, logit, rgb_to_sh_dc};
+use splat_core::Splats;
 use splat_train::schedule::next_stop;
 use splat_train::{
     Background, Dataset, DensifyConfig, HistoryEntry, TrainConfig, TrainReport, Trainer, View,
@@ -454,61 +453,38 @@ fn train_config(args: &Args) -> TrainConfig {
     c
 }
 
-/// Inria's initial splats: isotropic kNN scales, identity rotation, opacity 0.1, SH DC from the
-/// colour and higher bands zero.
+/// Inria's initial splats (splat-init's sparse init): isotropic kNN scales, identity rotation,
+/// opacity 0.1, SH DC from the colour and higher bands zero; the points are the dataset's
+/// points3D, or random ones (mid grey) in their bounds or, with fewer than 2 points, in the
+/// bounds of the camera centres.
 fn initial_splats(
     args: &Args,
     rec: &colmap_io::Reconstruction,
     views: &[View],
 ) -> anyhow::Result<Splats> {
-    let (points, colors): (Vec<Vec3>, Vec<[f32; 3]>) = match args.init {
+    let (points, colors) = match args.init {
         Init::Points3d => {
             if rec.points3d.is_empty() {
                 bail!("the dataset has no 3D points: use --init random");
             }
-            rec.points3d
-                .values()
-                .map(|p| (p.xyz.as_vec3(), p.rgb.map(|c| f32::from(c) / 255.0)))
-                .unzip()
+            splat_init::colmap_points(rec)
         }
         Init::Random => {
-            let (lo, hi) = if rec.points3d.len() >= 2 {
-                rec.points3d
-                    .values()
-                    .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| {
-                        (lo.min(p.xyz.as_vec3()), hi.max(p.xyz.as_vec3()))
-                    })
+            let corners: Vec<Vec3> = if rec.points3d.len() >= 2 {
+                rec.points3d.values().map(|p| p.xyz.as_vec3()).collect()
             } else {
-                let c: Vec<Vec3> = views.iter().map(|v| v.camera.center().as_vec3()).collect();
-                c.iter()
-                    .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| {
-                        (lo.min(*p), hi.max(*p))
-                    })
+                views.iter().map(|v| v.camera.center().as_vec3()).collect()
             };
-            let mut rng = rand_pcg::Pcg64::seed_from_u64(args.seed);
-            (0..args.random_points)
-                .map(|_| {
-                    let t = Vec3::new(rng.random(), rng.random(), rng.random());
-                    (
-                        lo + (hi - lo) * t,
-                        [rng.random(), rng.random(), rng.random()],
-                    )
-                })
-                .unzip()
+            let (lo, hi) = splat_init::bounds(&corners);
+            splat_init::random_points(lo, hi, args.random_points, args.seed)
         }
     };
-    let log_scales = splat_train::init::scales_from_knn(&points);
-    let mut s = Splats::new(args.sh_degree);
-    for ((p, c), ls) in points.iter().zip(&colors).zip(log_scales) {
-        s.push(
-            *p,
-            ls,
-            [1.0, 0.0, 0.0, 0.0],
-            logit(0.1),
-            &[rgb_to_sh_dc(*c)],
-        );
-    }
-    Ok(s)
+    Ok(splat_init::sparse_splats(
+        &points,
+        &colors,
+        splat_init::InitConfig::default().sparse_opacity,
+        args.sh_degree,
+    )?)
 }
 
 fn progress_bar(total: u32, done: u32, quiet: bool) -> ProgressBar {
