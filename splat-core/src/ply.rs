@@ -7,8 +7,8 @@
 //! channel-major: `f_rest_{c·K' + j}` is coefficient j + 1 of channel c, K' = (degree + 1)² − 1.
 //! Writing produces exactly Inria's layout: binary little endian, all `float`, normals as zeros.
 
-use std::io::{BufWriter, Write};
-use std::path::{Path, PathBuf};
+use std::io::Write;
+use std::path::Path;
 
 use glam::Vec3;
 
@@ -351,7 +351,7 @@ pub fn inria_property_names(degree: u32) -> Vec<String> {
 /// renamed over `path` once complete).
 pub fn write_splats(path: &Path, splats: &Splats) -> Result<(), Error> {
     splats.validate()?;
-    write_atomic(path, |w| {
+    atomic_output::write_atomic_with(path, |w| {
         let names = inria_property_names(splats.sh_degree);
         let mut head = format!(
             "ply\nformat binary_little_endian 1.0\nelement vertex {}\n",
@@ -384,38 +384,5 @@ pub fn write_splats(path: &Path, splats: &Splats) -> Result<(), Error> {
         }
         Ok(())
     })
-}
-
-/// Writes a file through `body` into a temporary sibling and renames it over `path`.
-pub(crate) fn write_atomic(
-    path: &Path,
-    body: impl FnOnce(&mut BufWriter<std::fs::File>) -> std::io::Result<()>,
-) -> Result<(), Error> {
-    let io = |source| Error::Io {
-        path: path.to_path_buf(),
-        source,
-    };
-    let name = path.file_name().map_or_else(
-        || std::ffi::OsString::from("splats"),
-        std::ffi::OsStr::to_os_string,
-    );
-    let mut tmp_name = std::ffi::OsString::from(".");
-    tmp_name.push(&name);
-    tmp_name.push(format!(".tmp{}", std::process::id()));
-    let tmp: PathBuf = path.with_file_name(tmp_name);
-    let result = (|| {
-        let file = std::fs::File::create(&tmp)?;
-        let mut w = BufWriter::new(file);
-        body(&mut w)?;
-        let file = w
-            .into_inner()
-            .map_err(std::io::IntoInnerError::into_error)?;
-        file.sync_all()?;
-        std::fs::rename(&tmp, path)
-    })();
-    if let Err(e) = result {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(io(e));
-    }
-    Ok(())
+    .map_err(|e| Error::io(path, e))
 }

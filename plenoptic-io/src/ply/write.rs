@@ -216,10 +216,11 @@ pub(crate) fn write_cloud(path: &Path, cloud: &PlenopticCloud) -> Result<(), Err
             body
         }
     };
-    crate::atomic::write_atomic(path, |w| {
+    atomic_output::write_atomic_with(path, |w| {
         w.write_all(header.as_bytes())?;
         w.write_all(&body)
     })
+    .map_err(|e| Error::io(path, e))
 }
 
 /// The header: format, comments, rig comments, the vertex element.
