@@ -12,7 +12,7 @@ use std::path::PathBuf;
 
 use camera_model::{GlViewport, rig};
 use colmap_io::dataset::{points_without_tracks, reconstruction_from_cameras};
-use colmap_io::{Format, write_atomic, write_model};
+use colmap_io::{Format, write_model};
 use glam::DVec3;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -60,7 +60,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }
         }
     }
-    write_atomic(&out.join("projections.txt"), projections.as_bytes())?;
+    atomic_output::write_atomic(&out.join("projections.txt"), projections.as_bytes())?;
     println!(
         "wrote {} cameras and {} points to {}",
         cameras.len(),

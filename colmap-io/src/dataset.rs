@@ -12,9 +12,7 @@ use std::path::{Path, PathBuf};
 use camera_model::Camera;
 use glam::DVec3;
 
-use crate::{
-    CameraRecord, Error, Format, ImageRecord, Point3D, Reconstruction, write_atomic, write_model,
-};
+use crate::{CameraRecord, Error, Format, ImageRecord, Point3D, Reconstruction, write_model};
 
 /// Writes a dataset folder.
 #[derive(Debug, Clone)]
@@ -88,7 +86,7 @@ impl DatasetWriter {
     pub fn write_image(&self, name: &str, encoded: &[u8]) -> Result<PathBuf, Error> {
         check_image_name(&self.root, name)?;
         let path = self.images_dir.join(name);
-        write_atomic(&path, encoded)?;
+        crate::io::write_file(&path, encoded)?;
         Ok(path)
     }
 

@@ -1,8 +1,7 @@
 //! Reading and writing whole models in a folder, in either encoding.
 
 use std::collections::BTreeMap;
-use std::io::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use crate::binary::POINT2D_SIZE;
 use crate::error::{Location, Problem};
@@ -152,28 +151,13 @@ pub fn write_model(dir: &Path, rec: &Reconstruction, format: Format) -> Result<(
             binary::points3d_bytes(&rec.points3d),
         ),
     };
-    write_atomic(&path("cameras"), &cameras)?;
-    write_atomic(&path("images"), &images)?;
-    write_atomic(&path("points3D"), &points)
+    write_file(&path("cameras"), &cameras)?;
+    write_file(&path("images"), &images)?;
+    write_file(&path("points3D"), &points)
 }
 
-/// Writes `bytes` to a temporary file beside `path`, then renames it over `path`, so readers
-/// never see a half-written file.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), Error> {
-    let file_name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp: PathBuf = path.with_file_name(format!(".{file_name}.tmp{}", std::process::id()));
-    let result = std::fs::File::create(&tmp)
-        .and_then(|mut f| {
-            f.write_all(bytes)?;
-            f.sync_all()
-        })
-        .and_then(|()| std::fs::rename(&tmp, path));
-    result.map_err(|e| {
-        // Best effort: the temporary file is useless after a failure.
-        let _ = std::fs::remove_file(&tmp);
-        Error::io(path, e)
-    })
+/// Writes `bytes` to `path` atomically (see [`atomic_output::write_atomic`]), so readers never
+/// see a half-written file; the error names the file.
+pub(crate) fn write_file(path: &Path, bytes: &[u8]) -> Result<(), Error> {
+    atomic_output::write_atomic(path, bytes).map_err(|e| Error::io(path, e))
 }

@@ -25,7 +25,7 @@ mod text;
 
 pub use camera_models::CameraModel;
 pub use error::{Error, Location, Problem};
-pub use io::{Format, detect_format, read_model, read_model_as, write_atomic, write_model};
+pub use io::{Format, detect_format, read_model, read_model_as, write_model};
 pub use reconstruction::{
     CameraRecord, ImageRecord, Point2D, Point3D, Reconstruction, TrackElement,
 };

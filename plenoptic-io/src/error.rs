@@ -152,6 +152,15 @@ impl Error {
         }
     }
 
+    /// Wraps a header error of [`ply_core::parse_header`] with its file.
+    pub(crate) fn header(path: &std::path::Path, error: ply_core::HeaderError) -> Self {
+        Error::Header {
+            path: path.to_path_buf(),
+            line: error.line,
+            message: error.problem.to_string(),
+        }
+    }
+
     /// Refuses a path that is not an existing regular file, before a reader library sees it.
     pub(crate) fn require_file(path: &std::path::Path) -> Result<(), Self> {
         if path.is_file() {

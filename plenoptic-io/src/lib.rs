@@ -9,7 +9,6 @@
 //!
 //! Formats, conventions and error policy: `docs/formats-input.md`.
 
-mod atomic;
 mod cloud;
 mod error;
 mod gltf_mesh;

@@ -39,7 +39,6 @@
 //! assert_eq!(image.alpha_at(16, 16), 1.0);
 //! ```
 
-mod atomic;
 mod camera;
 mod cloud;
 pub mod dataset;

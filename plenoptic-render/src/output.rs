@@ -5,8 +5,8 @@ use std::path::{Path, PathBuf};
 use image::codecs::png::PngEncoder;
 use image::{ExtendedColorType, ImageEncoder};
 
-use crate::atomic::{write_atomic, write_atomic_with};
 use crate::{Error, ViewImage};
+use atomic_output::{write_atomic, write_atomic_with};
 
 /// Bits per channel of a PNG.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]

@@ -1,6 +1,6 @@
 //! Typed errors of this crate; each names the file and the place of the problem.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Errors from reading, writing or validating splats.
 #[derive(Debug, thiserror::Error)]
@@ -75,4 +75,14 @@ pub enum Error {
         /// The memory the limit stands for, in MiB.
         limit_mib: u64,
     },
+}
+
+impl Error {
+    /// Wraps an I/O error with its file.
+    pub(crate) fn io(path: &Path, source: std::io::Error) -> Self {
+        Error::Io {
+            path: path.to_path_buf(),
+            source,
+        }
+    }
 }

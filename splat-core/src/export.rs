@@ -44,12 +44,13 @@ pub fn write_splat(path: &Path, splats: &Splats) -> Result<(), Error> {
         -((l.x + l.y + l.z).exp() * sigmoid(splats.opacity_logits[i]))
     };
     order.sort_by(|&a, &b| key(a).total_cmp(&key(b)).then(a.cmp(&b)));
-    crate::ply::write_atomic(path, |w| {
+    atomic_output::write_atomic_with(path, |w| {
         for i in order {
             w.write_all(&encode_record(splats, i))?;
         }
         Ok(())
     })
+    .map_err(|e| Error::io(path, e))
 }
 
 #[cfg(test)]

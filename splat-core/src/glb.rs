@@ -12,13 +12,11 @@
 //! Written by hand: the `gltf` crate reads glTF but does not build files, and the container is
 //! small (a 12-byte header, a JSON chunk and a binary chunk, each 4-byte aligned).
 
-use std::io::Write;
 use std::path::Path;
 
 use serde_json::{Value, json};
 
 use crate::frame::y_up_frame;
-use crate::ply::write_atomic;
 use crate::{Error, Splats, sh_dc_to_rgb};
 
 /// The extension's name, also the prefix of its attribute semantics.
@@ -227,5 +225,5 @@ pub fn encode_glb(splats: &Splats) -> Result<Vec<u8>, Error> {
 /// Writes `splats` as a `.glb` file with `KHR_gaussian_splatting`, atomically.
 pub fn write_glb(path: &Path, splats: &Splats) -> Result<(), Error> {
     let bytes = encode_glb(splats)?;
-    write_atomic(path, |w| w.write_all(&bytes))
+    atomic_output::write_atomic(path, &bytes).map_err(|e| Error::io(path, e))
 }

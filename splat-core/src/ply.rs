@@ -7,104 +7,17 @@
 //! channel-major: `f_rest_{c·K' + j}` is coefficient j + 1 of channel c, K' = (degree + 1)² − 1.
 //! Writing produces exactly Inria's layout: binary little endian, all `float`, normals as zeros.
 
-use std::io::{BufWriter, Write};
-use std::path::{Path, PathBuf};
+use std::io::Write;
+use std::path::Path;
 
 use glam::Vec3;
+
+use ply_core::{Element, Header, PlyFormat, PropertyKind, ScalarType, parse_ascii, read_binary};
 
 use crate::{Error, Splats, num_sh_coeffs};
 
 /// Largest vertex count accepted (a header claiming more is refused before allocating).
 pub const MAX_SPLATS: usize = 200_000_000;
-
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Format {
-    Ascii,
-    BinaryLe,
-    BinaryBe,
-}
-
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Scalar {
-    I8,
-    U8,
-    I16,
-    U16,
-    I32,
-    U32,
-    F32,
-    F64,
-}
-
-impl Scalar {
-    fn parse(s: &str) -> Option<Self> {
-        Some(match s {
-            "char" | "int8" => Self::I8,
-            "uchar" | "uint8" => Self::U8,
-            "short" | "int16" => Self::I16,
-            "ushort" | "uint16" => Self::U16,
-            "int" | "int32" => Self::I32,
-            "uint" | "uint32" => Self::U32,
-            "float" | "float32" => Self::F32,
-            "double" | "float64" => Self::F64,
-            _ => return None,
-        })
-    }
-
-    fn size(self) -> usize {
-        match self {
-            Self::I8 | Self::U8 => 1,
-            Self::I16 | Self::U16 => 2,
-            Self::I32 | Self::U32 | Self::F32 => 4,
-            Self::F64 => 8,
-        }
-    }
-
-    /// Decodes one value from the start of `b` (which holds at least `size()` bytes).
-    fn read(self, b: &[u8], le: bool) -> f64 {
-        macro_rules! num {
-            ($t:ty, $n:expr) => {{
-                let mut a = [0u8; $n];
-                a.copy_from_slice(&b[..$n]);
-                if le {
-                    <$t>::from_le_bytes(a)
-                } else {
-                    <$t>::from_be_bytes(a)
-                }
-            }};
-        }
-        match self {
-            Self::I8 => f64::from(b[0] as i8),
-            Self::U8 => f64::from(b[0]),
-            Self::I16 => f64::from(num!(i16, 2)),
-            Self::U16 => f64::from(num!(u16, 2)),
-            Self::I32 => f64::from(num!(i32, 4)),
-            Self::U32 => f64::from(num!(u32, 4)),
-            Self::F32 => f64::from(num!(f32, 4)),
-            Self::F64 => num!(f64, 8),
-        }
-    }
-}
-
-#[derive(Clone, Debug)]
-enum Property {
-    Scalar { name: String, ty: Scalar },
-    List { count: Scalar, item: Scalar },
-}
-
-#[derive(Clone, Debug)]
-struct Element {
-    name: String,
-    count: usize,
-    props: Vec<Property>,
-}
-
-struct Header {
-    format: Format,
-    elements: Vec<Element>,
-    /// Byte offset of the body.
-    body: usize,
-}
 
 fn header_err(path: &Path, line: usize, message: impl Into<String>) -> Error {
     Error::Header {
@@ -114,106 +27,9 @@ fn header_err(path: &Path, line: usize, message: impl Into<String>) -> Error {
     }
 }
 
+/// Parses the header with `ply-core`, naming `path` in the error.
 fn parse_header(path: &Path, data: &[u8]) -> Result<Header, Error> {
-    let mut pos = 0;
-    let mut line_no = 0;
-    let mut format = None;
-    let mut elements: Vec<Element> = Vec::new();
-    loop {
-        let Some(nl) = data[pos..].iter().position(|&b| b == b'\n') else {
-            return Err(header_err(path, line_no + 1, "no `end_header` line"));
-        };
-        let raw = &data[pos..pos + nl];
-        pos += nl + 1;
-        line_no += 1;
-        let line = std::str::from_utf8(raw)
-            .map_err(|_| header_err(path, line_no, "header is not text"))?
-            .trim_end_matches('\r')
-            .trim();
-        let mut words = line.split_whitespace();
-        let first = words.next().unwrap_or("");
-        if line_no == 1 {
-            if line != "ply" {
-                return Err(header_err(
-                    path,
-                    1,
-                    "not a PLY file (first line is not `ply`)",
-                ));
-            }
-            continue;
-        }
-        match first {
-            "" | "comment" | "obj_info" => {}
-            "format" => {
-                format = Some(match words.next() {
-                    Some("ascii") => Format::Ascii,
-                    Some("binary_little_endian") => Format::BinaryLe,
-                    Some("binary_big_endian") => Format::BinaryBe,
-                    other => {
-                        return Err(header_err(
-                            path,
-                            line_no,
-                            format!("unknown format {other:?}"),
-                        ));
-                    }
-                });
-            }
-            "element" => {
-                let name = words
-                    .next()
-                    .ok_or_else(|| header_err(path, line_no, "element without a name"))?;
-                let count = words
-                    .next()
-                    .and_then(|c| c.parse::<usize>().ok())
-                    .ok_or_else(|| header_err(path, line_no, "element count is not a number"))?;
-                elements.push(Element {
-                    name: name.to_string(),
-                    count,
-                    props: Vec::new(),
-                });
-            }
-            "property" => {
-                let el = elements
-                    .last_mut()
-                    .ok_or_else(|| header_err(path, line_no, "property before any element"))?;
-                let ty = words.next().unwrap_or("");
-                let prop = if ty == "list" {
-                    let count = words.next().and_then(Scalar::parse);
-                    let item = words.next().and_then(Scalar::parse);
-                    match (count, item) {
-                        (Some(count), Some(item)) => Property::List { count, item },
-                        _ => return Err(header_err(path, line_no, "bad list property types")),
-                    }
-                } else {
-                    let ty = Scalar::parse(ty).ok_or_else(|| {
-                        header_err(path, line_no, format!("unknown property type `{ty}`"))
-                    })?;
-                    let name = words
-                        .next()
-                        .ok_or_else(|| header_err(path, line_no, "property without a name"))?;
-                    Property::Scalar {
-                        name: name.to_string(),
-                        ty,
-                    }
-                };
-                el.props.push(prop);
-            }
-            "end_header" => break,
-            other => {
-                return Err(header_err(
-                    path,
-                    line_no,
-                    format!("unknown keyword `{other}`"),
-                ));
-            }
-        }
-    }
-    let format = format.ok_or_else(|| header_err(path, 0, "no `format` line"))?;
-    Ok(Header {
-        format,
-        elements,
-        body: pos,
-    })
+    ply_core::parse_header(data).map_err(|e| header_err(path, e.line, e.problem.to_string()))
 }
 
 /// Column of each 3DGS attribute in the vertex element.
@@ -258,21 +74,18 @@ fn check_finite(
         Some(&c) => Err(Error::NonFinite {
             path: path.to_path_buf(),
             index,
-            property: match &el.props[c] {
-                Property::Scalar { name, .. } => name.clone(),
-                Property::List { .. } => format!("property {c}"),
-            },
+            property: el.properties[c].name.clone(),
             value: values[c],
         }),
     }
 }
 
 fn find_columns(path: &Path, el: &Element) -> Result<Columns, Error> {
-    let mut names = Vec::with_capacity(el.props.len());
-    for p in &el.props {
-        match p {
-            Property::Scalar { name, .. } => names.push(name.as_str()),
-            Property::List { .. } => {
+    let mut names = Vec::with_capacity(el.properties.len());
+    for p in &el.properties {
+        match p.kind {
+            PropertyKind::Scalar(_) => names.push(p.name.as_str()),
+            PropertyKind::List { .. } => {
                 return Err(header_err(
                     path,
                     0,
@@ -327,12 +140,9 @@ pub fn read_splats(path: &Path) -> Result<Splats, Error> {
 /// Parses the bytes of a 3DGS PLY file; `path` is used in error messages.
 pub fn parse_splats(path: &Path, data: &[u8]) -> Result<Splats, Error> {
     let header = parse_header(path, data)?;
-    let vi = header
-        .elements
-        .iter()
-        .position(|e| e.name == "vertex")
+    let (vi, el) = header
+        .element("vertex")
         .ok_or_else(|| header_err(path, 0, "no `vertex` element"))?;
-    let el = &header.elements[vi];
     let cols = find_columns(path, el)?;
     let degree = match cols.rest.len() {
         0 => 0,
@@ -347,17 +157,30 @@ pub fn parse_splats(path: &Path, data: &[u8]) -> Result<Splats, Error> {
             ));
         }
     };
-    let n = el.count;
-    if n > MAX_SPLATS {
-        return Err(header_err(
-            path,
-            0,
-            format!("{n} vertices claimed (at most {MAX_SPLATS} are accepted)"),
-        ));
-    }
-    let n_props = el.props.len();
+    let n = match usize::try_from(el.count) {
+        Ok(n) if n <= MAX_SPLATS => n,
+        _ => {
+            return Err(header_err(
+                path,
+                0,
+                format!(
+                    "{} vertices claimed (at most {MAX_SPLATS} are accepted)",
+                    el.count
+                ),
+            ));
+        }
+    };
+    // find_columns refused list properties, so every property has a scalar type.
+    let types: Vec<ScalarType> = el
+        .properties
+        .iter()
+        .map(|p| match p.kind {
+            PropertyKind::Scalar(ty) | PropertyKind::List { item: ty, .. } => ty,
+        })
+        .collect();
+    let n_props = types.len();
     let used = cols.used();
-    let body = &data[header.body..];
+    let body = &data[header.body_offset..];
     let mut values = vec![0.0_f64; n_props];
     let mut splats = Splats::new(degree);
     let k = num_sh_coeffs(degree);
@@ -380,10 +203,10 @@ pub fn parse_splats(path: &Path, data: &[u8]) -> Result<Splats, Error> {
         );
     };
     match header.format {
-        Format::Ascii => {
+        PlyFormat::Ascii => {
             let text = std::str::from_utf8(body).map_err(|e| Error::Body {
                 path: path.to_path_buf(),
-                offset: (header.body + e.valid_up_to()) as u64,
+                offset: (header.body_offset + e.valid_up_to()) as u64,
                 index: 0,
                 message: "ASCII body is not text".into(),
             })?;
@@ -410,45 +233,47 @@ pub fn parse_splats(path: &Path, data: &[u8]) -> Result<Splats, Error> {
                     message: format!("file ends after {i} of {n} vertices"),
                 })?;
                 let mut it = line.split_whitespace();
-                for (c, slot) in values.iter_mut().enumerate() {
-                    *slot = it
-                        .next()
-                        .and_then(|w| w.parse().ok())
-                        .ok_or_else(|| Error::Body {
-                            path: path.to_path_buf(),
-                            offset: 0,
-                            index: i,
-                            message: format!("property {c} is missing or not a number"),
-                        })?;
+                for (c, (slot, &ty)) in values.iter_mut().zip(&types).enumerate() {
+                    *slot =
+                        it.next()
+                            .and_then(|w| parse_ascii(w, ty))
+                            .ok_or_else(|| Error::Body {
+                                path: path.to_path_buf(),
+                                offset: 0,
+                                index: i,
+                                message: format!(
+                                    "property {c} (`{}`) is missing or not a valid {}",
+                                    el.properties[c].name,
+                                    ty.name()
+                                ),
+                            })?;
                 }
                 check_finite(path, el, &used, i, &values)?;
                 emit(&mut splats, &values);
             }
         }
-        Format::BinaryLe | Format::BinaryBe => {
-            let le = header.format == Format::BinaryLe;
+        PlyFormat::BinaryLittleEndian | PlyFormat::BinaryBigEndian => {
+            let big = header.format == PlyFormat::BinaryBigEndian;
             let mut off = 0;
             for (ei, e) in header.elements[..vi].iter().enumerate() {
-                off = skip_element(body, off, e, le).map_err(|m| Error::Body {
+                off = skip_element(body, off, e, big).map_err(|m| Error::Body {
                     path: path.to_path_buf(),
-                    offset: (header.body + off) as u64,
+                    offset: (header.body_offset + off) as u64,
                     index: ei,
                     message: m,
                 })?;
             }
             let mut layout = Vec::with_capacity(n_props);
             let mut stride = 0;
-            for p in &el.props {
-                if let Property::Scalar { ty, .. } = p {
-                    layout.push((stride, *ty));
-                    stride += ty.size();
-                }
+            for &ty in &types {
+                layout.push((stride, ty));
+                stride += ty.size();
             }
             let need = n.checked_mul(stride).and_then(|b| b.checked_add(off));
             if need.is_none_or(|need| need > body.len()) {
                 return Err(Error::Body {
                     path: path.to_path_buf(),
-                    offset: (header.body + off) as u64,
+                    offset: (header.body_offset + off) as u64,
                     index: (body.len().saturating_sub(off)) / stride.max(1),
                     message: format!(
                         "{n} vertices of {stride} bytes need {} bytes but the body after this \
@@ -462,7 +287,7 @@ pub fn parse_splats(path: &Path, data: &[u8]) -> Result<Splats, Error> {
             for i in 0..n {
                 let rec = &body[off + i * stride..off + (i + 1) * stride];
                 for (slot, &(o, ty)) in values.iter_mut().zip(&layout) {
-                    *slot = ty.read(&rec[o..], le);
+                    *slot = read_binary(&rec[o..], ty, big);
                 }
                 check_finite(path, el, &used, i, &values)?;
                 emit(&mut splats, &values);
@@ -473,36 +298,25 @@ pub fn parse_splats(path: &Path, data: &[u8]) -> Result<Splats, Error> {
 }
 
 /// Skips one element's items in a binary body, returning the offset after it.
-fn skip_element(body: &[u8], mut off: usize, e: &Element, le: bool) -> Result<usize, String> {
-    let fixed: Option<usize> = e
-        .props
-        .iter()
-        .map(|p| match p {
-            Property::Scalar { ty, .. } => Some(ty.size()),
-            Property::List { .. } => None,
-        })
-        .sum();
-    if let Some(stride) = fixed {
-        let end = e
-            .count
-            .checked_mul(stride)
+fn skip_element(body: &[u8], mut off: usize, e: &Element, big: bool) -> Result<usize, String> {
+    let past_end = || format!("element `{}` runs past the end of the file", e.name);
+    if let Some(stride) = e.fixed_stride() {
+        return usize::try_from(e.count)
+            .ok()
+            .and_then(|count| count.checked_mul(stride))
             .and_then(|b| b.checked_add(off))
             .filter(|&end| end <= body.len())
-            .ok_or_else(|| format!("element `{}` runs past the end of the file", e.name))?;
-        return Ok(end);
+            .ok_or_else(past_end);
     }
     for _ in 0..e.count {
-        for p in &e.props {
-            let (size, n) = match p {
-                Property::Scalar { ty, .. } => (ty.size(), 1),
-                Property::List { count, item } => {
+        for p in &e.properties {
+            let (size, n) = match p.kind {
+                PropertyKind::Scalar(ty) => (ty.size(), 1),
+                PropertyKind::List { count, item } => {
                     if off + count.size() > body.len() {
-                        return Err(format!(
-                            "element `{}` runs past the end of the file",
-                            e.name
-                        ));
+                        return Err(past_end());
                     }
-                    let n = count.read(&body[off..], le);
+                    let n = read_binary(&body[off..], count, big);
                     off += count.size();
                     (item.size(), n.max(0.0) as usize)
                 }
@@ -511,7 +325,7 @@ fn skip_element(body: &[u8], mut off: usize, e: &Element, le: bool) -> Result<us
                 .checked_mul(size)
                 .and_then(|b| b.checked_add(off))
                 .filter(|&end| end <= body.len())
-                .ok_or_else(|| format!("element `{}` runs past the end of the file", e.name))?;
+                .ok_or_else(past_end)?;
         }
     }
     Ok(off)
@@ -537,7 +351,7 @@ pub fn inria_property_names(degree: u32) -> Vec<String> {
 /// renamed over `path` once complete).
 pub fn write_splats(path: &Path, splats: &Splats) -> Result<(), Error> {
     splats.validate()?;
-    write_atomic(path, |w| {
+    atomic_output::write_atomic_with(path, |w| {
         let names = inria_property_names(splats.sh_degree);
         let mut head = format!(
             "ply\nformat binary_little_endian 1.0\nelement vertex {}\n",
@@ -570,38 +384,5 @@ pub fn write_splats(path: &Path, splats: &Splats) -> Result<(), Error> {
         }
         Ok(())
     })
-}
-
-/// Writes a file through `body` into a temporary sibling and renames it over `path`.
-pub(crate) fn write_atomic(
-    path: &Path,
-    body: impl FnOnce(&mut BufWriter<std::fs::File>) -> std::io::Result<()>,
-) -> Result<(), Error> {
-    let io = |source| Error::Io {
-        path: path.to_path_buf(),
-        source,
-    };
-    let name = path.file_name().map_or_else(
-        || std::ffi::OsString::from("splats"),
-        std::ffi::OsStr::to_os_string,
-    );
-    let mut tmp_name = std::ffi::OsString::from(".");
-    tmp_name.push(&name);
-    tmp_name.push(format!(".tmp{}", std::process::id()));
-    let tmp: PathBuf = path.with_file_name(tmp_name);
-    let result = (|| {
-        let file = std::fs::File::create(&tmp)?;
-        let mut w = BufWriter::new(file);
-        body(&mut w)?;
-        let file = w
-            .into_inner()
-            .map_err(std::io::IntoInnerError::into_error)?;
-        file.sync_all()?;
-        std::fs::rename(&tmp, path)
-    })();
-    if let Err(e) = result {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(io(e));
-    }
-    Ok(())
+    .map_err(|e| Error::io(path, e))
 }

@@ -24,7 +24,7 @@ use std::path::Path;
 use glam::{Quat, Vec3};
 
 use crate::frame::y_up_frame;
-use crate::ply::{MAX_SPLATS, write_atomic};
+use crate::ply::MAX_SPLATS;
 use crate::{Error, Splats, logit, num_sh_coeffs, sigmoid};
 
 /// `NGSP` read as a little-endian u32.
@@ -96,7 +96,7 @@ pub fn encode_spz(splats: &Splats, options: &SpzOptions) -> Result<Vec<u8>, Erro
 /// Writes `splats` as an SPZ file (version 3), atomically.
 pub fn write_spz(path: &Path, splats: &Splats, options: &SpzOptions) -> Result<(), Error> {
     let bytes = encode_spz(splats, options)?;
-    write_atomic(path, |w| w.write_all(&bytes))
+    atomic_output::write_atomic(path, &bytes).map_err(|e| Error::io(path, e))
 }
 
 /// Reads an SPZ file (version 2 or 3, gzip container).

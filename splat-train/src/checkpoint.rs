@@ -11,8 +11,7 @@
 //! or altered afterwards, which is refused rather than resumed from.
 
 use std::fs;
-use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 use splat_core::{Splats, num_sh_coeffs};
@@ -91,7 +90,7 @@ pub(crate) fn save(trainer: &Trainer, path: &Path) -> Result<(), Error> {
     }
     let sum = checksum(&buf);
     buf.extend_from_slice(&sum.to_le_bytes());
-    write_atomic(path, &buf).map_err(|source| Error::Io {
+    atomic_output::write_atomic(path, &buf).map_err(|source| Error::Io {
         path: path.to_path_buf(),
         source,
     })
@@ -249,23 +248,4 @@ fn checksum(bytes: &[u8]) -> u64 {
         h = (h ^ u64::from_le_bytes(b)).wrapping_mul(PRIME);
     }
     h
-}
-
-/// Writes `bytes` to `path` through a temporary sibling renamed over it.
-fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp: PathBuf = path.with_file_name(format!(".{name}.tmp{}", std::process::id()));
-    let result = (|| {
-        let mut f = fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        fs::rename(&tmp, path)
-    })();
-    if result.is_err() {
-        let _ = fs::remove_file(&tmp);
-    }
-    result
 }

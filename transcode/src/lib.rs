@@ -4,7 +4,6 @@
 //! COLMAP dataset, initialisation, training, export, evaluation, report) and holds the policy
 //! and defaults; the `transcode` binary is its command-line face.
 
-pub mod atomic;
 pub mod config;
 pub mod eval;
 pub mod pipeline;

@@ -11,8 +11,8 @@ use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 
-use crate::atomic::write_atomic;
 use crate::config::Config;
+use atomic_output::write_atomic;
 use splat_init::InitSummary;
 use splat_train::eval::Metrics;
 

@@ -15,8 +15,8 @@ use std::time::{Duration, UNIX_EPOCH};
 
 use serde::{Deserialize, Serialize};
 
-use crate::atomic::write_atomic;
 use crate::config::{Config, InitMode};
+use atomic_output::write_atomic;
 use splat_init::InitSummary;
 
 /// Name of the state file in the output folder.

@@ -1,12 +1,11 @@
 //! PLY point clouds and meshes: header, fast binary path, general path, writer.
 
-mod header;
 mod read;
 mod rig;
 mod schema;
 mod write;
 
-pub use header::{Element, Header, PlyFormat, Property, PropertyKind, ScalarType, parse_header};
+pub use ply_core::{Element, Header, HeaderError, PlyFormat, Property, PropertyKind, ScalarType};
 
 use std::path::Path;
 
@@ -30,6 +29,12 @@ fn with_bytes<R>(path: &Path, f: impl FnOnce(&[u8]) -> Result<R, Error>) -> Resu
     let map = unsafe { memmap2::MmapOptions::new().populate().map(&file) }
         .map_err(|e| Error::io(path, e))?;
     f(&map)
+}
+
+/// Parses the header at the start of `bytes` (see [`ply_core::parse_header`]); `path` names the
+/// file in errors.
+pub fn parse_header(path: &Path, bytes: &[u8]) -> Result<Header, Error> {
+    ply_core::parse_header(bytes).map_err(|e| Error::header(path, e))
 }
 
 /// Reads the header of a PLY file (cheap: the body is not touched).

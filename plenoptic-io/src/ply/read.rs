@@ -6,9 +6,9 @@ use std::path::Path;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
-use super::header::{Element, Header, PlyFormat, PropertyKind, ScalarType};
 use super::schema::{VertexPlan, color_from_stored};
 use crate::Error;
+use ply_core::{Element, Header, PlyFormat, PropertyKind, ScalarType, parse_ascii, read_binary};
 
 /// Points decoded per parallel task: large enough to amortise scheduling, small enough to balance 2+ cores.
 const CHUNK_POINTS: usize = 16 * 1024;
@@ -223,53 +223,6 @@ impl Row for Record<'_> {
                 lut[usize::from(src[2])],
             ];
         }
-    }
-}
-
-/// Reads one binary scalar from the start of `b` (which holds at least `ty.size()` bytes).
-#[inline(always)]
-fn read_binary(b: &[u8], ty: ScalarType, big_endian: bool) -> f64 {
-    macro_rules! get {
-        ($t:ty, $n:literal) => {{
-            let mut a = [0u8; $n];
-            a.copy_from_slice(&b[..$n]);
-            f64::from(if big_endian {
-                <$t>::from_be_bytes(a)
-            } else {
-                <$t>::from_le_bytes(a)
-            })
-        }};
-    }
-    match ty {
-        ScalarType::I8 => f64::from(b[0] as i8),
-        ScalarType::U8 => f64::from(b[0]),
-        ScalarType::I16 => get!(i16, 2),
-        ScalarType::U16 => get!(u16, 2),
-        ScalarType::I32 => get!(i32, 4),
-        ScalarType::U32 => get!(u32, 4),
-        ScalarType::F32 => get!(f32, 4),
-        ScalarType::F64 => get!(f64, 8),
-    }
-}
-
-/// Parses one ASCII token as the given type, exactly (f32 parsed as f32, not via f64).
-fn parse_ascii(token: &str, ty: ScalarType) -> Option<f64> {
-    let int = |lo: i64, hi: i64| {
-        token
-            .parse::<i64>()
-            .ok()
-            .filter(|v| (lo..=hi).contains(v))
-            .map(|v| v as f64)
-    };
-    match ty {
-        ScalarType::I8 => int(i8::MIN.into(), i8::MAX.into()),
-        ScalarType::U8 => int(0, u8::MAX.into()),
-        ScalarType::I16 => int(i16::MIN.into(), i16::MAX.into()),
-        ScalarType::U16 => int(0, u16::MAX.into()),
-        ScalarType::I32 => int(i32::MIN.into(), i32::MAX.into()),
-        ScalarType::U32 => int(0, u32::MAX.into()),
-        ScalarType::F32 => token.parse::<f32>().ok().map(f64::from),
-        ScalarType::F64 => token.parse::<f64>().ok(),
     }
 }
 

@@ -2,8 +2,8 @@
 
 use std::path::Path;
 
-use super::header::{Element, PropertyKind, ScalarType};
 use crate::Error;
+use ply_core::{Element, PropertyKind, ScalarType};
 
 /// The role of one vertex property, as decided from its name.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

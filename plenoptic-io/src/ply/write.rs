@@ -6,9 +6,9 @@ use std::path::Path;
 
 use rayon::prelude::*;
 
-use super::header::{PlyFormat, ScalarType};
 use super::schema::{Role, color_to_stored, role_of_name};
 use crate::{Error, PlenopticCloud, PlyLayout};
+use ply_core::{PlyFormat, ScalarType, write_ascii, write_binary};
 
 /// Points encoded per parallel task.
 const CHUNK_POINTS: usize = 16 * 1024;
@@ -216,10 +216,11 @@ pub(crate) fn write_cloud(path: &Path, cloud: &PlenopticCloud) -> Result<(), Err
             body
         }
     };
-    crate::atomic::write_atomic(path, |w| {
+    atomic_output::write_atomic_with(path, |w| {
         w.write_all(header.as_bytes())?;
         w.write_all(&body)
     })
+    .map_err(|e| Error::io(path, e))
 }
 
 /// The header: format, comments, rig comments, the vertex element.
@@ -261,37 +262,4 @@ fn header_text(cloud: &PlenopticCloud, layout: &PlyLayout, n: usize) -> String {
     }
     h.push_str("end_header\n");
     h
-}
-
-/// Encodes `v` as `ty` into `out` (integers rounded and saturated).
-fn write_binary(out: &mut [u8], v: f64, ty: ScalarType, big: bool) {
-    macro_rules! put {
-        ($x:expr) => {{
-            let x = $x;
-            out.copy_from_slice(&if big {
-                x.to_be_bytes()
-            } else {
-                x.to_le_bytes()
-            });
-        }};
-    }
-    match ty {
-        ScalarType::I8 => put!(v.round() as i8),
-        ScalarType::U8 => put!(v.round() as u8),
-        ScalarType::I16 => put!(v.round() as i16),
-        ScalarType::U16 => put!(v.round() as u16),
-        ScalarType::I32 => put!(v.round() as i32),
-        ScalarType::U32 => put!(v.round() as u32),
-        ScalarType::F32 => put!(v as f32),
-        ScalarType::F64 => put!(v),
-    }
-}
-
-/// Formats `v` as `ty` in ASCII; Rust's shortest round-trip float formatting keeps values exact.
-fn write_ascii(text: &mut String, v: f64, ty: ScalarType) {
-    let _ = match ty {
-        ScalarType::F32 => write!(text, "{}", v as f32),
-        ScalarType::F64 => write!(text, "{v}"),
-        _ => write!(text, "{}", v.round() as i64),
-    };
 }

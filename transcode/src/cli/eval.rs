@@ -97,7 +97,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     if let Some(path) = &args.json {
         let json = serde_json::to_vec_pretty(&metrics)?;
-        transcode::atomic::write_atomic(path, &json)
+        atomic_output::write_atomic(path, &json)
             .with_context(|| format!("cannot write {}", path.display()))?;
     }
     Ok(())

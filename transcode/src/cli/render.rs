@@ -102,7 +102,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             image::ExtendedColorType::Rgb8,
         )
         .with_context(|| format!("encoding {}", path.display()))?;
-        colmap_io::write_atomic(&path, &png)?;
+        atomic_output::write_atomic(&path, &png)
+            .with_context(|| format!("cannot write {}", path.display()))?;
         bar.inc(1);
     }
     bar.finish_with_message(format!("wrote {}", args.out.display()));

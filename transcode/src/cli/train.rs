@@ -15,7 +15,7 @@ use splat_train::{
     Warmup, evaluate, read_dataset,
 };
 
-use transcode::atomic::write_atomic;
+use atomic_output::write_atomic;
 
 /// How the initial splats are made.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]

@@ -1,8 +1,6 @@
-//! PLY header: format line, elements, properties, comments.
+//! The PLY header model (format line, elements, properties, comments) and its parser.
 
-use std::path::Path;
-
-use crate::Error;
+use crate::{HeaderError, HeaderProblem};
 
 /// Longest header we accept; real headers (8iVSLF with 13 rig matrices) are ~3.5 KB.
 pub const MAX_HEADER_BYTES: usize = 1 << 20;
@@ -198,18 +196,19 @@ impl Header {
     }
 }
 
-/// Parses the header at the start of `bytes`.
-pub fn parse_header(path: &Path, bytes: &[u8]) -> Result<Header, Error> {
-    let err = |line: usize, message: String| Error::Header {
-        path: path.to_path_buf(),
-        line,
-        message,
-    };
+/// Parses the header at the start of `bytes` (the whole file, or at least its header).
+///
+/// Accepts the classic and the sized type names, CRLF header lines, blank lines, `comment` and
+/// `obj_info` lines; refuses anything else with the 1-based line and the problem.
+///
+/// # Errors
+/// [`HeaderError`] for an empty input, a missing `ply` magic line, a header that is not UTF-8,
+/// longer than [`MAX_HEADER_BYTES`] or without `end_header`, an unknown format, version, type
+/// or keyword, and elements or properties that are malformed or declared twice.
+pub fn parse_header(bytes: &[u8]) -> Result<Header, HeaderError> {
+    let err = |line: usize, problem: HeaderProblem| HeaderError { line, problem };
     if bytes.is_empty() {
-        return Err(err(
-            1,
-            "the file is empty (expected the magic line 'ply')".into(),
-        ));
+        return Err(err(1, HeaderProblem::Empty));
     }
     let mut pos = 0usize;
     let mut line_no = 0usize;
@@ -219,12 +218,14 @@ pub fn parse_header(path: &Path, bytes: &[u8]) -> Result<Header, Error> {
     let mut obj_info = Vec::new();
     loop {
         if pos >= bytes.len() {
-            return Err(err(line_no, "the file ends before 'end_header'".into()));
+            return Err(err(line_no, HeaderProblem::NoEndHeader));
         }
         if pos > MAX_HEADER_BYTES {
             return Err(err(
                 line_no,
-                format!("no 'end_header' within the first {MAX_HEADER_BYTES} bytes"),
+                HeaderProblem::TooLong {
+                    limit: MAX_HEADER_BYTES,
+                },
             ));
         }
         let end = bytes[pos..]
@@ -234,15 +235,16 @@ pub fn parse_header(path: &Path, bytes: &[u8]) -> Result<Header, Error> {
         line_no += 1;
         let raw = &bytes[pos..end];
         pos = (end + 1).min(bytes.len());
-        let text = std::str::from_utf8(raw)
-            .map_err(|_| err(line_no, "the header line is not valid UTF-8".into()))?;
+        let text = std::str::from_utf8(raw).map_err(|_| err(line_no, HeaderProblem::NotUtf8))?;
         // Accept CRLF headers (written by some Windows tools); the body is unaffected.
         let text = text.strip_suffix('\r').unwrap_or(text);
         if line_no == 1 {
             if text.trim_end() != "ply" {
                 return Err(err(
                     1,
-                    format!("expected the magic line 'ply', found {text:?}"),
+                    HeaderProblem::NotPly {
+                        found: text.to_string(),
+                    },
                 ));
             }
             continue;
@@ -254,18 +256,32 @@ pub fn parse_header(path: &Path, bytes: &[u8]) -> Result<Header, Error> {
         match keyword {
             "format" => {
                 if format.is_some() {
-                    return Err(err(line_no, "a second 'format' line".into()));
+                    return Err(err(line_no, HeaderProblem::SecondFormat));
                 }
                 let kind = words.next().unwrap_or("");
                 format = Some(match kind {
                     "ascii" => PlyFormat::Ascii,
                     "binary_little_endian" => PlyFormat::BinaryLittleEndian,
                     "binary_big_endian" => PlyFormat::BinaryBigEndian,
-                    _ => return Err(err(line_no, format!("unknown format {kind:?}"))),
+                    _ => {
+                        return Err(err(
+                            line_no,
+                            HeaderProblem::UnknownFormat {
+                                found: kind.to_string(),
+                            },
+                        ));
+                    }
                 });
                 match words.next() {
-                    Some("1.0") | Some("1") => {}
-                    v => return Err(err(line_no, format!("unsupported format version {v:?}"))),
+                    Some("1.0" | "1") => {}
+                    v => {
+                        return Err(err(
+                            line_no,
+                            HeaderProblem::UnsupportedVersion {
+                                found: v.unwrap_or("").to_string(),
+                            },
+                        ));
+                    }
                 }
             }
             "comment" => {
@@ -277,16 +293,23 @@ pub fn parse_header(path: &Path, bytes: &[u8]) -> Result<Header, Error> {
             }
             "element" => {
                 let (Some(name), Some(count)) = (words.next(), words.next()) else {
-                    return Err(err(line_no, "expected 'element NAME COUNT'".into()));
+                    return Err(err(line_no, HeaderProblem::MalformedElement));
                 };
                 let count: u64 = count.parse().map_err(|_| {
                     err(
                         line_no,
-                        format!("element count {count:?} is not a non-negative integer"),
+                        HeaderProblem::BadElementCount {
+                            found: count.to_string(),
+                        },
                     )
                 })?;
                 if elements.iter().any(|e| e.name == name) {
-                    return Err(err(line_no, format!("element '{name}' is declared twice")));
+                    return Err(err(
+                        line_no,
+                        HeaderProblem::DuplicateElement {
+                            name: name.to_string(),
+                        },
+                    ));
                 }
                 elements.push(Element {
                     name: name.to_string(),
@@ -296,12 +319,18 @@ pub fn parse_header(path: &Path, bytes: &[u8]) -> Result<Header, Error> {
             }
             "property" => {
                 let Some(element) = elements.last_mut() else {
-                    return Err(err(line_no, "property before any element".into()));
+                    return Err(err(line_no, HeaderProblem::PropertyBeforeElement));
                 };
                 let parts: Vec<&str> = words.collect();
                 let ty = |s: &str| {
-                    ScalarType::parse(s)
-                        .ok_or_else(|| err(line_no, format!("unknown property type {s:?}")))
+                    ScalarType::parse(s).ok_or_else(|| {
+                        err(
+                            line_no,
+                            HeaderProblem::UnknownType {
+                                found: s.to_string(),
+                            },
+                        )
+                    })
                 };
                 let property = match parts.as_slice() {
                     ["list", count, item, name] => {
@@ -309,10 +338,7 @@ pub fn parse_header(path: &Path, bytes: &[u8]) -> Result<Header, Error> {
                         if count.is_float() {
                             return Err(err(
                                 line_no,
-                                format!(
-                                    "list count type must be an integer, found {}",
-                                    count.name()
-                                ),
+                                HeaderProblem::FloatListCount { found: count },
                             ));
                         }
                         Property {
@@ -327,25 +353,39 @@ pub fn parse_header(path: &Path, bytes: &[u8]) -> Result<Header, Error> {
                         name: (*name).to_string(),
                         kind: PropertyKind::Scalar(ty(t)?),
                     },
-                    _ => return Err(err(line_no, format!("malformed property line {text:?}"))),
+                    _ => {
+                        return Err(err(
+                            line_no,
+                            HeaderProblem::MalformedProperty {
+                                found: text.to_string(),
+                            },
+                        ));
+                    }
                 };
                 if element.property_index(&property.name).is_some() {
                     return Err(err(
                         line_no,
-                        format!(
-                            "element '{}' declares property '{}' twice",
-                            element.name, property.name
-                        ),
+                        HeaderProblem::DuplicateProperty {
+                            element: element.name.clone(),
+                            property: property.name,
+                        },
                     ));
                 }
                 element.properties.push(property);
             }
             "end_header" => break,
-            other => return Err(err(line_no, format!("unknown header keyword {other:?}"))),
+            other => {
+                return Err(err(
+                    line_no,
+                    HeaderProblem::UnknownKeyword {
+                        found: other.to_string(),
+                    },
+                ));
+            }
         }
     }
     let Some(format) = format else {
-        return Err(err(2, "no 'format' line in the header".into()));
+        return Err(err(2, HeaderProblem::NoFormat));
     };
     Ok(Header {
         format,
@@ -360,35 +400,86 @@ pub fn parse_header(path: &Path, bytes: &[u8]) -> Result<Header, Error> {
 mod tests {
     use super::*;
 
-    fn parse(text: &str) -> Result<Header, Error> {
-        parse_header(Path::new("t.ply"), text.as_bytes())
+    fn parse(text: &str) -> Result<Header, HeaderError> {
+        parse_header(text.as_bytes())
     }
 
     #[test]
     fn parses_elements_lists_and_comments() {
-        let h = parse(
-            "ply\nformat binary_big_endian 1.0\ncomment width 1023\nelement vertex 3\nproperty float x\n\
-             property uint8 red\nelement face 1\nproperty list uchar int vertex_indices\nend_header\nXYZ",
-        )
-        .unwrap();
+        let text = "ply\nformat binary_big_endian 1.0\ncomment width 1023\nobj_info made by hand\n\
+                    element vertex 3\nproperty float x\nproperty uint8 red\nelement face 1\n\
+                    property list uchar int vertex_indices\nend_header\n";
+        let h = parse(&format!("{text}XYZ")).unwrap();
         assert_eq!(h.format, PlyFormat::BinaryBigEndian);
         assert_eq!(h.comments, vec![(3, "width 1023".to_string())]);
+        assert_eq!(h.obj_info, vec!["made by hand".to_string()]);
         assert_eq!(h.elements[0].fixed_stride(), Some(5));
+        assert_eq!(h.elements[0].property_index("red"), Some(1));
         assert_eq!(h.elements[1].fixed_stride(), None);
         assert_eq!(h.elements[1].min_row_bytes(h.format), 1);
-        assert_eq!(&"ply\nformat binary_big_endian 1.0\ncomment width 1023\nelement vertex 3\nproperty float x\nproperty uint8 red\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n".len(), &h.body_offset);
+        assert_eq!(h.elements[1].min_row_bytes(PlyFormat::Ascii), 2);
+        assert_eq!(h.element("face").map(|(i, _)| i), Some(1));
+        assert_eq!(h.body_offset, text.len());
+    }
+
+    #[test]
+    fn accepts_crlf_and_sized_type_names() {
+        let h = parse(
+            "ply\r\nformat ascii 1.0\r\nelement vertex 1\r\nproperty float64 x\r\nend_header\r\n",
+        )
+        .unwrap();
+        assert_eq!(h.format, PlyFormat::Ascii);
+        assert_eq!(
+            h.elements[0].properties[0].kind,
+            PropertyKind::Scalar(ScalarType::F64)
+        );
     }
 
     #[test]
     fn rejects_bad_headers_with_line_numbers() {
         let e = parse("ply\nformat ascii 1.0\nelement vertex -3\nend_header\n").unwrap_err();
-        assert!(matches!(e, Error::Header { line: 3, .. }), "{e}");
+        assert_eq!(e.line, 3, "{e}");
+        assert!(
+            matches!(e.problem, HeaderProblem::BadElementCount { .. }),
+            "{e}"
+        );
         let e = parse("ply\nformat ascii 1.0\nelement vertex 3\nproperty flot x\nend_header\n")
             .unwrap_err();
-        assert!(e.to_string().contains("flot"), "{e}");
+        assert_eq!(
+            e.to_string(),
+            "PLY header line 4: unknown property type \"flot\""
+        );
         let e = parse("ply\nformat ascii 1.0\nelement vertex 3\n").unwrap_err();
         assert!(e.to_string().contains("end_header"), "{e}");
         let e = parse("plx\n").unwrap_err();
-        assert!(matches!(e, Error::Header { line: 1, .. }), "{e}");
+        assert_eq!(e.line, 1, "{e}");
+        assert!(e.to_string().contains("not a PLY file"), "{e}");
+        let e = parse("").unwrap_err();
+        assert_eq!((e.line, e.problem), (1, HeaderProblem::Empty));
+        let e = parse("ply\nelement vertex 1\nend_header\n").unwrap_err();
+        assert_eq!((e.line, e.problem), (2, HeaderProblem::NoFormat));
+        let e = parse("ply\nformat ascii 2.0\nend_header\n").unwrap_err();
+        assert_eq!(e.line, 2, "{e}");
+        let e =
+            parse("ply\nformat ascii 1.0\nelement v 1\nproperty list float int i\nend_header\n")
+                .unwrap_err();
+        assert!(e.to_string().contains("found float"), "{e}");
+        let e = parse(
+            "ply\nformat ascii 1.0\nelement v 1\nproperty int a\nproperty int a\nend_header\n",
+        )
+        .unwrap_err();
+        assert_eq!(e.line, 5, "{e}");
+        let e = parse("ply\nformat ascii 1.0\nbogus\nend_header\n").unwrap_err();
+        assert_eq!(e.line, 3, "{e}");
+    }
+
+    #[test]
+    fn refuses_an_endless_header() {
+        let mut text = String::from("ply\nformat ascii 1.0\n");
+        while text.len() <= MAX_HEADER_BYTES + 100 {
+            text.push_str("comment padding padding padding padding padding padding\n");
+        }
+        let e = parse(&text).unwrap_err();
+        assert!(matches!(e.problem, HeaderProblem::TooLong { .. }), "{e}");
     }
 }

@@ -1,0 +1,233 @@
+//! Atomic file output: readers of a file written here see either the old file or the complete
+//! new one, never a half-written file.
+//!
+//! - [`write_atomic`]: writes bytes already in memory.
+//! - [`write_atomic_with`]: streams through a 1 MiB [`BufWriter`] on the temporary file.
+//!
+//! Both write a temporary sibling of the target (in the same folder, so the rename cannot cross
+//! file systems), named from the target's file name, the process id and a process-wide counter,
+//! so two threads or processes writing into one folder never share a temporary. The temporary
+//! is flushed, `fsync`ed and renamed over the target; on Unix the folder is then `fsync`ed (best
+//! effort). On any failure the temporary is removed and an existing file at the target is left
+//! untouched. Errors are plain [`std::io::Error`]s; callers wrap them with the path in their own
+//! error types.
+//!
+//! ```
+//! use std::io::Write;
+//!
+//! let dir = tempfile::tempdir()?;
+//! let path = dir.path().join("numbers.txt");
+//! atomic_output::write_atomic(&path, b"1 2 3\n")?;
+//! atomic_output::write_atomic_with(&path, |w| writeln!(w, "4 5 6"))?;
+//! assert_eq!(std::fs::read_to_string(&path)?, "4 5 6\n");
+//! // Only the target is left in the folder.
+//! assert_eq!(std::fs::read_dir(dir.path())?.count(), 1);
+//! # Ok::<(), std::io::Error>(())
+//! ```
+
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// Capacity of the buffered writer handed to the `fill` closure of [`write_atomic_with`].
+const BUFFER_BYTES: usize = 1 << 20;
+
+/// Distinguishes the temporaries of concurrent writes within one process.
+static NEXT_TEMPORARY: AtomicU64 = AtomicU64::new(0);
+
+/// Writes `bytes` to `path` atomically (temporary sibling, flush, `fsync`, rename).
+///
+/// # Errors
+/// Any I/O error creating, writing, syncing or renaming the temporary file (for example when
+/// the folder of `path` does not exist); the temporary is then removed and an old file at
+/// `path` is left as it was.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    write_atomic_with(path, |w| w.write_all(bytes))
+}
+
+/// Writes `path` atomically through `fill`, which receives a 1 MiB buffered writer on a
+/// temporary sibling file; the file appears under its name only if `fill`, the flush, the
+/// `fsync` and the rename all succeed.
+///
+/// # Errors
+/// The first error of `fill` or of the file system; the temporary is then removed and an old
+/// file at `path` is left as it was.
+pub fn write_atomic_with<F>(path: &Path, fill: F) -> std::io::Result<()>
+where
+    F: FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
+{
+    let temp = temporary_sibling(path);
+    let result = (|| {
+        let file = File::create(&temp)?;
+        let mut writer = BufWriter::with_capacity(BUFFER_BYTES, file);
+        fill(&mut writer)?;
+        writer.flush()?;
+        writer.get_ref().sync_all()?;
+        drop(writer);
+        std::fs::rename(&temp, path)
+    })();
+    if let Err(e) = result {
+        // Best effort: the temporary is useless after a failure (and may not exist at all).
+        let _ = std::fs::remove_file(&temp);
+        return Err(e);
+    }
+    sync_parent(path);
+    Ok(())
+}
+
+/// The temporary used while `path` is written: `.NAME.PID.N.tmp` in the same folder.
+fn temporary_sibling(path: &Path) -> PathBuf {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let n = NEXT_TEMPORARY.fetch_add(1, Ordering::Relaxed);
+    path.with_file_name(format!(".{name}.{}.{n}.tmp", std::process::id()))
+}
+
+/// Syncs the folder holding `path`, best effort.
+///
+/// The rename replaces a directory entry, and the entry lives in the folder, not in the file:
+/// `sync_all` on the file makes its content durable, but only an `fsync` of the folder makes
+/// the rename itself survive a power cut (otherwise the old file, or no file, may come back).
+/// Failure is ignored: the new file is complete and in place either way, and some file systems
+/// refuse to sync a directory.
+#[cfg(unix)]
+fn sync_parent(path: &Path) {
+    let parent = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    if let Ok(dir) = File::open(parent) {
+        let _ = dir.sync_all();
+    }
+}
+
+/// Elsewhere a folder cannot be opened as a file; the rename is as durable as the platform makes it.
+#[cfg(not(unix))]
+fn sync_parent(_path: &Path) {}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn entries(dir: &Path) -> Vec<String> {
+        let mut names: Vec<String> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        names
+    }
+
+    #[test]
+    fn writes_the_whole_file_and_leaves_no_temporary() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("out.bin");
+        let bytes: Vec<u8> = (0..3_000_000u32).map(|i| (i % 251) as u8).collect();
+        write_atomic(&p, &bytes).unwrap();
+        assert_eq!(std::fs::read(&p).unwrap(), bytes);
+        write_atomic(&p, b"shorter").unwrap();
+        assert_eq!(std::fs::read(&p).unwrap(), b"shorter");
+        assert_eq!(entries(dir.path()), ["out.bin"]);
+    }
+
+    #[test]
+    fn streams_through_fill() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("out.txt");
+        write_atomic_with(&p, |w| {
+            for i in 0..3 {
+                writeln!(w, "line {i}")?;
+            }
+            Ok(())
+        })
+        .unwrap();
+        assert_eq!(
+            std::fs::read_to_string(&p).unwrap(),
+            "line 0\nline 1\nline 2\n"
+        );
+        assert_eq!(entries(dir.path()), ["out.txt"]);
+    }
+
+    #[test]
+    fn a_failing_fill_leaves_nothing_behind_and_the_old_file_intact() {
+        let dir = tempfile::tempdir().unwrap();
+        let fresh = dir.path().join("fresh.bin");
+        let err = write_atomic_with(&fresh, |w| {
+            w.write_all(b"partial")?;
+            Err(std::io::Error::other("disk full"))
+        })
+        .unwrap_err();
+        assert_eq!(err.to_string(), "disk full");
+        assert!(!fresh.exists());
+        assert!(entries(dir.path()).is_empty());
+
+        let old = dir.path().join("old.bin");
+        std::fs::write(&old, b"old content").unwrap();
+        let err = write_atomic_with(&old, |w| {
+            w.write_all(&vec![7u8; 2 << 20])?;
+            Err(std::io::Error::other("cancelled"))
+        });
+        assert!(err.is_err());
+        assert_eq!(std::fs::read(&old).unwrap(), b"old content");
+        assert_eq!(entries(dir.path()), ["old.bin"]);
+    }
+
+    #[test]
+    fn many_threads_write_into_one_folder_at_once() {
+        let dir = tempfile::tempdir().unwrap();
+        std::thread::scope(|s| {
+            for t in 0..16u8 {
+                let dir = dir.path();
+                s.spawn(move || {
+                    for round in 0..8u8 {
+                        // Every thread also rewrites one shared file: each write must still
+                        // succeed, because no two writes share a temporary.
+                        let shared = dir.join("shared.bin");
+                        write_atomic(&shared, &[t; 4096]).unwrap();
+                        let own = dir.join(format!("file-{t}.bin"));
+                        write_atomic(&own, &[t, round]).unwrap();
+                    }
+                });
+            }
+        });
+        let names = entries(dir.path());
+        assert_eq!(names.len(), 17, "{names:?}");
+        for t in 0..16u8 {
+            let own = std::fs::read(dir.path().join(format!("file-{t}.bin"))).unwrap();
+            assert_eq!(own, [t, 7]);
+        }
+        let shared = std::fs::read(dir.path().join("shared.bin")).unwrap();
+        assert_eq!(shared.len(), 4096);
+        assert!(shared.iter().all(|&b| b == shared[0]), "a torn file");
+    }
+
+    #[test]
+    fn a_missing_folder_is_an_error_not_a_panic() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir
+            .path()
+            .join("no")
+            .join("such")
+            .join("folder")
+            .join("x.bin");
+        let err = write_atomic(&p, b"x").unwrap_err();
+        assert_eq!(err.kind(), std::io::ErrorKind::NotFound);
+        assert!(entries(dir.path()).is_empty());
+    }
+
+    #[test]
+    fn temporaries_differ_and_stay_beside_the_target() {
+        let p = Path::new("some/dir/model.ply");
+        let (a, b) = (temporary_sibling(p), temporary_sibling(p));
+        assert_ne!(a, b);
+        assert_eq!(a.parent(), p.parent());
+        let name = a.file_name().unwrap().to_string_lossy().into_owned();
+        assert!(
+            name.starts_with(".model.ply.") && name.ends_with(".tmp"),
+            "{name}"
+        );
+    }
+}
