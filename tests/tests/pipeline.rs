@@ -41,7 +41,8 @@ fn pipeline_on_a_small_plenoptic_cloud() {
     let out = tmp.path().join("out");
     let mut cfg = small_config();
     cfg.output.compare_init = true;
-    let outcome = transcode::pipeline::run(&input, &out, &cfg, true).unwrap();
+    let outcome =
+        transcode::pipeline::run(&input, &out, &cfg, &transcode::progress::ignore).unwrap();
 
     // Dataset: 16 images and a COLMAP model in both encodings, with the input points.
     let images = std::fs::read_dir(out.join("dataset/images"))
@@ -149,7 +150,13 @@ fn pipeline_on_a_small_plenoptic_cloud() {
     sparse_cfg.init.points3d = Some(out.join("dataset/sparse/0"));
     sparse_cfg.training.iterations = 120;
     let sparse_out = tmp.path().join("sparse");
-    let run = transcode::pipeline::run(&input, &sparse_out, &sparse_cfg, true).unwrap();
+    let run = transcode::pipeline::run(
+        &input,
+        &sparse_out,
+        &sparse_cfg,
+        &transcode::progress::ignore,
+    )
+    .unwrap();
     let r = &run.report.runs[0];
     assert_eq!(r.init.mode, InitMode::Sparse);
     assert_eq!(r.init.source, "colmap");
@@ -192,7 +199,8 @@ fn bad_input_fails_clearly_and_leaves_no_complete_looking_output() {
     std::fs::write(out.join("model/splats-sparse.glb"), b"old").unwrap();
     std::fs::write(out.join("report/report.html"), b"old").unwrap();
     let bad = data().join("bad/pond.0.ply");
-    let err = transcode::pipeline::run(&bad, &out, &small_config(), true).unwrap_err();
+    let err = transcode::pipeline::run(&bad, &out, &small_config(), &transcode::progress::ignore)
+        .unwrap_err();
     let msg = err.to_string();
     assert!(msg.contains("pond.0.ply"), "{msg}");
     assert!(!out.join("model/splats.ply").exists());
@@ -201,9 +209,14 @@ fn bad_input_fails_clearly_and_leaves_no_complete_looking_output() {
     assert!(!out.join("report/report.html").exists());
 
     let missing = tmp.path().join("nope.ply");
-    let msg = transcode::pipeline::run(&missing, &out, &small_config(), true)
-        .unwrap_err()
-        .to_string();
+    let msg = transcode::pipeline::run(
+        &missing,
+        &out,
+        &small_config(),
+        &transcode::progress::ignore,
+    )
+    .unwrap_err()
+    .to_string();
     assert!(msg.contains("nope.ply"), "{msg}");
 }
 
@@ -218,7 +231,7 @@ fn refused(input: &Path, out: &Path, cfg: &Config, expected: &str) -> String {
     std::fs::write(out.join("report/report.json"), b"old").unwrap();
     std::fs::write(sparse.join("cameras.txt"), b"old").unwrap();
     let started = std::time::Instant::now();
-    let msg = transcode::pipeline::run(input, out, cfg, true)
+    let msg = transcode::pipeline::run(input, out, cfg, &transcode::progress::ignore)
         .unwrap_err()
         .to_string();
     eprintln!("{msg} ({:.1} s)", started.elapsed().as_secs_f64());

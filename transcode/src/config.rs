@@ -179,6 +179,41 @@ impl Default for OutputConfig {
 pub const DEFAULT_CHECKPOINT_INTERVAL_S: f64 = 60.0;
 
 impl Config {
+    /// The trainer's configuration for one init mode: the `[training]` table, densification for
+    /// sparse init (and surface init when asked), and surface splats frozen in place unless
+    /// they may move or densify.
+    #[must_use]
+    pub fn train_config(&self, mode: InitMode, sh_degree: u32) -> splat_train::TrainConfig {
+        let cfg = self;
+        let t = &cfg.training;
+        let surface = mode == InitMode::Surface;
+        let mut tc = splat_train::TrainConfig {
+            iterations: t.iterations,
+            seed: t.seed,
+            lr: t.lr,
+            ssim_weight: t.ssim_weight,
+            sh_degree: Some(sh_degree),
+            sh_degree_interval: t.sh_degree_interval,
+            densify: if !surface || cfg.init.densify_surface {
+                Some(t.densify)
+            } else {
+                None
+            },
+            background: if t.random_background {
+                splat_train::Background::Random
+            } else {
+                splat_train::Background::Fixed([0.0; 3])
+            },
+            time_budget: t.time_budget_s.map(std::time::Duration::from_secs_f64),
+            alpha_loss_weight: t.alpha_loss,
+            history_every: t.history_every,
+            ..splat_train::TrainConfig::default()
+        };
+        // Surface splats sit on the input's points: keep them there unless asked (or densifying).
+        tc.frozen.positions = surface && !cfg.init.free_positions && tc.densify.is_none();
+        tc
+    }
+
     /// Reads a TOML file; missing keys keep their defaults.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
         let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {

@@ -7,5 +7,6 @@
 pub mod config;
 pub mod eval;
 pub mod pipeline;
+pub mod progress;
 pub mod report;
 pub mod resume;

@@ -11,25 +11,26 @@
 //! began, and what is cheap and deterministic (views in memory, evaluation, report) is redone.
 
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use camera_model::Camera;
 use glam::Vec3;
-use indicatif::{ProgressBar, ProgressStyle};
 use plenoptic_io::Model;
 use splat_core::Splats;
 use splat_train::eval::{EvalOptions, Metrics, RenderedView, evaluate_views};
-use splat_train::{Background, TrainConfig, Trainer, View};
+use splat_train::{TrainConfig, Trainer, View};
 
 use crate::config::{Config, InitMode};
+use crate::progress::{Event, Observer};
 use crate::report::{
     CurvePoint, InputInfo, Report, RunReport, StageTiming, ViewPictures, write_report,
 };
 use crate::resume::{
     self, InputStamp, ModeState, ResumeError, RunState, Schedule, Status, TrainedState,
 };
-use plenoptic_render::{self as views, ViewImage};
-use splat_init::{self as init, SurfacePoints};
+use plenoptic_render::{self as views, Rig, ViewImage};
+use splat_init::{self as init, InitSummary, SurfacePoints};
 
 /// Errors of the pipeline, each naming the stage and the file.
 #[derive(Debug, thiserror::Error)]
@@ -116,38 +117,6 @@ pub fn training_view(name: String, camera: Camera, image: &ViewImage) -> View {
     View::from_premultiplied(name, camera, &image.rgb, image.alpha.clone())
 }
 
-/// The trainer's configuration for one init mode.
-#[must_use]
-pub fn train_config(cfg: &Config, mode: InitMode, sh_degree: u32) -> TrainConfig {
-    let t = &cfg.training;
-    let surface = mode == InitMode::Surface;
-    let mut tc = TrainConfig {
-        iterations: t.iterations,
-        seed: t.seed,
-        lr: t.lr,
-        ssim_weight: t.ssim_weight,
-        sh_degree: Some(sh_degree),
-        sh_degree_interval: t.sh_degree_interval,
-        densify: if !surface || cfg.init.densify_surface {
-            Some(t.densify)
-        } else {
-            None
-        },
-        background: if t.random_background {
-            Background::Random
-        } else {
-            Background::Fixed([0.0; 3])
-        },
-        time_budget: t.time_budget_s.map(Duration::from_secs_f64),
-        alpha_loss_weight: t.alpha_loss,
-        history_every: t.history_every,
-        ..TrainConfig::default()
-    };
-    // Surface splats sit on the input's points: keep them there unless asked (or densifying).
-    tc.frozen.positions = surface && !cfg.init.free_positions && tc.densify.is_none();
-    tc
-}
-
 /// Steps timed (after one untimed warm-up step) to estimate a time-budgeted run's length before
 /// its densification is scheduled.
 const PROBE_STEPS: u32 = 4;
@@ -203,8 +172,6 @@ pub struct Outcome {
 /// How [`run_with`] starts.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct RunOptions {
-    /// Print nothing (progress goes to stderr otherwise).
-    pub quiet: bool,
     /// Continue the run saved in the output folder, if there is one (else start afresh).
     pub resume: bool,
 }
@@ -223,10 +190,15 @@ pub enum Finish {
     },
 }
 
-/// Runs the whole pipeline on `input` from the start, writing into `out`. Progress goes to stderr
-/// unless `quiet`.
-pub fn run(input: &Path, out: &Path, cfg: &Config, quiet: bool) -> Result<Outcome, PipelineError> {
-    execute(input, out, cfg, quiet, None)
+/// Runs the whole pipeline on `input` from the start, writing into `out`, reporting progress
+/// to `observer` ([`crate::progress::ignore`] for none).
+pub fn run(
+    input: &Path,
+    out: &Path,
+    cfg: &Config,
+    observer: Observer<'_>,
+) -> Result<Outcome, PipelineError> {
+    execute(input, out, cfg, observer, None)
 }
 
 /// Runs the pipeline, or with `opts.resume` continues the run saved in `out`: a run with the same
@@ -238,6 +210,7 @@ pub fn run_with(
     out: &Path,
     cfg: &Config,
     opts: RunOptions,
+    observer: Observer<'_>,
 ) -> Result<Finish, PipelineError> {
     let saved = if opts.resume {
         cfg.validate()?;
@@ -252,8 +225,8 @@ pub fn run_with(
         })?;
         state.check_same_run(out, &stamp, cfg)?;
         if state.status == Status::Finished {
-            let model = out.join("model").join("splats.ply");
-            let html = out.join("report").join("report.html");
+            let layout = Layout::new(out);
+            let (model, html) = (layout.main_model(), layout.html());
             if model.is_file() && html.is_file() {
                 return Ok(Finish::AlreadyFinished { model, html });
             }
@@ -264,77 +237,217 @@ pub fn run_with(
             .into());
         }
     }
-    execute(input, out, cfg, opts.quiet, saved).map(|o| Finish::Completed(Box::new(o)))
+    execute(input, out, cfg, observer, saved).map(|o| Finish::Completed(Box::new(o)))
 }
 
-/// The stages, from the beginning or continuing `saved`.
+/// The stages of a run, in order (the numbers in [`Event::Stage`]).
+const STAGES: u32 = 6;
+
+/// The stages, from the beginning or continuing `saved`: load → reference views and dataset →
+/// for each init mode (init → train → evaluate) → export the models → report.
 fn execute(
     input: &Path,
     out: &Path,
     cfg: &Config,
-    quiet: bool,
+    observer: Observer<'_>,
     saved: Option<RunState>,
 ) -> Result<Outcome, PipelineError> {
     cfg.validate()?;
     let started = Instant::now();
-    let say = |msg: String| {
-        if !quiet {
-            eprintln!("{msg}");
-        }
-    };
-    let model_dir = out.join("model");
-    let report_dir = out.join("report");
-    let dataset_dir = out.join("dataset");
-    // Markers of a finished run go first, so a failure below cannot leave an old, complete-looking
-    // model or report beside new, partial data.
-    let models = ["splats", "splats-sparse", "splats-surface"]
-        .into_iter()
-        .flat_map(|stem| MODEL_EXTENSIONS.map(|ext| model_dir.join(format!("{stem}.{ext}"))));
-    let reports = [
-        report_dir.join("report.json"),
-        report_dir.join("report.html"),
-    ];
-    for marker in models.chain(reports) {
-        match std::fs::remove_file(&marker) {
-            Ok(()) => {}
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-            Err(e) => return Err(io_err(&marker)(e)),
-        }
-    }
-    let checkpoints = out.join(resume::CHECKPOINT_DIR);
-    if saved.is_none() {
-        // A fresh run must not pick up an earlier run's state or checkpoints.
-        remove_file_if_present(&out.join(resume::STATE_FILE))?;
-        remove_dir_if_present(&checkpoints)?;
-    }
-    let mut timings = Vec::new();
-    let mut stage = Instant::now();
-    let mut lap = |name: &str, timings: &mut Vec<StageTiming>| {
-        timings.push(StageTiming {
-            stage: name.to_string(),
-            seconds: stage.elapsed().as_secs_f64(),
-        });
-        stage = Instant::now();
-    };
+    let layout = Layout::new(out);
+    layout.clear_results(saved.is_none())?;
+    let mut clock = StageClock::default();
 
-    say(format!("[1/6] loading {}", input.display()));
+    let loaded = load(input, observer)?;
+    clock.lap("load");
+    layout.create()?;
+    let mut state = open_state(input, cfg, &layout, saved, observer)?;
+    let rig = views::build_rig(&loaded.model, &cfg.rig)?;
+    clock.lap("rig");
+    let refs = reference_views(
+        input,
+        &loaded.model,
+        &rig,
+        cfg,
+        &layout,
+        &mut state,
+        observer,
+        &mut clock,
+    )?;
+    let surfaces = Surfaces::of(&loaded.model, cfg);
+
+    let mut trained = Vec::new();
+    for (k, mode) in init_modes(cfg).into_iter().enumerate() {
+        let run = RunOf {
+            mode,
+            index: k,
+            model_path: layout.model_path(k, mode),
+        };
+        let model = init_train_eval(&run, &surfaces, &refs, cfg, &layout, &mut state, observer)?;
+        observer(Event::Note(format!(
+            "{mode} init: held-out PSNR {:.2} dB on black, {:.2} dB on white, {} splats",
+            model.report.metrics.psnr_black,
+            model.report.metrics.psnr_white,
+            model.report.metrics.splats
+        )));
+        trained.push(model);
+    }
+
+    // The models only now that every run is trained and evaluated, the report after them and the
+    // "finished" state last: whatever a kill leaves behind, a model file is the final one.
+    export(&mut trained, cfg, observer)?;
+    let outcome = report(
+        &loaded, &refs, trained, cfg, &layout, clock, started, observer,
+    )?;
+    state.status = Status::Finished;
+    state.save(out)?;
+    remove_dir_if_present(&layout.checkpoints)?;
+    Ok(outcome)
+}
+
+/// The folders and files of a run in its output folder.
+#[derive(Debug, Clone)]
+struct Layout {
+    out: PathBuf,
+    model_dir: PathBuf,
+    report_dir: PathBuf,
+    dataset_dir: PathBuf,
+    checkpoints: PathBuf,
+}
+
+impl Layout {
+    fn new(out: &Path) -> Self {
+        Self {
+            out: out.to_path_buf(),
+            model_dir: out.join("model"),
+            report_dir: out.join("report"),
+            dataset_dir: out.join("dataset"),
+            checkpoints: out.join(resume::CHECKPOINT_DIR),
+        }
+    }
+
+    /// `model/splats.ply`: the first init mode's model.
+    fn main_model(&self) -> PathBuf {
+        self.model_dir.join("splats.ply")
+    }
+
+    /// `report/report.html`.
+    fn html(&self) -> PathBuf {
+        self.report_dir.join("report.html")
+    }
+
+    /// The model of the `k`-th init mode: `splats.ply`, then `splats-MODE.ply`.
+    fn model_path(&self, k: usize, mode: InitMode) -> PathBuf {
+        if k == 0 {
+            self.main_model()
+        } else {
+            self.model_dir.join(format!("splats-{mode}.ply"))
+        }
+    }
+
+    /// Removes what marks a finished run, and for a fresh run the saved state and checkpoints.
+    ///
+    /// Markers of a finished run go first, so a failure later cannot leave an old,
+    /// complete-looking model or report beside new, partial data; a fresh run must not pick up an
+    /// earlier run's state or checkpoints.
+    fn clear_results(&self, fresh: bool) -> Result<(), PipelineError> {
+        let models = ["splats", "splats-sparse", "splats-surface"]
+            .into_iter()
+            .flat_map(|stem| {
+                MODEL_EXTENSIONS.map(|ext| self.model_dir.join(format!("{stem}.{ext}")))
+            });
+        let reports = [self.report_dir.join("report.json"), self.html()];
+        for marker in models.chain(reports) {
+            remove_file_if_present(&marker)?;
+        }
+        if fresh {
+            remove_file_if_present(&self.out.join(resume::STATE_FILE))?;
+            remove_dir_if_present(&self.checkpoints)?;
+        }
+        Ok(())
+    }
+
+    /// Creates the run's folders.
+    fn create(&self) -> Result<(), PipelineError> {
+        for d in [
+            &self.model_dir,
+            &self.report_dir,
+            &self.dataset_dir,
+            &self.checkpoints,
+        ] {
+            std::fs::create_dir_all(d).map_err(io_err(d))?;
+        }
+        Ok(())
+    }
+}
+
+/// Wall time of each stage, for the report.
+#[derive(Debug)]
+struct StageClock {
+    timings: Vec<StageTiming>,
+    since: Instant,
+}
+
+impl Default for StageClock {
+    fn default() -> Self {
+        Self {
+            timings: Vec::new(),
+            since: Instant::now(),
+        }
+    }
+}
+
+impl StageClock {
+    /// Records the time since the last lap as stage `name`.
+    fn lap(&mut self, name: &str) {
+        self.timings.push(StageTiming {
+            stage: name.to_string(),
+            seconds: self.since.elapsed().as_secs_f64(),
+        });
+        self.since = Instant::now();
+    }
+}
+
+/// The loaded input and what the report says of it.
+#[derive(Debug)]
+pub struct Loaded {
+    /// The cloud or mesh.
+    pub model: Model,
+    /// Its file, kind and counts.
+    pub info: InputInfo,
+}
+
+/// Stage 1: reads the input and refuses one that is empty or cannot make a model.
+pub fn load(input: &Path, observer: Observer<'_>) -> Result<Loaded, PipelineError> {
+    observer(Event::Stage {
+        index: 1,
+        of: STAGES,
+        what: format!("loading {}", input.display()),
+    });
     let model = plenoptic_io::load(input)?;
     let info = input_info(input, &model);
     if info.points == 0 {
         return Err(PipelineError::EmptyInput(input.to_path_buf()));
     }
     plenoptic_render::degenerate::check_model(input, &model)?;
-    lap("load", &mut timings);
-    for d in [&model_dir, &report_dir, &dataset_dir, &checkpoints] {
-        std::fs::create_dir_all(d).map_err(io_err(d))?;
-    }
+    Ok(Loaded { model, info })
+}
+
+/// The saved state to continue, or a new one; from here until the end the folder says "running".
+fn open_state(
+    input: &Path,
+    cfg: &Config,
+    layout: &Layout,
+    saved: Option<RunState>,
+    observer: Observer<'_>,
+) -> Result<RunState, PipelineError> {
     let mut state = match saved {
         Some(s) => {
-            say(format!(
-                "      resuming the run in {} ({})",
-                out.display(),
+            observer(Event::Note(format!(
+                "resuming the run in {} ({})",
+                layout.out.display(),
                 resume_summary(&s)
-            ));
+            )));
             s
         }
         None => {
@@ -345,20 +458,44 @@ fn execute(
             RunState::start(stamp, cfg)
         }
     };
-    // From here until the end the folder says "running".
     state.status = Status::Running;
-    state.save(out)?;
+    state.save(&layout.out)?;
+    Ok(state)
+}
 
-    let rig = views::build_rig(&model, &cfg.rig)?;
-    lap("rig", &mut timings);
+/// The reference views as the trainer and the evaluator take them.
+#[derive(Debug)]
+pub struct References {
+    /// Training views (straight colour with their masks), named as in the dataset.
+    pub train: Vec<View>,
+    /// Held-out views, for evaluation only.
+    pub heldout: Vec<View>,
+}
 
-    say(format!(
-        "[2/6] rendering {} training views (and the COLMAP dataset) and {} held-out views at {}×{}",
-        rig.train.len(),
-        rig.heldout.len(),
-        cfg.rig.width,
-        cfg.rig.height
-    ));
+/// Stage 2: renders the training views (writing them as the COLMAP dataset unless a resumed run
+/// already has) and the held-out views, and refuses a rig that sees nothing.
+#[allow(clippy::too_many_arguments)]
+fn reference_views(
+    input: &Path,
+    model: &Model,
+    rig: &Rig,
+    cfg: &Config,
+    layout: &Layout,
+    state: &mut RunState,
+    observer: Observer<'_>,
+    clock: &mut StageClock,
+) -> Result<References, PipelineError> {
+    observer(Event::Stage {
+        index: 2,
+        of: STAGES,
+        what: format!(
+            "rendering {} training views (and the COLMAP dataset) and {} held-out views at {}×{}",
+            rig.train.len(),
+            rig.heldout.len(),
+            cfg.rig.width,
+            cfg.rig.height
+        ),
+    });
     let mut opts = cfg.renderer.clone();
     opts.background = [0.0; 3];
     let dataset_opts = views::DatasetOptions {
@@ -373,71 +510,105 @@ fn execute(
     let train_images = if state.dataset_written {
         // The dataset's PNGs are quantised: training needs the renders themselves, which are
         // deterministic, so they are made again in memory.
-        say("      the dataset is already written: rendering the training views in memory".into());
-        let images = views::render_views(&model, &rig.train, &opts)?;
-        lap("render training views", &mut timings);
+        observer(Event::Note(
+            "the dataset is already written: rendering the training views in memory".into(),
+        ));
+        let images = views::render_views(model, &rig.train, &opts)?;
+        clock.lap("render training views");
         images
     } else {
-        let bar = progress_bar(rig.train.len() as u64, quiet, "views");
+        observer(Event::Begin {
+            unit: "views",
+            total: rig.train.len() as u64,
+            done: 0,
+        });
+        let done = AtomicU64::new(0);
         let images = views::write_dataset(
-            &dataset_dir,
-            &model,
+            &layout.dataset_dir,
+            model,
             &rig.train,
             &opts,
             &dataset_opts,
             &|| {
-                bar.inc(1);
+                let n = done.fetch_add(1, Ordering::Relaxed) + 1;
+                observer(Event::Advance {
+                    done: n,
+                    message: None,
+                });
             },
         )?;
-        bar.finish_and_clear();
+        observer(Event::End);
         state.dataset_written = true;
-        state.save(out)?;
-        lap("render training views + write dataset", &mut timings);
+        state.save(&layout.out)?;
+        clock.lap("render training views + write dataset");
         images
     };
-    let heldout_images = views::render_views(&model, &rig.heldout, &opts)?;
+    let heldout_images = views::render_views(model, &rig.heldout, &opts)?;
     plenoptic_render::degenerate::check_views(
         input,
         "held-out",
         heldout_images.iter().map(|v| v.alpha.as_slice()),
         heldout_name,
     )?;
-    lap("render held-out views", &mut timings);
-    say(format!(
-        "      dataset written to {}",
-        dataset_dir.display()
-    ));
-    // Mesh samples: K of them when `--splats K` is given, so that K means splats for meshes too.
-    let surface = SurfacePoints::from_model(
-        &model,
-        cfg.init.mesh_points,
-        cfg.init.splats.unwrap_or(cfg.init.mesh_samples),
-        cfg.training.seed,
-    );
-
-    let train_views: Vec<View> = rig
+    clock.lap("render held-out views");
+    observer(Event::Note(format!(
+        "dataset written to {}",
+        layout.dataset_dir.display()
+    )));
+    let train = rig
         .train
         .iter()
         .zip(&train_images)
         .enumerate()
         .map(|(i, (c, img))| training_view(views::dataset_image_name(i), *c, img))
         .collect();
-    drop(train_images);
-    let heldout: Vec<View> = rig
+    let heldout = rig
         .heldout
         .iter()
         .zip(heldout_images)
         .enumerate()
         .map(|(i, (c, img))| View::from_premultiplied(heldout_name(i), *c, &img.rgb, img.alpha))
         .collect();
+    Ok(References { train, heldout })
+}
 
-    // The surface for the distance metric: the cloud itself, or dense samples of the mesh.
-    let distance_surface = match &model {
-        Model::Cloud(_) => surface.positions.clone(),
-        Model::Mesh(m) => init::sample_mesh(m, 200_000, cfg.training.seed ^ 0x5eed).positions,
-    };
-    let spacing = init::point_spacing(&distance_surface);
+/// The input's surface as initialisation and the distance metric use it.
+#[derive(Debug)]
+pub struct Surfaces {
+    /// The points splats are initialised on.
+    pub init: SurfacePoints,
+    /// The surface the evaluator measures splat distances to: the cloud, or dense mesh samples.
+    pub distance: Vec<Vec3>,
+    /// The median spacing of `distance`'s points.
+    pub spacing: f32,
+}
 
+impl Surfaces {
+    /// The surfaces of `model` under `cfg`.
+    #[must_use]
+    pub fn of(model: &Model, cfg: &Config) -> Self {
+        // Mesh samples: K of them when `--splats K` is given, so that K means splats for meshes too.
+        let init = SurfacePoints::from_model(
+            model,
+            cfg.init.mesh_points,
+            cfg.init.splats.unwrap_or(cfg.init.mesh_samples),
+            cfg.training.seed,
+        );
+        let distance = match model {
+            Model::Cloud(_) => init.positions.clone(),
+            Model::Mesh(m) => init::sample_mesh(m, 200_000, cfg.training.seed ^ 0x5eed).positions,
+        };
+        let spacing = init::point_spacing(&distance);
+        Self {
+            init,
+            distance,
+            spacing,
+        }
+    }
+}
+
+/// The init modes a run trains: the configured one, and the other with `compare_init`.
+fn init_modes(cfg: &Config) -> Vec<InitMode> {
     let mut modes = vec![cfg.init.mode];
     if cfg.output.compare_init {
         modes.push(match cfg.init.mode {
@@ -445,114 +616,114 @@ fn execute(
             InitMode::Sparse => InitMode::Surface,
         });
     }
-    let mut runs = Vec::new();
-    let mut renders_per_run: Vec<Vec<RenderedView>> = Vec::new();
-    let mut trained_models = Vec::new();
-    for (k, &mode) in modes.iter().enumerate() {
-        let model_path = if k == 0 {
-            model_dir.join("splats.ply")
-        } else {
-            model_dir.join(format!("splats-{mode}.ply"))
-        };
-        let (run, renders, trained) = init_train_eval(
-            &surface,
-            &train_views,
-            &heldout,
-            (&distance_surface, spacing),
-            cfg,
-            mode,
-            &model_path,
-            (out, &mut state, k),
-            quiet,
-        )?;
-        say(format!(
-            "      {mode} init: held-out PSNR {:.2} dB on black, {:.2} dB on white, {} splats",
-            run.metrics.psnr_black, run.metrics.psnr_white, run.metrics.splats
-        ));
-        runs.push(run);
-        renders_per_run.push(renders);
-        trained_models.push(trained);
-    }
+    modes
+}
 
-    // The models only now that every run is trained and evaluated, the report after them and the
-    // "finished" state last: whatever a kill leaves behind, a model file is the final one.
-    for (k, (run, trained)) in runs.iter_mut().zip(&trained_models).enumerate() {
-        say(format!("[5/6] writing {}", run.model_path.display()));
-        let t = Instant::now();
-        let formats = ModelFormats {
-            splat: k == 0 && cfg.output.splat_file,
-            spz: cfg.output.spz,
-            glb: cfg.output.glb,
-        };
-        let compact = write_model(&run.model_path, trained, formats)?;
-        run.model_bytes = std::fs::metadata(&run.model_path).map_or(0, |m| m.len());
-        run.compact_files = compact
-            .into_iter()
-            .map(|p| {
-                let bytes = std::fs::metadata(&p).map_or(0, |m| m.len());
-                (p, bytes)
+/// Which model of the run: its init mode, its index among the run's modes, its file.
+#[derive(Debug, Clone)]
+struct RunOf {
+    mode: InitMode,
+    index: usize,
+    model_path: PathBuf,
+}
+
+/// One trained and evaluated model, not yet written.
+#[derive(Debug)]
+pub struct TrainedModel {
+    /// Its part of the report.
+    pub report: RunReport,
+    /// Its renders of the held-out views.
+    pub renders: Vec<RenderedView>,
+    /// The splats.
+    pub splats: Splats,
+}
+
+/// The initial splats and schedule of a model, or where training continues from.
+struct Initialised {
+    summary: InitSummary,
+    schedule: Schedule,
+    /// Fresh splats; `None` when training continues from the checkpoint.
+    fresh: Option<Splats>,
+}
+
+/// Stages 3–5 for one init mode: initialises (or finds the checkpoint to continue from),
+/// trains and evaluates one model of the run, whose progress `state` records.
+fn init_train_eval(
+    run: &RunOf,
+    surfaces: &Surfaces,
+    refs: &References,
+    cfg: &Config,
+    layout: &Layout,
+    state: &mut RunState,
+    observer: Observer<'_>,
+) -> Result<TrainedModel, PipelineError> {
+    let mut clock = StageClock::default();
+    let init = initialise(
+        run,
+        &surfaces.init,
+        &refs.train,
+        cfg,
+        layout,
+        state,
+        observer,
+    )?;
+    clock.lap("init");
+    let (splats, train_report) = train(
+        run,
+        init.fresh,
+        &init.schedule,
+        init.summary.sh_degree,
+        &refs.train,
+        cfg,
+        layout,
+        state,
+        observer,
+    )?;
+    clock.lap("train");
+    let (metrics, renders) = evaluate(run.mode, &splats, refs, surfaces, cfg, observer)?;
+    clock.lap("evaluate");
+    let report = RunReport {
+        init: init.summary,
+        iterations: train_report.iterations,
+        train_seconds: train_report.elapsed_s,
+        stopped_by_budget: train_report.stopped_by_budget,
+        curve: train_report
+            .history
+            .iter()
+            .map(|h| CurvePoint {
+                iteration: h.iteration,
+                elapsed_s: h.elapsed_s,
+                psnr: h.psnr,
+                splats: h.splats,
             })
-            .collect();
-        run.timings.push(StageTiming {
-            stage: "write model".to_string(),
-            seconds: t.elapsed().as_secs_f64(),
-        });
-    }
-    let main_model = model_dir.join("splats.ply");
-
-    say("[6/6] writing the report".to_string());
-    let pictures = pick_pictures(&heldout, &renders_per_run, cfg.eval.report_views);
-    let mut report = Report {
-        version: env!("CARGO_PKG_VERSION").to_string(),
-        input: info,
-        config: cfg.clone(),
-        train_views: train_views.len(),
-        heldout_views: heldout.len(),
-        timings,
-        runs,
-        total_seconds: 0.0,
+            .collect(),
+        metrics,
+        model_path: run.model_path.clone(),
+        // Filled in when the model is written, after every run is done.
+        model_bytes: 0,
+        compact_files: Vec::new(),
+        timings: clock.timings,
     };
-    report.total_seconds = started.elapsed().as_secs_f64();
-    let html = write_report(&report_dir, &report, &pictures).map_err(io_err(&report_dir))?;
-    state.status = Status::Finished;
-    state.save(out)?;
-    remove_dir_if_present(&checkpoints)?;
-    Ok(Outcome {
+    Ok(TrainedModel {
         report,
-        html,
-        model: main_model,
+        renders,
+        splats,
     })
 }
 
-/// Initialises, trains and evaluates one model: the `k`-th init mode of the run in `out`, whose
-/// progress `state` records (and, when resuming, already holds). Returns its report, its held-out
-/// renders and the trained splats, which the caller writes once every mode is done.
-#[allow(clippy::too_many_arguments)]
-fn init_train_eval(
+/// Stage 3: the initial splats and the training schedule, unless training continues from a
+/// checkpoint. The schedule is fixed once, before the first step, and saved: a resumed run must
+/// train on the same one even when it came from timed probe steps.
+fn initialise(
+    run: &RunOf,
     surface: &SurfacePoints,
     train_views: &[View],
-    heldout: &[View],
-    distance_surface: (&[Vec3], f32),
     cfg: &Config,
-    mode: InitMode,
-    model_path: &Path,
-    (out, state, k): (&Path, &mut RunState, usize),
-    quiet: bool,
-) -> Result<(RunReport, Vec<RenderedView>, Splats), PipelineError> {
-    let mut timings = Vec::new();
-    let mut stage = Instant::now();
-    let mut lap = |name: &str, timings: &mut Vec<StageTiming>| {
-        timings.push(StageTiming {
-            stage: name.to_string(),
-            seconds: stage.elapsed().as_secs_f64(),
-        });
-        stage = Instant::now();
-    };
-    let say = |msg: String| {
-        if !quiet {
-            eprintln!("{msg}");
-        }
-    };
+    layout: &Layout,
+    state: &mut RunState,
+    observer: Observer<'_>,
+) -> Result<Initialised, PipelineError> {
+    let (mode, k, out) = (run.mode, run.index, &layout.out);
     let ckpt = resume::checkpoint_path(out, mode);
     let saved = state.modes.get(k).cloned();
     if let Some(m) = &saved
@@ -576,74 +747,96 @@ fn init_train_eval(
         }
         .into());
     }
-
-    // Initial splats, unless training continues from a checkpoint, and the training schedule.
-    // The schedule is fixed once, before the first step, and saved: a resumed run must train on
-    // the same one even when it came from timed probe steps.
-    let mut fresh = None;
-    let (summary, schedule) = match &saved {
-        Some(m) if resume_from_checkpoint => {
-            say(format!(
-                "[3/6] {mode} init: continuing from {}",
-                ckpt.display()
-            ));
-            lap("init", &mut timings);
-            (m.init.clone(), m.schedule)
-        }
-        _ => {
-            say(format!("[3/6] {mode} init"));
-            let mut init_cfg = cfg.init.clone();
-            init_cfg.mode = mode;
-            let (splats, summary) =
-                init::initialise(surface, &init_cfg, cfg.renderer.exponent, cfg.training.seed)?;
-            say(format!(
-                "      {} splats, SH degree {}{}",
-                summary.splats,
-                summary.sh_degree,
-                summary
-                    .sh_fit_rms
-                    .map(|e| format!(
-                        " (SH fit RMS by degree: {:.4} {:.4} {:.4} {:.4})",
-                        e[0], e[1], e[2], e[3]
-                    ))
-                    .unwrap_or_default()
-            ));
-            lap("init", &mut timings);
-            let schedule = match &saved {
-                Some(m) => m.schedule,
-                None => {
-                    let base = train_config(cfg, mode, summary.sh_degree);
-                    let schedule = plan(&splats, train_views, &base, cfg.training.scale_densify)?;
-                    state.modes.push(ModeState {
-                        mode,
-                        init: summary.clone(),
-                        schedule,
-                        trained: None,
-                    });
-                    state.save(out)?;
-                    schedule
-                }
-            };
-            fresh = Some(splats);
-            (summary, schedule)
+    if let Some(m) = saved.as_ref().filter(|_| resume_from_checkpoint) {
+        observer(Event::Stage {
+            index: 3,
+            of: STAGES,
+            what: format!("{mode} init: continuing from {}", ckpt.display()),
+        });
+        return Ok(Initialised {
+            summary: m.init.clone(),
+            schedule: m.schedule,
+            fresh: None,
+        });
+    }
+    observer(Event::Stage {
+        index: 3,
+        of: STAGES,
+        what: format!("{mode} init"),
+    });
+    let mut init_cfg = cfg.init.clone();
+    init_cfg.mode = mode;
+    let (splats, summary) =
+        init::initialise(surface, &init_cfg, cfg.renderer.exponent, cfg.training.seed)?;
+    observer(Event::Note(format!(
+        "{} splats, SH degree {}{}",
+        summary.splats,
+        summary.sh_degree,
+        summary
+            .sh_fit_rms
+            .map(|e| format!(
+                " (SH fit RMS by degree: {:.4} {:.4} {:.4} {:.4})",
+                e[0], e[1], e[2], e[3]
+            ))
+            .unwrap_or_default()
+    )));
+    let schedule = match &saved {
+        Some(m) => m.schedule,
+        None => {
+            let base = cfg.train_config(mode, summary.sh_degree);
+            let schedule = plan(&splats, train_views, &base, cfg.training.scale_densify)?;
+            state.modes.push(ModeState {
+                mode,
+                init: summary.clone(),
+                schedule,
+                trained: None,
+            });
+            state.save(out)?;
+            schedule
         }
     };
+    Ok(Initialised {
+        summary,
+        schedule,
+        fresh: Some(splats),
+    })
+}
 
-    say(format!(
-        "[4/6] training {} iterations{}",
-        cfg.training.iterations,
-        cfg.training
-            .time_budget_s
-            .map(|b| format!(" (budget {b:.0} s)"))
-            .unwrap_or_default()
-    ));
-    let base = train_config(cfg, mode, summary.sh_degree);
-    let tc = scheduled_config(base, &schedule);
+/// Stage 4: trains from `fresh` splats, or from the run's checkpoint, to the end of the schedule
+/// (or finds it trained already), checkpointing as it goes. Returns the splats and the trainer's
+/// report.
+#[allow(clippy::too_many_arguments)]
+fn train(
+    run: &RunOf,
+    fresh: Option<Splats>,
+    schedule: &Schedule,
+    sh_degree: u32,
+    train_views: &[View],
+    cfg: &Config,
+    layout: &Layout,
+    state: &mut RunState,
+    observer: Observer<'_>,
+) -> Result<(Splats, splat_train::TrainReport), PipelineError> {
+    let (mode, k, out) = (run.mode, run.index, &layout.out);
+    let ckpt = resume::checkpoint_path(out, mode);
+    observer(Event::Stage {
+        index: 4,
+        of: STAGES,
+        what: format!(
+            "training {} iterations{}",
+            cfg.training.iterations,
+            cfg.training
+                .time_budget_s
+                .map(|b| format!(" (budget {b:.0} s)"))
+                .unwrap_or_default()
+        ),
+    });
+    let tc = scheduled_config(cfg.train_config(mode, sh_degree), schedule);
     if let (Some(steps), Some(d)) = (schedule.densify_steps, tc.densify) {
-        say(format!(
-            "      densification scaled to ~{steps} steps: from step {} every {} until {}, opacity reset every {}",
+        observer(Event::Note(format!(
+            "densification scaled to ~{steps} steps: from step {} every {} until {}, opacity reset every {}",
             d.start, d.interval, d.stop, d.opacity_reset_interval
-        ));
+        )));
     }
     let mut trainer = match fresh {
         Some(splats) => Trainer::new(splats, train_views.to_vec(), tc)?,
@@ -654,23 +847,24 @@ fn init_train_eval(
             }
         })?,
     };
-    let train_report = match saved.and_then(|m| m.trained) {
+    let already = state.modes.get(k).and_then(|m| m.trained);
+    let report = match already {
         Some(t) => {
-            say(format!(
-                "      trained already ({} steps)",
+            observer(Event::Note(format!(
+                "trained already ({} steps)",
                 trainer.iteration()
-            ));
+            )));
             trainer.report(t.stopped_by_budget)
         }
         None => {
             if trainer.iteration() > 0 {
-                say(format!(
-                    "      continuing from step {}",
+                observer(Event::Note(format!(
+                    "continuing from step {}",
                     trainer.iteration()
-                ));
+                )));
             }
             let every = Duration::from_secs_f64(cfg.output.checkpoint_interval_s);
-            let report = train(&mut trainer, &ckpt, every, quiet)?;
+            let report = train_to_end(&mut trainer, &ckpt, every, observer)?;
             if let Some(m) = state.modes.get_mut(k) {
                 m.trained = Some(TrainedState {
                     stopped_by_budget: report.stopped_by_budget,
@@ -680,41 +874,104 @@ fn init_train_eval(
             report
         }
     };
-    let trained = trainer.splats().clone();
-    drop(trainer);
-    lap("train", &mut timings);
+    Ok((trainer.splats().clone(), report))
+}
 
-    say(format!("[5/6] evaluating the {mode} model"));
-    let (metrics, renders): (Metrics, Vec<RenderedView>) = evaluate_views(
-        &trained,
-        heldout,
-        Some(distance_surface),
+/// Stage 5: scores a trained model on the held-out views.
+fn evaluate(
+    mode: InitMode,
+    splats: &Splats,
+    refs: &References,
+    surfaces: &Surfaces,
+    cfg: &Config,
+    observer: Observer<'_>,
+) -> Result<(Metrics, Vec<RenderedView>), PipelineError> {
+    observer(Event::Stage {
+        index: 5,
+        of: STAGES,
+        what: format!("evaluating the {mode} model"),
+    });
+    Ok(evaluate_views(
+        splats,
+        &refs.heldout,
+        Some((&surfaces.distance, surfaces.spacing)),
         &EvalOptions::from(&cfg.eval),
-    )?;
-    lap("evaluate", &mut timings);
-    let run = RunReport {
-        init: summary,
-        iterations: train_report.iterations,
-        train_seconds: train_report.elapsed_s,
-        stopped_by_budget: train_report.stopped_by_budget,
-        curve: train_report
-            .history
-            .iter()
-            .map(|h| CurvePoint {
-                iteration: h.iteration,
-                elapsed_s: h.elapsed_s,
-                psnr: h.psnr,
-                splats: h.splats,
+    )?)
+}
+
+/// Stage 5 (end): writes every model in the formats asked for, noting sizes in its report.
+fn export(
+    trained: &mut [TrainedModel],
+    cfg: &Config,
+    observer: Observer<'_>,
+) -> Result<(), PipelineError> {
+    for (k, model) in trained.iter_mut().enumerate() {
+        let run = &mut model.report;
+        observer(Event::Stage {
+            index: 5,
+            of: STAGES,
+            what: format!("writing {}", run.model_path.display()),
+        });
+        let t = Instant::now();
+        let formats = ModelFormats {
+            splat: k == 0 && cfg.output.splat_file,
+            spz: cfg.output.spz,
+            glb: cfg.output.glb,
+        };
+        let compact = write_model(&run.model_path, &model.splats, formats)?;
+        run.model_bytes = std::fs::metadata(&run.model_path).map_or(0, |m| m.len());
+        run.compact_files = compact
+            .into_iter()
+            .map(|p| {
+                let bytes = std::fs::metadata(&p).map_or(0, |m| m.len());
+                (p, bytes)
             })
-            .collect(),
-        metrics,
-        model_path: model_path.to_path_buf(),
-        // Filled in when the model is written, after every run is done.
-        model_bytes: 0,
-        compact_files: Vec::new(),
-        timings,
+            .collect();
+        run.timings.push(StageTiming {
+            stage: "write model".to_string(),
+            seconds: t.elapsed().as_secs_f64(),
+        });
+    }
+    Ok(())
+}
+
+/// Stage 6: writes the report (JSON and HTML).
+#[allow(clippy::too_many_arguments)]
+fn report(
+    loaded: &Loaded,
+    refs: &References,
+    trained: Vec<TrainedModel>,
+    cfg: &Config,
+    layout: &Layout,
+    clock: StageClock,
+    started: Instant,
+    observer: Observer<'_>,
+) -> Result<Outcome, PipelineError> {
+    observer(Event::Stage {
+        index: 6,
+        of: STAGES,
+        what: "writing the report".to_string(),
+    });
+    let renders: Vec<Vec<RenderedView>> = trained.iter().map(|t| t.renders.clone()).collect();
+    let pictures = pick_pictures(&refs.heldout, &renders, cfg.eval.report_views);
+    let mut report = Report {
+        version: env!("CARGO_PKG_VERSION").to_string(),
+        input: loaded.info.clone(),
+        config: cfg.clone(),
+        train_views: refs.train.len(),
+        heldout_views: refs.heldout.len(),
+        timings: clock.timings,
+        runs: trained.into_iter().map(|t| t.report).collect(),
+        total_seconds: 0.0,
     };
-    Ok((run, renders, trained))
+    report.total_seconds = started.elapsed().as_secs_f64();
+    let html =
+        write_report(&layout.report_dir, &report, &pictures).map_err(io_err(&layout.report_dir))?;
+    Ok(Outcome {
+        report,
+        html,
+        model: layout.main_model(),
+    })
 }
 
 /// Every extension a model file of a run may have: a run deletes them all before it starts.
@@ -801,30 +1058,32 @@ fn scheduled_config(mut tc: TrainConfig, schedule: &Schedule) -> TrainConfig {
     tc
 }
 
-/// Trains to the end with a progress bar, saving the trainer's state to `ckpt` whenever `every`
+/// Trains to the end, reporting progress, saving the trainer's state to `ckpt` whenever `every`
 /// has passed since the last save, and once more at the end (the later stages resume from that).
 ///
 /// The trainer pauses between two steps to save, which changes nothing it computes: a run
 /// checkpointed at any moments ends bit-identical to one that never stopped.
-fn train(
+fn train_to_end(
     trainer: &mut Trainer,
     ckpt: &Path,
     every: Duration,
-    quiet: bool,
+    observer: Observer<'_>,
 ) -> Result<splat_train::TrainReport, PipelineError> {
     let total = trainer.config().iterations;
-    let bar = progress_bar(u64::from(total), quiet, "steps");
-    bar.set_position(u64::from(trainer.iteration()));
+    observer(Event::Begin {
+        unit: "steps",
+        total: u64::from(total),
+        done: u64::from(trainer.iteration()),
+    });
     let mut saved_at = Instant::now();
     let report = loop {
         let r = trainer.run_until(trainer.iteration() + 1, |p| {
-            bar.set_position(u64::from(p.step.iteration));
-            if p.step.iteration % 25 == 0 {
-                bar.set_message(format!(
-                    "PSNR {:.2} dB, {} splats",
-                    p.step.psnr, p.step.splats
-                ));
-            }
+            let message = (p.step.iteration % 25 == 0)
+                .then(|| format!("PSNR {:.2} dB, {} splats", p.step.psnr, p.step.splats));
+            observer(Event::Advance {
+                done: u64::from(p.step.iteration),
+                message,
+            });
         });
         if r.iterations >= total || r.stopped_by_budget {
             break r;
@@ -835,7 +1094,7 @@ fn train(
         }
     };
     trainer.save_checkpoint(ckpt)?;
-    bar.finish_and_clear();
+    observer(Event::End);
     Ok(report)
 }
 
@@ -876,21 +1135,6 @@ fn resume_summary(s: &RunState) -> String {
         ));
     }
     parts.join(", ")
-}
-
-/// A progress bar on stderr (hidden when `quiet`) counting `unit`.
-fn progress_bar(total: u64, quiet: bool, unit: &str) -> ProgressBar {
-    if quiet {
-        return ProgressBar::hidden();
-    }
-    let bar = ProgressBar::new(total);
-    bar.set_style(
-        ProgressStyle::with_template(&format!(
-            "      {{bar:30}} {{pos}}/{{len}} {unit}, {{elapsed_precise}} elapsed, ETA {{eta}} {{msg}}"
-        ))
-        .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
-    bar
 }
 
 /// Pictures of up to `n` held-out views spread over the set.

@@ -7,6 +7,7 @@ use plenoptic_scenes::{DemoConfig, demo_scene};
 use transcode::config::Config;
 
 use super::config::{Overrides, flat};
+use super::progress::Reporter;
 
 /// Arguments of `transcode demo`.
 #[derive(Debug, clap::Args)]
@@ -54,7 +55,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let input = input_dir.join("demo.ply");
     plenoptic_io::write_cloud(&input, &cloud)
         .with_context(|| format!("cannot write the demo scene to {}", input.display()))?;
-    let outcome = transcode::pipeline::run(&input, &args.out, &config, args.quiet).map_err(flat)?;
+    let reporter = Reporter::new(args.quiet);
+    let outcome = transcode::pipeline::run(&input, &args.out, &config, &|e| reporter.show(e))
+        .map_err(flat)?;
     super::run::print_outcome(&outcome);
     Ok(())
 }

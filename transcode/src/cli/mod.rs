@@ -8,6 +8,7 @@ mod config;
 mod demo;
 mod eval;
 mod info;
+mod progress;
 mod render;
 mod run;
 #[cfg(feature = "scenes")]

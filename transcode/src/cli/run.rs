@@ -6,6 +6,7 @@ use transcode::config::Config;
 use transcode::pipeline::{Finish, RunOptions};
 
 use super::config::{Overrides, flat, require_file};
+use super::progress::Reporter;
 
 /// Arguments of `transcode run`.
 #[derive(Debug, clap::Args)]
@@ -41,10 +42,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .map_err(|e| anyhow::anyhow!("{e} (from --checkpoint-interval)"))?;
     }
     let opts = RunOptions {
-        quiet: args.quiet,
         resume: args.resume,
     };
-    match transcode::pipeline::run_with(&args.input, &args.out, &config, opts).map_err(flat)? {
+    let reporter = Reporter::new(args.quiet);
+    let outcome =
+        transcode::pipeline::run_with(&args.input, &args.out, &config, opts, &|e| reporter.show(e));
+    match outcome.map_err(flat)? {
         Finish::Completed(outcome) => print_outcome(&outcome),
         Finish::AlreadyFinished { model, html } => {
             println!(
