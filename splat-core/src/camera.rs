@@ -3,7 +3,8 @@
 use glam::{Mat3, Vec3};
 
 /// A pinhole camera in COLMAP conventions (x right, y down, z forward; world→camera pose;
-/// pixel (0, 0)'s centre at (0.5, 0.5)). Skew is not modelled.
+/// pixel (0, 0)'s centre at (0.5, 0.5)). Skew is not modelled: converting a skewed
+/// [`camera_model::Camera`] is refused.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RenderCamera {
     /// Image width in pixels.
@@ -47,11 +48,20 @@ impl RenderCamera {
     }
 }
 
-impl From<&camera_model::Camera> for RenderCamera {
-    fn from(c: &camera_model::Camera) -> Self {
-        // 3DGS rasterisers have no skew term; rendered rigs and COLMAP's pinhole models have none.
+impl TryFrom<&camera_model::Camera> for RenderCamera {
+    type Error = crate::Error;
+
+    /// The one conversion from camera-model's camera: to single precision, refusing a skewed
+    /// camera ([`crate::Error::Skewed`]) because the 3DGS projection (and every 3DGS viewer) has
+    /// no skew term, so dropping it would render a different image without a word.
+    fn try_from(c: &camera_model::Camera) -> Result<Self, Self::Error> {
+        if c.intrinsics.skew != 0.0 {
+            return Err(crate::Error::Skewed {
+                skew: c.intrinsics.skew,
+            });
+        }
         let f = c.to_f32();
-        Self {
+        Ok(Self {
             width: f.width,
             height: f.height,
             fx: f.fx,
@@ -60,6 +70,26 @@ impl From<&camera_model::Camera> for RenderCamera {
             cy: f.cy,
             rotation: f.rotation,
             translation: f.translation,
-        }
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use camera_model::{Camera, Intrinsics, Pose};
+    use glam::DVec3;
+
+    #[test]
+    fn conversion_keeps_the_pinhole_and_refuses_skew() {
+        let pose = Pose::look_at(DVec3::new(1.0, 2.0, 3.0), DVec3::ZERO, DVec3::Y);
+        let mut k = Intrinsics::from_fov_y(64, 48, 30.0);
+        let cam = RenderCamera::try_from(&Camera::new(k, pose)).unwrap();
+        assert_eq!((cam.width, cam.height), (64, 48));
+        assert_eq!(cam.fx, k.fx as f32);
+        assert!((cam.center().as_dvec3() - DVec3::new(1.0, 2.0, 3.0)).length() < 1e-5);
+        k.skew = 0.5;
+        let err = RenderCamera::try_from(&Camera::new(k, pose)).unwrap_err();
+        assert!(err.to_string().contains("skew"), "{err}");
     }
 }

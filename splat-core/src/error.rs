@@ -75,6 +75,14 @@ pub enum Error {
         /// The memory the limit stands for, in MiB.
         limit_mib: u64,
     },
+    /// A camera with skew: the 3DGS projection has no skew term.
+    #[error(
+        "the camera has skew {skew}; 3D Gaussian splats are rendered with skew-free pinhole cameras (resample the image to remove the skew)"
+    )]
+    Skewed {
+        /// The camera's skew, in pixels.
+        skew: f64,
+    },
 }
 
 impl Error {

@@ -28,7 +28,7 @@ fn views(model: &Splats, size: u32) -> Vec<View> {
             let eye = DVec3::new(2.2 * a.sin(), -2.2 * a.cos(), 2.3);
             let camera = Camera::new(k, Pose::look_at(eye, DVec3::ZERO, DVec3::Z));
             let image = r
-                .forward(model, &RenderCamera::from(&camera), &opts)
+                .forward(model, &RenderCamera::try_from(&camera).unwrap(), &opts)
                 .rgb
                 .clone();
             View {

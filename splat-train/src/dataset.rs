@@ -330,8 +330,8 @@ mod tests {
             tb.run(|_| {});
             assert_eq!(ta.splats(), tb.splats(), "{background:?}");
             assert_eq!(
-                evaluate(ta.splats(), &a.views, Vec3::ZERO),
-                evaluate(tb.splats(), &b.views, Vec3::ZERO)
+                evaluate(ta.splats(), &a.views, Vec3::ZERO).unwrap(),
+                evaluate(tb.splats(), &b.views, Vec3::ZERO).unwrap()
             );
         }
 

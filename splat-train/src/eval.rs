@@ -15,7 +15,7 @@ use std::borrow::Cow;
 use glam::Vec3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use splat_core::{Rasterizer, RenderCamera, RenderOptions, Splats};
+use splat_core::{Rasterizer, RenderOptions, Splats};
 
 use crate::init::PointIndex;
 use crate::metrics::{psnr, ssim};
@@ -24,6 +24,14 @@ use crate::view::View;
 /// Errors of [`evaluate_views`].
 #[derive(Debug, thiserror::Error)]
 pub enum EvalError {
+    /// A view cannot be rendered (its camera is skewed).
+    #[error("view {name}: {problem}")]
+    View {
+        /// The view's name.
+        name: String,
+        /// What is wrong with it.
+        problem: String,
+    },
     /// No view covers a single pixel: an empty render would match every one of them
     /// (PSNR ∞, SSIM 1), so there is nothing to score.
     #[error(
@@ -60,32 +68,44 @@ pub struct Evaluation {
 /// Renders `splats` (at their full SH degree, over `background`) from every view, clamps the
 /// render to [0, 1] as Inria's evaluation does, and scores it against the view's image (composited
 /// over `background` where the view has a mask). The means run over all views.
-#[must_use]
-pub fn evaluate(splats: &Splats, views: &[View], background: Vec3) -> Evaluation {
+///
+/// # Errors
+/// [`EvalError::View`] when a view's camera cannot be rendered (skew).
+pub fn evaluate(
+    splats: &Splats,
+    views: &[View],
+    background: Vec3,
+) -> Result<Evaluation, EvalError> {
     evaluate_with(splats, views, &render_options(splats, background))
 }
 
 /// [`evaluate`] with explicit render options.
-#[must_use]
-pub fn evaluate_with(splats: &Splats, views: &[View], opts: &RenderOptions) -> Evaluation {
+///
+/// # Errors
+/// [`EvalError::View`] when a view's camera cannot be rendered (skew).
+pub fn evaluate_with(
+    splats: &Splats,
+    views: &[View],
+    opts: &RenderOptions,
+) -> Result<Evaluation, EvalError> {
     let mut raster = Rasterizer::new();
     let scores: Vec<ViewScore> = views
         .iter()
         .map(|v| {
-            let s = score(&mut raster, splats, v, opts);
-            ViewScore {
+            let s = score(&mut raster, splats, v, opts)?;
+            Ok(ViewScore {
                 name: v.name.clone(),
                 psnr: s.psnr,
                 ssim: s.ssim,
-            }
+            })
         })
-        .collect();
+        .collect::<Result<_, EvalError>>()?;
     let n = scores.len().max(1) as f64;
-    Evaluation {
+    Ok(Evaluation {
         psnr: scores.iter().map(|s| s.psnr).sum::<f64>() / n,
         ssim: scores.iter().map(|s| s.ssim).sum::<f64>() / n,
         views: scores,
-    }
+    })
 }
 
 /// Options for rendering `splats` over `background` for evaluation: full SH degree, no
@@ -108,17 +128,25 @@ struct Scored {
 
 /// The one scoring path: render over `opts.background`, clamp to [0, 1], PSNR and SSIM against
 /// the view over the same background.
-fn score(raster: &mut Rasterizer, splats: &Splats, view: &View, opts: &RenderOptions) -> Scored {
-    let cam = RenderCamera::from(&view.camera);
+fn score(
+    raster: &mut Rasterizer,
+    splats: &Splats,
+    view: &View,
+    opts: &RenderOptions,
+) -> Result<Scored, EvalError> {
+    let cam = view.render_camera().map_err(|problem| EvalError::View {
+        name: view.name.clone(),
+        problem,
+    })?;
     let out = raster.forward(splats, &cam, opts);
     let rgb: Vec<f32> = out.rgb.par_iter().map(|x| x.clamp(0.0, 1.0)).collect();
     let target = view.on_background(opts.background.to_array());
-    Scored {
+    Ok(Scored {
         psnr: psnr(&rgb, &target),
         ssim: ssim(&rgb, &target, cam.width, cam.height),
         rgb,
         alpha: out.alpha.clone(),
-    }
+    })
 }
 
 /// Scores of one view on both backgrounds, with coverage errors.
@@ -241,8 +269,8 @@ pub fn evaluate_views(
     let mut per_view = Vec::with_capacity(views.len());
     let mut renders = Vec::with_capacity(views.len());
     for ((v, reference), &covered_pixels) in views.iter().zip(&coverage).zip(&covered) {
-        let black = score(&mut raster, splats, v, &render_options(splats, Vec3::ZERO));
-        let white = score(&mut raster, splats, v, &render_options(splats, Vec3::ONE));
+        let black = score(&mut raster, splats, v, &render_options(splats, Vec3::ZERO))?;
+        let white = score(&mut raster, splats, v, &render_options(splats, Vec3::ONE))?;
         let alpha_iou = iou(&black.alpha, reference, opts.alpha_threshold);
         let (hole_alpha, free_alpha) = coverage_errors(&black.alpha, reference);
         per_view.push(ViewMetrics {
@@ -492,8 +520,8 @@ mod tests {
         // Black render against 0.25 grey: MSE 1/16; white render: MSE 9/16.
         assert!((m.psnr_black - -10.0 * (1.0f64 / 16.0).log10()).abs() < 1e-9);
         assert!((m.psnr_white - -10.0 * (9.0f64 / 16.0).log10()).abs() < 1e-9);
-        let black = evaluate(&splats, std::slice::from_ref(&view), Vec3::ZERO);
-        let white = evaluate(&splats, std::slice::from_ref(&view), Vec3::ONE);
+        let black = evaluate(&splats, std::slice::from_ref(&view), Vec3::ZERO).unwrap();
+        let white = evaluate(&splats, std::slice::from_ref(&view), Vec3::ONE).unwrap();
         assert_eq!((black.psnr, black.ssim), (m.psnr_black, m.ssim_black));
         assert_eq!((white.psnr, white.ssim), (m.psnr_white, m.ssim_white));
     }

@@ -238,7 +238,7 @@ impl Trainer {
         let mut t = Self {
             grads: SplatGrads::zeros_like(&splats),
             state: ParamState::new(splats),
-            levels: vec![Level::new(views)],
+            levels: vec![Level::new(views)?],
             config,
             strategy,
             run,
@@ -257,7 +257,7 @@ impl Trainer {
                 .iter()
                 .map(|v| downsample_view(v, w.factor))
                 .collect();
-            t.levels.push(Level::new(coarse));
+            t.levels.push(Level::new(coarse)?);
         }
         Ok(t)
     }
@@ -722,17 +722,25 @@ struct Level {
 }
 
 impl Level {
-    fn new(views: Vec<View>) -> Self {
+    /// The level of `views` (checked already, so the conversion only fails on a bug).
+    fn new(views: Vec<View>) -> Result<Self, Error> {
         let cameras = views
             .iter()
-            .map(|v| RenderCamera::from(&v.camera))
-            .collect();
+            .enumerate()
+            .map(|(index, v)| {
+                v.render_camera().map_err(|problem| Error::View {
+                    index,
+                    name: v.name.clone(),
+                    problem,
+                })
+            })
+            .collect::<Result<_, _>>()?;
         let targets = vec![None; views.len()];
-        Self {
+        Ok(Self {
             views,
             cameras,
             targets,
-        }
+        })
     }
 }
 

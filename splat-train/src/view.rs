@@ -21,6 +21,15 @@ pub struct View {
 }
 
 impl View {
+    /// The rasteriser's camera for this view ([`RenderCamera`]'s one conversion, which refuses
+    /// skew).
+    ///
+    /// # Errors
+    /// The conversion's message when the camera is skewed.
+    pub fn render_camera(&self) -> Result<splat_core::RenderCamera, String> {
+        splat_core::RenderCamera::try_from(&self.camera).map_err(|e| e.to_string())
+    }
+
     /// Checks that the camera's size fits the rasteriser's buffers, that the image and mask
     /// sizes match the camera and that values are finite.
     ///
@@ -38,6 +47,7 @@ impl View {
         // The trainer's per-pixel buffers (loss, SSIM) are sized by the view like the
         // rasteriser's: the rasteriser's limit refuses them all before any is allocated.
         splat_core::Rasterizer::check_view_size(k.width, k.height).map_err(|e| e.to_string())?;
+        self.render_camera()?;
         if self.image.len() != 3 * px {
             return Err(format!(
                 "image holds {} values, the {}×{} camera needs {}",

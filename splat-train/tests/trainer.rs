@@ -73,7 +73,10 @@ fn render_views(model: &Splats, cams: &[Camera], prefix: &str) -> Vec<View> {
         .map(|(i, c)| View {
             name: format!("{prefix}{i}"),
             camera: *c,
-            image: r.forward(model, &RenderCamera::from(c), &opts).rgb.clone(),
+            image: r
+                .forward(model, &RenderCamera::try_from(c).unwrap(), &opts)
+                .rgb
+                .clone(),
             mask: None,
         })
         .collect()
@@ -117,10 +120,10 @@ fn recovers_held_out_views_of_a_known_model() {
     let train = render_views(&truth, &cameras(32, 80, 60, 0.0), "train");
     let held = render_views(&truth, &cameras(6, 80, 60, 0.7), "held");
     let init = initial_model(&truth, 0.03, 2);
-    let before = evaluate(&init, &held, Vec3::ZERO);
+    let before = evaluate(&init, &held, Vec3::ZERO).unwrap();
     let mut t = Trainer::new(init, train, base_config(3000)).unwrap();
     let report = t.run(|_| {});
-    let after = evaluate(t.splats(), &held, Vec3::ZERO);
+    let after = evaluate(t.splats(), &held, Vec3::ZERO).unwrap();
     eprintln!(
         "held-out PSNR {:.2} dB → {:.2} dB, SSIM {:.4} → {:.4}, {} steps in {:.2} s",
         before.psnr, after.psnr, before.ssim, after.ssim, report.iterations, report.elapsed_s
@@ -211,7 +214,7 @@ fn masked_views() -> (Splats, Vec<View>) {
         antialiased: false,
     };
     for (v, c) in views.iter_mut().zip(&cams) {
-        let out = r.forward(&truth, &RenderCamera::from(c), &opts);
+        let out = r.forward(&truth, &RenderCamera::try_from(c).unwrap(), &opts);
         // Straight colour where covered, so that compositing over a random background is exact.
         v.image = v
             .image

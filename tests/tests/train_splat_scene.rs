@@ -44,7 +44,7 @@ fn splat_scene_held_out_views_are_recovered() {
     assert_eq!(train[0].camera.intrinsics.width, 160);
     let init = from_points3d(&rec, 3);
     assert_eq!(init.len(), 4000);
-    let before = evaluate(&init, &held, Vec3::ZERO);
+    let before = evaluate(&init, &held, Vec3::ZERO).unwrap();
     let cfg = TrainConfig {
         iterations: 200,
         densify: None,
@@ -53,7 +53,7 @@ fn splat_scene_held_out_views_are_recovered() {
     };
     let mut t = Trainer::new(init, train, cfg).unwrap();
     let report = t.run(|_| {});
-    let after = evaluate(t.splats(), &held, Vec3::ZERO);
+    let after = evaluate(t.splats(), &held, Vec3::ZERO).unwrap();
     eprintln!(
         "splat-scene at 160×120: held-out PSNR {:.2} → {:.2} dB, SSIM {:.4} → {:.4} after {} steps ({:.1} s)",
         before.psnr, after.psnr, before.ssim, after.ssim, report.iterations, report.elapsed_s
@@ -77,7 +77,7 @@ fn maupertuis_photos_train_with_densification() {
     );
     let init = from_points3d(&rec, 1);
     assert_eq!(init.len(), 1039);
-    let before = evaluate(&init, &views, Vec3::ZERO);
+    let before = evaluate(&init, &views, Vec3::ZERO).unwrap();
     let cfg = TrainConfig {
         iterations: 150,
         sh_degree_interval: 50,
@@ -91,7 +91,7 @@ fn maupertuis_photos_train_with_densification() {
     };
     let mut t = Trainer::new(init, views.clone(), cfg).unwrap();
     let report = t.run(|_| {});
-    let after = evaluate(t.splats(), &views, Vec3::ZERO);
+    let after = evaluate(t.splats(), &views, Vec3::ZERO).unwrap();
     eprintln!(
         "maupertuis at 240×135: training-view PSNR {:.2} → {:.2} dB, {} → {} splats ({:?})",
         before.psnr, after.psnr, 1039, report.splats, report.refine

@@ -81,7 +81,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let camera = rec
             .camera_of(id)
             .with_context(|| format!("camera of image {}", image.name))?;
-        let cam = RenderCamera::from(&camera);
+        let cam = RenderCamera::try_from(&camera)
+            .with_context(|| format!("camera of image {}", image.name))?;
         let out = r.forward(&splats, &cam, &opts);
         let pixels: Vec<u8> = out
             .rgb

@@ -303,7 +303,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         pending_ckpt |= saved_at.elapsed() >= interval;
         let done = it >= args.iterations || r.stopped_by_budget;
         if pending_eval || done {
-            let e = evaluate(trainer.splats(), &eval_views, background);
+            let e = evaluate(trainer.splats(), &eval_views, background)?;
             let line = format!(
                 "iteration {it}: {:.2} dB PSNR, SSIM {:.4} on {} views after {:.1} s, {} splats",
                 e.psnr,
