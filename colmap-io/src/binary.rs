@@ -10,7 +10,7 @@ use std::path::Path;
 use glam::{DVec2, DVec3};
 
 use crate::error::{Location, Problem};
-use crate::io::{ImagesRead, PointsRead};
+use crate::located::{ImagesRead, PointsRead};
 use crate::{CameraModel, CameraRecord, Error, ImageRecord, Point2D, Point3D, TrackElement};
 
 /// Bytes of one camera record before its parameters: id u32, model i32, width u64, height u64.

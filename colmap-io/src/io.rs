@@ -1,11 +1,11 @@
 //! Reading and writing whole models in a folder, in either encoding.
 
-use std::collections::BTreeMap;
 use std::path::Path;
 
 use crate::binary::POINT2D_SIZE;
 use crate::error::{Location, Problem};
-use crate::{Error, ImageRecord, Point3D, Reconstruction, binary, text};
+
+use crate::{Error, Reconstruction, binary, text};
 
 /// Encoding of a model's files.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -25,21 +25,6 @@ impl Format {
             Format::Binary => "bin",
         }
     }
-}
-
-/// Images as read, with where each record and its POINTS2D list started (for error messages).
-#[derive(Debug, Default)]
-pub(crate) struct ImagesRead {
-    pub images: BTreeMap<u32, ImageRecord>,
-    pub record_location: BTreeMap<u32, Location>,
-    pub points2d_location: BTreeMap<u32, Location>,
-}
-
-/// Points as read, with where each record started.
-#[derive(Debug, Default)]
-pub(crate) struct PointsRead {
-    pub points: BTreeMap<u64, Point3D>,
-    pub location: BTreeMap<u64, Location>,
 }
 
 /// The encoding of the model in `dir`, if a complete one is there; binary first, as COLMAP.

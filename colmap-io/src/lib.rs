@@ -20,6 +20,7 @@ mod camera_models;
 pub mod dataset;
 mod error;
 mod io;
+mod located;
 mod reconstruction;
 mod text;
 

@@ -12,7 +12,7 @@ use std::str::FromStr;
 use glam::{DVec2, DVec3};
 
 use crate::error::{Location, Problem};
-use crate::io::{ImagesRead, PointsRead};
+use crate::located::{ImagesRead, PointsRead};
 use crate::{CameraModel, CameraRecord, Error, ImageRecord, Point2D, Point3D, TrackElement};
 
 /// Reads a whole text file, reporting invalid UTF-8 at its line.

@@ -2,7 +2,7 @@
 
 use glam::{DVec3, Vec3};
 
-use crate::ply::{PlyFormat, ScalarType};
+use ply_core::{PlyFormat, ScalarType};
 
 /// One capture camera of the rig.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -8,7 +8,7 @@ use plenoptic_io::view_color::interpolate;
 use rayon::prelude::*;
 
 use crate::camera::ViewCamera;
-use crate::render::{render_supersampled, shade_pixels};
+use crate::pixels::{render_supersampled, shade_pixels};
 use crate::zbuffer::ZBuffer;
 use crate::{Error, PointShape, ViewImage, ViewOptions};
 

@@ -48,6 +48,7 @@ mod image;
 mod mesh;
 mod options;
 pub mod output;
+mod pixels;
 mod render;
 pub mod rig;
 mod zbuffer;

@@ -43,9 +43,11 @@
 mod codec;
 mod error;
 mod header;
+mod scalar;
 
 pub use codec::{parse_ascii, read_binary, write_ascii, write_binary};
 pub use error::{HeaderError, HeaderProblem};
 pub use header::{
-    Element, Header, MAX_HEADER_BYTES, PlyFormat, Property, PropertyKind, ScalarType, parse_header,
+    Element, Header, MAX_HEADER_BYTES, PlyFormat, Property, PropertyKind, parse_header,
 };
+pub use scalar::ScalarType;

@@ -20,6 +20,7 @@ pub mod frame;
 pub mod glb;
 pub mod ply;
 mod project;
+mod projected;
 mod rasterize;
 mod rasterize_backward;
 mod render;
@@ -32,9 +33,9 @@ pub use camera::RenderCamera;
 pub use error::Error;
 pub use rasterize::{MAX_PIXELS, Rasterizer, RenderStats};
 pub use render::{RenderOptions, RenderOutput, SplatGrads};
+pub use sh::num_sh_coeffs;
 pub use splats::{
-    MIN_QUAT_NORM, Splats, logit, normalize_quat, num_sh_coeffs, rgb_to_sh_dc, sh_dc_to_rgb,
-    sigmoid,
+    MIN_QUAT_NORM, Splats, logit, normalize_quat, rgb_to_sh_dc, sh_dc_to_rgb, sigmoid,
 };
 pub use tiles::TILE_SIZE;
 

@@ -5,25 +5,8 @@
 use glam::{Mat3, Quat, Vec2, Vec3};
 
 use crate::constants::{DILATION, EXTENT_SIGMAS, FOV_CLAMP_MARGIN, MIN_ALPHA, NEAR_PLANE};
-use crate::tiles::quad_bound;
+use crate::projected::{Projected, quad_bound};
 use crate::{RenderCamera, RenderOptions, Splats, normalize_quat, num_sh_coeffs, sh, sigmoid};
-
-/// What the compositor needs of a visible splat, packed for the per-tile loop.
-#[derive(Clone, Copy, Debug, Default)]
-pub(crate) struct Projected {
-    /// Centre in pixel-index coordinates (pixel centres at integers: mean2d − 0.5).
-    pub xy: [f32; 2],
-    /// Inverse 2D covariance (a, b, c) of [[a, b], [b, c]].
-    pub conic: [f32; 3],
-    /// Effective opacity (sigmoid, times the antialiasing compensation when enabled).
-    pub opacity: f32,
-    /// View-dependent colour, clamped at 0.
-    pub color: [f32; 3],
-    /// Camera-space depth.
-    pub depth: f32,
-    /// Bound on the conic's quadratic form beyond which alpha < 1/255 ([`quad_bound`]).
-    pub q_max: f32,
-}
 
 /// Why a splat was not drawn.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -4,7 +4,8 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use crate::constants::{MAX_ALPHA, MIN_ALPHA, MIN_TRANSMITTANCE};
-use crate::project::{Cull, Projected, ProjectedGrad, ViewConsts, project};
+use crate::project::{Cull, ProjectedGrad, ViewConsts, project};
+use crate::projected::Projected;
 use crate::tiles::{Bins, Falloff, HALF_ROWS, LANES, RowSpans, TILE_PIXELS, TILE_SIZE};
 use crate::{Error, RenderCamera, RenderOptions, RenderOutput, Splats};
 
@@ -470,60 +471,5 @@ pub(crate) fn lanes_mut<T>(buf: &mut [T], base: usize) -> &mut [T; LANES] {
     match (&mut buf[base..base + LANES]).try_into() {
         Ok(a) => a,
         Err(_) => unreachable!("a slice of LANES elements converts to [T; LANES]"),
-    }
-}
-
-/// e^x for the Gaussian falloff: 2^(x·log₂e) with a degree-5 polynomial for 2^f (relative
-/// error below 6e-7 on [−10, 0], where alphas reach 1/255), written branch-free (no library
-/// calls) for the per-lane loops. Inputs below −87 give 0.
-/// The forward and backward passes both use it, so they see identical alphas.
-#[inline(always)]
-pub(crate) fn fast_exp(x: f32) -> f32 {
-    let t = (x * std::f32::consts::LOG2_E).max(-126.0);
-    // Round to nearest by adding and removing 1.5·2²³ (plain adds: `floor` is a library call
-    // on the x86-64 baseline).
-    const ROUND: f32 = 12_582_912.0;
-    let shifted = t + ROUND;
-    let n = shifted - ROUND;
-    let f = t - n;
-    // 2^f on [−½, ½] as 1 + f·P(f), P of degree 4 fitted for least maximum relative error
-    // (1.9e-7 in f32 arithmetic, a term shorter than Cephes' degree-5 P at 1.2e-7). Its
-    // constant term is the fit's, not ln 2.
-    #[allow(clippy::approx_constant)]
-    let p = (((1.326_472_7e-3 * f + 9.671_513e-3) * f + 5.550_733_6e-2) * f + 2.402_224_2e-1) * f
-        + 6.931_47e-1;
-    // 2ⁿ from the bits of `shifted`, whose low mantissa bits hold n (two's complement): a
-    // saturating `n as i32` would not vectorise. Exact for the clamped range n ∈ [−126, 128).
-    let scale = f32::from_bits(
-        shifted
-            .to_bits()
-            .wrapping_sub(ROUND.to_bits())
-            .wrapping_add(127)
-            << 23,
-    );
-    let r = (1.0 + p * f) * scale;
-    if x < -87.0 { 0.0 } else { r }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::fast_exp;
-
-    #[test]
-    fn fast_exp_is_accurate_over_the_falloff_range() {
-        // Alpha can reach 1/255 only for x ≥ −ln 255 ≈ −5.5; beyond, the rounding of x·log₂e
-        // (relative 6e-8 of |x·log₂e|) dominates but the values are negligible.
-        for (lo, tol) in [(-10.0, 6e-7), (-87.0, 1e-5)] {
-            let mut worst = 0.0_f64;
-            for i in 0..=200_000 {
-                let x = (lo * f64::from(i) / 200_000.0) as f32;
-                let got = f64::from(fast_exp(x));
-                let want = f64::from(x).exp();
-                worst = worst.max((got - want).abs() / want);
-            }
-            assert!(worst < tol, "worst relative error {worst} on [{lo}, 0]");
-        }
-        assert_eq!(fast_exp(-100.0), 0.0);
-        assert_eq!(fast_exp(0.0), 1.0);
     }
 }

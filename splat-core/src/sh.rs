@@ -99,7 +99,7 @@ pub fn basis_grad(degree: u32, dir: Vec3, out: &mut [f32], grad: &mut [Vec3]) {
 pub fn eval(degree: u32, dir: Vec3, coeffs: &[[f32; 3]]) -> Vec3 {
     let mut b = [0.0_f32; 16];
     basis(degree, dir, &mut b);
-    let n = crate::num_sh_coeffs(degree);
+    let n = num_sh_coeffs(degree);
     b[..n]
         .iter()
         .zip(coeffs)
@@ -125,7 +125,7 @@ pub fn eval_backward(
     let mut b = [0.0_f32; 16];
     let mut g = [Vec3::ZERO; 16];
     basis_grad(degree, dir, &mut b, &mut g);
-    let n = crate::num_sh_coeffs(degree);
+    let n = num_sh_coeffs(degree);
     let mut d_dir = Vec3::ZERO;
     for k in 0..n {
         let dc = b[k] * d_out;
@@ -135,6 +135,12 @@ pub fn eval_backward(
         d_dir += g[k] * Vec3::from(coeffs[k]).dot(d_out);
     }
     d_dir
+}
+
+/// Returns the number of SH coefficients per colour channel for a degree: 1, 4, 9, 16.
+#[must_use]
+pub const fn num_sh_coeffs(degree: u32) -> usize {
+    ((degree + 1) * (degree + 1)) as usize
 }
 
 #[cfg(test)]

@@ -3,7 +3,7 @@
 use glam::{Quat, Vec3};
 
 use crate::Error;
-use crate::sh::C0;
+use crate::sh::{C0, num_sh_coeffs};
 
 /// Gaussian splats with Inria's parameterisation.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -20,12 +20,6 @@ pub struct Splats {
     pub sh_degree: u32,
     /// SH coefficients, splat-major: `sh[i * num_sh_coeffs(sh_degree) + k]`, k = 0 is DC.
     pub sh: Vec<[f32; 3]>,
-}
-
-/// Returns the number of SH coefficients per colour channel for a degree: 1, 4, 9, 16.
-#[must_use]
-pub const fn num_sh_coeffs(degree: u32) -> usize {
-    ((degree + 1) * (degree + 1)) as usize
 }
 
 /// Returns the logistic function 1 / (1 + e^(−x)) (Inria's opacity activation).

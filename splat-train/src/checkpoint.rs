@@ -249,3 +249,25 @@ fn checksum(bytes: &[u8]) -> u64 {
     }
     h
 }
+
+// The trainer's checkpoint methods live here, beside the format, so that the trainer does not
+// depend on its own serialisation.
+impl Trainer {
+    /// Writes the whole run state to `path` atomically (this module's format).
+    ///
+    /// # Errors
+    /// [`Error::Io`] when the file cannot be written.
+    pub fn save_checkpoint(&self, path: &Path) -> Result<(), Error> {
+        save(self, path)
+    }
+
+    /// Continues the run saved at `path` on the same `views` with `config` (its iteration count
+    /// and time budget may differ from the saved run's).
+    ///
+    /// # Errors
+    /// [`Error::Checkpoint`] when the file is malformed or does not match the views and
+    /// configuration, and the errors of [`Trainer::new`].
+    pub fn resume(path: &Path, views: Vec<View>, config: TrainConfig) -> Result<Self, Error> {
+        load(path, views, config)
+    }
+}

@@ -1,6 +1,5 @@
 //! The training loop: one view per step, render, loss, backward, Adam, refinement.
 
-use std::path::Path;
 use std::time::{Duration, Instant};
 
 use glam::Vec3;
@@ -670,24 +669,6 @@ impl Trainer {
             refine: self.run.refine,
             timings: self.timings,
         }
-    }
-
-    /// Writes the whole run state to `path` atomically (see [`crate::checkpoint`]).
-    ///
-    /// # Errors
-    /// [`Error::Io`] when the file cannot be written.
-    pub fn save_checkpoint(&self, path: &Path) -> Result<(), Error> {
-        crate::checkpoint::save(self, path)
-    }
-
-    /// Continues the run saved at `path` on the same `views` with `config` (its iteration count
-    /// and time budget may differ from the saved run's).
-    ///
-    /// # Errors
-    /// [`Error::Checkpoint`] when the file is malformed or does not match the views and
-    /// configuration, and the errors of [`Trainer::new`].
-    pub fn resume(path: &Path, views: Vec<View>, config: TrainConfig) -> Result<Self, Error> {
-        crate::checkpoint::load(path, views, config)
     }
 
     /// Replaces the parameters, optimiser and run state (used when resuming).
