@@ -140,6 +140,16 @@ impl Default for EvalConfig {
     }
 }
 
+// `transcode eval` and the pipeline both run splat-train's evaluator with these options.
+impl From<&EvalConfig> for splat_train::eval::EvalOptions {
+    fn from(c: &EvalConfig) -> Self {
+        Self {
+            alpha_threshold: c.alpha_threshold,
+            floater_spacings: c.floater_spacings,
+        }
+    }
+}
+
 /// Output settings.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]

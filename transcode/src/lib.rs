@@ -5,7 +5,6 @@
 //! and defaults; the `transcode` binary is its command-line face.
 
 pub mod config;
-pub mod eval;
 pub mod pipeline;
 pub mod progress;
 pub mod report;
