@@ -1,3 +1,4 @@
+#![allow(clippy::print_stderr)] // tests report what they measured
 use glam::Vec3;
 
 use crate::*;
