@@ -4,6 +4,7 @@
 //! pinhole cameras (SVG y points down, like COLMAP pixel rows).
 //!
 //! Run: `cargo run -p camera-model --example axes_figure -- docs/cameras-axes.svg`
+#![allow(clippy::print_stdout)] // examples print their results
 
 use std::fmt::Write as _;
 

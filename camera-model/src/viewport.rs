@@ -18,11 +18,11 @@ pub const DEFAULT_FOV_Y_DEG: f64 = 20.0;
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct GlViewport {
     /// Position of the viewer.
-    pub eye: glam::DVec3,
+    pub eye: DVec3,
     /// Point looked at (PccAppRenderer's "view" / "center").
-    pub center: glam::DVec3,
+    pub center: DVec3,
     /// Up direction of the image.
-    pub up: glam::DVec3,
+    pub up: DVec3,
     /// Vertical field of view in degrees.
     pub fov_y_deg: f64,
     /// Image width in pixels.

@@ -6,6 +6,7 @@
 //! points with COLMAP's own code and compares.
 //!
 //! Run: `cargo run -p colmap-io --example rig_model -- OUT_DIR [txt|bin]`
+#![allow(clippy::print_stdout)] // examples print their results
 
 use std::fmt::Write as _;
 use std::path::PathBuf;

@@ -1,6 +1,7 @@
 //! Reads a PLY cloud or any supported model and prints what it holds and how long reading took.
 //!
 //! `cargo run --release -p plenoptic-io --example read_frame -- FILE`
+#![allow(clippy::print_stdout)] // examples print their results
 
 use std::time::Instant;
 

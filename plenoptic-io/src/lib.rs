@@ -8,6 +8,31 @@
 //! - [`summary`]: counts, bounds, rig and colour statistics of a model (`transcode info`).
 //!
 //! Formats, conventions and error policy: `docs/formats-input.md`.
+//!
+//! ```
+//! use glam::Vec3;
+//! use plenoptic_io::PlenopticCloud;
+//!
+//! // A plain coloured cloud of two points, written as PLY and read back.
+//! let mut cloud = PlenopticCloud::default();
+//! cloud.positions = vec![Vec3::new(1.0, 2.0, 3.0), Vec3::new(4.0, 5.0, 6.0)];
+//! cloud.colors = vec![[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]];
+//! let dir = tempfile::tempdir()?;
+//! let path = dir.path().join("points.ply");
+//! plenoptic_io::write_cloud(&path, &cloud)?;
+//! let back = plenoptic_io::read_cloud(&path)?;
+//! assert_eq!(back.positions, cloud.positions);
+//! assert_eq!(back.num_cameras, 0);
+//!
+//! // The view-dependent colour: a viewer next to camera 0 sees mostly its colour.
+//! let cameras = [Vec3::new(0.0, 0.0, 10.0), Vec3::new(10.0, 0.0, 0.0)];
+//! let colors = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+//! let seen = plenoptic_io::view_color::interpolate(
+//!     Vec3::ZERO, Vec3::new(0.0, 0.0, 5.0), &cameras, &colors, [0.5; 3], 2,
+//! );
+//! assert_eq!(seen, [1.0, 0.0, 0.0]);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 mod cloud;
 mod error;

@@ -1,5 +1,6 @@
 //! Reference renderer speed on an 8iVSLF-sized frame: 3 million voxels with 13 per-camera
 //! colours, 44 Fibonacci views at 1024×1024 (the target: under a minute on 2 cores).
+#![allow(clippy::print_stderr)] // benches print their measurements
 
 use std::hint::black_box;
 use std::time::Duration;

@@ -16,6 +16,17 @@
 //! - [`Shading`]: the shading model both use.
 //!
 //! These are test and demonstration inputs: the transcoder's pipeline does not need them.
+//!
+//! ```
+//! use plenoptic_scenes::{DemoConfig, demo_scene};
+//!
+//! let cloud = demo_scene(&DemoConfig { grid: 32, ..DemoConfig::default() })?;
+//! assert!(!cloud.positions.is_empty());
+//! // One colour per point and capture camera, and the rig that took them.
+//! assert_eq!(cloud.camera_colors.len(), cloud.len() * cloud.num_cameras);
+//! assert_eq!(cloud.cameras.len(), cloud.num_cameras);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 mod capture;
 mod demo;

@@ -290,7 +290,7 @@ pub const AUTO_GRID: u32 = 0;
 pub const SAMPLES_PER_VOXEL: f64 = 12.0;
 
 /// The grid width for which `points` area-uniform samples of a surface of area `area` put about
-/// [`SAMPLES_PER_VOXEL`] samples on each voxel² of surface: voxel side v = √(k·area/points), the
+/// `SAMPLES_PER_VOXEL` (12) samples on each voxel² of surface: voxel side v = √(k·area/points), the
 /// longest side `extent` spanning `extent / v` voxels. Rendered with the reference renderer's
 /// default one-voxel cubes, such a cloud has no holes inside its silhouette.
 #[must_use]

@@ -3,6 +3,7 @@
 //! seen from a camera that frames it.
 //!
 //! Run: `cargo bench -p splat-core --bench rasterize`.
+#![allow(clippy::print_stderr)] // benches print their measurements
 
 use std::hint::black_box;
 

@@ -12,6 +12,28 @@
 //! - [`ply`]: the Inria 3DGS PLY, read and write; [`export`]: the antimatter15 `.splat` layout;
 //!   [`spz`]: Niantic's compressed SPZ, read and write; [`glb`]: binary glTF with
 //!   `KHR_gaussian_splatting`; [`frame`]: the change to their y-up frame.
+//! - [`Error`]: inconsistent models, oversized views and file errors.
+//!
+//! ```
+//! use camera_model::{Camera, Intrinsics, Pose};
+//! use glam::{DVec3, Vec3};
+//! use splat_core::{Rasterizer, RenderCamera, RenderOptions, Splats};
+//!
+//! // One orange splat at the origin, seen from 5 units away.
+//! let splats = Splats::from_points(
+//!     &[Vec3::ZERO], &[[1.0, 0.5, 0.0]], &[Vec3::splat(0.5)], None, 0.9, 0,
+//! )?;
+//! let camera = Camera::new(
+//!     Intrinsics::from_fov_y(32, 32, 40.0),
+//!     Pose::look_at(DVec3::new(0.0, 0.0, 5.0), DVec3::ZERO, DVec3::Y),
+//! );
+//! let mut rasterizer = Rasterizer::new();
+//! let out = rasterizer.try_forward(&splats, &RenderCamera::from(&camera), &RenderOptions::default())?;
+//! let centre = 16 * 32 + 16;
+//! assert!(out.alpha[centre] > 0.8);
+//! assert!(out.rgb[3 * centre] > out.rgb[3 * centre + 2]); // more red than blue
+//! # Ok::<(), splat_core::Error>(())
+//! ```
 
 mod camera;
 mod error;

@@ -317,6 +317,7 @@ fn composite_tile(
     #[cfg(target_arch = "x86_64")]
     if avx2 {
         // SAFETY: `avx2` is only true when `has_avx2()` is, so the CPU supports the enabled features.
+        #[allow(unsafe_code)]
         return unsafe { composite_tile_avx2(list, proj, ext, o) };
     }
     let _ = avx2;
@@ -455,6 +456,7 @@ pub(crate) fn prefetch(proj: &[Projected], i: usize) {
     if let Some(rec) = proj.get(i) {
         // SAFETY: a prefetch never faults and the pointer is to a live element; SSE is part of
         // the x86-64 baseline.
+        #[allow(unsafe_code)]
         unsafe {
             std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(
                 std::ptr::from_ref(rec).cast::<i8>(),

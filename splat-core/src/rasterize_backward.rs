@@ -23,7 +23,10 @@ use crate::{Rasterizer, RenderCamera, RenderOptions, SplatGrads, Splats};
 struct SharedSlots(*mut ProjectedGrad);
 // SAFETY: each tile task writes only the slots of its own list range
 // `offsets[tile]..offsets[tile + 1]`; these ranges are disjoint.
+#[allow(unsafe_code)]
 unsafe impl Send for SharedSlots {}
+// SAFETY: as for `Send`: the tasks sharing the pointer write disjoint ranges.
+#[allow(unsafe_code)]
 unsafe impl Sync for SharedSlots {}
 
 impl SharedSlots {
@@ -101,6 +104,7 @@ impl Rasterizer {
             let (s, e) = (this.bins.offsets[tile], this.bins.offsets[tile + 1]);
             // SAFETY: [s, e) is this tile's own range of `pair_grads` (see `SharedSlots`), in
             // bounds because offsets end at `pairs()`, the vector's length.
+            #[allow(unsafe_code)]
             let out = unsafe { std::slice::from_raw_parts_mut(slots.get().add(s), e - s) };
             this.backward_tile(tile, &this.bins.list[s..e], cam, &pg, out, avx2);
         });
@@ -157,6 +161,7 @@ impl Rasterizer {
         #[cfg(target_arch = "x86_64")]
         if avx2 {
             // SAFETY: `avx2` is only true when `has_avx2()` is, so the CPU supports the enabled features.
+            #[allow(unsafe_code)]
             return unsafe { self.backward_tile_avx2(tile, list, cam, pg, out) };
         }
         let _ = avx2;

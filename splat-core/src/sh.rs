@@ -93,7 +93,7 @@ pub fn basis_grad(degree: u32, dir: Vec3, out: &mut [f32], grad: &mut [Vec3]) {
     grad[15] = C3[6] * Vec3::new(3.0 * xx - 3.0 * yy, -6.0 * x * y, 0.0);
 }
 
-/// Returns Σ_k basis_k(dir)·coeffs[k] per channel (no +0.5 offset, no clamp), using the first
+/// Returns `Σ_k basis_k(dir)·coeffs[k]` per channel (no +0.5 offset, no clamp), using the first
 /// `(degree + 1)²` coefficients.
 #[must_use]
 pub fn eval(degree: u32, dir: Vec3, coeffs: &[[f32; 3]]) -> Vec3 {

@@ -22,8 +22,12 @@ const BIN_SLICES: usize = 16;
 /// The tile lists' buffer, written by the slices' tasks at disjoint positions.
 #[derive(Clone, Copy)]
 struct SharedList(*mut u32);
-// SAFETY: each task writes only its own (tile, slice) runs of the list (see `Bins::build`).
+// SAFETY: the pointer is only written through, by tasks that each write only their own
+// (tile, slice) runs of the list (see `Bins::build`), so sending it to another thread is sound.
+#[allow(unsafe_code)]
 unsafe impl Send for SharedList {}
+// SAFETY: shared use is sound for the same reason: the concurrent writes are to disjoint runs.
+#[allow(unsafe_code)]
 unsafe impl Sync for SharedList {}
 
 impl SharedList {
@@ -121,7 +125,10 @@ impl Bins {
                             // [start(t, sl), start(t, sl) + count(t, sl)), which are disjoint
                             // from every other (tile, slice) run and inside `list`, whose
                             // length is the total count.
-                            unsafe { list.get().add(*c).write(i) };
+                            #[allow(unsafe_code)]
+                            unsafe {
+                                list.get().add(*c).write(i);
+                            }
                             *c += 1;
                         }
                     }

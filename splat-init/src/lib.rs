@@ -16,6 +16,24 @@
 //! - [`sampling`]: which K points carry splats; [`neighbours`]: k-d tree, spacing, PCA normals.
 //! - [`sh_fit`]: the SH fit and the automatic SH degree.
 //! - [`surface_init`], [`sparse_init`], [`initialise`]: the splats and an [`InitSummary`].
+//!
+//! ```
+//! use glam::Vec3;
+//! use plenoptic_io::PlenopticCloud;
+//! use splat_init::{InitConfig, SurfacePoints, initialise};
+//!
+//! // A 10 × 10 grid of grey points on the z = 0 plane.
+//! let mut cloud = PlenopticCloud::default();
+//! for i in 0..100 {
+//!     cloud.positions.push(Vec3::new((i % 10) as f32, (i / 10) as f32, 0.0));
+//!     cloud.colors.push([0.5; 3]);
+//! }
+//! let points = SurfacePoints::from_cloud(&cloud);
+//! let (splats, summary) = initialise(&points, &InitConfig::default(), 10, 0)?;
+//! assert_eq!(splats.len(), summary.splats);
+//! assert!(splats.len() > 0 && splats.len() <= 100);
+//! # Ok::<(), splat_init::InitError>(())
+//! ```
 
 use std::path::PathBuf;
 

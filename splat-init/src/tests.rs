@@ -1,3 +1,4 @@
+#![allow(clippy::print_stderr)] // tests report what they measured
 use glam::Vec3;
 
 use crate::*;
@@ -197,7 +198,7 @@ fn surface_init_makes_flat_discs_on_the_points() {
 
 #[test]
 fn sparse_init_reads_colmap_points3d() {
-    let dir = std::path::PathBuf::from(concat!(
+    let dir = PathBuf::from(concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/../testdata/colmap/maupertuis/sparse/0"
     ));
@@ -258,7 +259,7 @@ fn sparse_init_reads_colmap_points3d() {
     }
     // A folder without a COLMAP model names the folder.
     let missing = InitConfig {
-        points3d: Some(std::path::PathBuf::from("/nonexistent/sparse/0")),
+        points3d: Some(PathBuf::from("/nonexistent/sparse/0")),
         ..cfg
     };
     let e = initialise(&sp, &missing, 10, 3).unwrap_err().to_string();

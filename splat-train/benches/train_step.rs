@@ -3,6 +3,7 @@
 //! gradient), backward, Adam. After the timed runs, the split of time per phase is printed.
 //!
 //! Run: `cargo bench -p splat-train --bench train_step`.
+#![allow(clippy::print_stderr)] // benches print their measurements
 
 use std::hint::black_box;
 

@@ -9,6 +9,28 @@
 //! - [`ssim`], [`metrics`], [`eval`]: image quality and held-out evaluation; [`init`]: kNN scale
 //!   initialisation and the nearest-neighbour index.
 //! - [`checkpoint`]: save and resume a run exactly.
+//! - [`Error`], [`DatasetError`]: what a run or a dataset refuses.
+//!
+//! ```
+//! use camera_model::{Camera, Intrinsics, Pose};
+//! use glam::{DVec3, Vec3};
+//! use splat_core::Splats;
+//! use splat_train::{TrainConfig, Trainer, View};
+//!
+//! // Fit one splat to a uniformly grey 16 × 16 image for a few steps.
+//! let camera = Camera::new(
+//!     Intrinsics::from_fov_y(16, 16, 40.0),
+//!     Pose::look_at(DVec3::new(0.0, 0.0, 5.0), DVec3::ZERO, DVec3::Y),
+//! );
+//! let view = View { name: "grey".into(), camera, image: vec![0.5; 3 * 16 * 16], mask: None };
+//! let splats = Splats::from_points(&[Vec3::ZERO], &[[0.2; 3]], &[Vec3::splat(0.5)], None, 0.5, 0)?;
+//! let config = TrainConfig { iterations: 5, ..TrainConfig::default() };
+//! let mut trainer = Trainer::new(splats, vec![view], config)?;
+//! let first = trainer.step();
+//! assert_eq!(first.iteration, 1);
+//! assert!(first.loss.is_finite());
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 pub mod adam;
 pub mod checkpoint;

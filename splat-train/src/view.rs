@@ -13,7 +13,7 @@ pub struct View {
     /// Name (usually the image file name).
     pub name: String,
     /// Intrinsics and world→camera pose.
-    pub camera: camera_model::Camera,
+    pub camera: Camera,
     /// Colours, interleaved RGB in [0, 1], row-major, top row first (3·W·H).
     pub image: Vec<f32>,
     /// Optional coverage mask in [0, 1] (W·H); pixels with 0 show the background.

@@ -1,5 +1,6 @@
 //! Training runs on views rendered from known splat models: recovery, frozen groups,
 //! reproducibility, exact resume and non-finite handling.
+#![allow(clippy::print_stderr)] // tests report what they measured
 
 use camera_model::rig::{fibonacci_sphere, look_at_rig};
 use camera_model::{Camera, Intrinsics};

@@ -1,5 +1,6 @@
 //! The real COLMAP model in `testdata/colmap/maupertuis` (kapture's sample, 4 photos):
 //! read it, reproject every observation through `camera-model`, and convert it exactly.
+#![allow(clippy::print_stderr)] // tests report what they measured
 
 use std::path::PathBuf;
 

@@ -1,5 +1,6 @@
 //! End to end: the whole `transcode` pipeline on a small plenoptic input, its outputs and metrics,
 //! and its behaviour on bad input.
+#![allow(clippy::print_stderr)] // tests report what they measured
 
 use std::path::{Path, PathBuf};
 

@@ -1,5 +1,6 @@
 //! plenoptic-io on every mesh, cloud and bad file in `testdata`, checked against values read
 //! independently from the files themselves (text parsing, raw bytes of the .bin buffers).
+#![allow(clippy::print_stdout)] // tests report what they measured
 
 use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};

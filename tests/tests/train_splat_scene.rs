@@ -1,5 +1,6 @@
 //! Training on the real data in `testdata`: the synthetic splat scene (held-out views rendered
 //! by an independent renderer) and the maupertuis photos with their SfM points.
+#![allow(clippy::print_stderr)] // tests report what they measured
 
 use std::path::{Path, PathBuf};
 

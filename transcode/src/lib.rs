@@ -3,6 +3,24 @@
 //! This crate composes the workspace's crates into the pipeline (load, rig, reference views,
 //! COLMAP dataset, initialisation, training, export, evaluation, report) and holds the policy
 //! and defaults; the `transcode` binary is its command-line face.
+//!
+//! - [`config`]: every setting ([`config::Config`]), with defaults, TOML files and validation.
+//! - [`pipeline`]: the stages, from an input file to a model, a dataset and a report.
+//! - [`eval`]: held-out evaluation of a model against reference views.
+//! - [`report`]: the run report (JSON and HTML).
+//! - [`resume`]: the run state that lets a killed run continue.
+//!
+//! ```
+//! use transcode::config::Config;
+//!
+//! let mut cfg = Config::default();
+//! cfg.training.iterations = 2_000;
+//! // Settings round-trip through TOML, as `transcode config --defaults` writes them.
+//! let text = cfg.to_toml();
+//! assert_eq!(Config::from_toml(&text)?, cfg);
+//! cfg.validate()?;
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 pub mod config;
 pub mod pipeline;

@@ -2,6 +2,7 @@
 //! finishes writes the same model, byte for byte, as a run that was never interrupted; what a
 //! killed run leaves never looks finished; a finished run is not redone; other settings are
 //! refused.
+#![allow(clippy::print_stderr)] // tests report what they measured
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};

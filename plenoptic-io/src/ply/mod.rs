@@ -26,6 +26,7 @@ fn with_bytes<R>(path: &Path, f: impl FnOnce(&[u8]) -> Result<R, Error>) -> Resu
     // SAFETY: the map is read-only and lives only during `f`; like every mmap reader we rely on
     // the file not being truncated by another process meanwhile (documented in docs/formats-input.md).
     // Every byte is read anyway, so pre-fault the whole map (MAP_POPULATE) instead of page by page.
+    #[allow(unsafe_code)]
     let map = unsafe { memmap2::MmapOptions::new().populate().map(&file) }
         .map_err(|e| Error::io(path, e))?;
     f(&map)

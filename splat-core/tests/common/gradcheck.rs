@@ -2,6 +2,7 @@
 //! ([`super::render_ref`]); the tolerances are explained in `gradients.rs`, which holds the
 //! general cases (`hard_cases.rs` uses the same checks on degenerate ones).
 #![allow(clippy::needless_range_loop)] // index loops mirror the maths in these checks
+#![allow(clippy::print_stderr)] // tests report what they measured
 
 use splat_core::{Rasterizer, RenderCamera, RenderOptions, SplatGrads, Splats};
 
