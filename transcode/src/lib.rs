@@ -2,11 +2,12 @@
 //!
 //! This crate composes the workspace's crates into the pipeline (load, rig, reference views,
 //! COLMAP dataset, initialisation, training, export, evaluation, report) and holds the policy
-//! and defaults; the `transcode` binary is its command-line face.
+//! and defaults; the `transcode` binary is its command-line face. The stages' work lives in
+//! the other crates (`plenoptic-render`, `splat-init`, `splat-train`, …; `docs/architecture.md`).
 //!
 //! - [`config`]: every setting ([`config::Config`]), with defaults, TOML files and validation.
 //! - [`pipeline`]: the stages, from an input file to a model, a dataset and a report.
-//! - [`eval`]: held-out evaluation of a model against reference views.
+//! - [`progress`]: the events a run reports to its caller (the library never prints).
 //! - [`report`]: the run report (JSON and HTML).
 //! - [`resume`]: the run state that lets a killed run continue.
 //!
