@@ -21,7 +21,7 @@ pub struct View {
 }
 
 impl View {
-    /// The rasteriser's camera for this view ([`RenderCamera`]'s one conversion, which refuses
+    /// The rasteriser's camera for this view ([`splat_core::RenderCamera`]'s one conversion, which refuses
     /// skew).
     ///
     /// # Errors
