@@ -28,7 +28,8 @@
 //!     Pose::look_at(DVec3::new(0.0, 0.0, 5.0), DVec3::ZERO, DVec3::Y),
 //! );
 //! let mut rasterizer = Rasterizer::new();
-//! let out = rasterizer.try_forward(&splats, &RenderCamera::from(&camera), &RenderOptions::default())?;
+//! let camera = RenderCamera::try_from(&camera)?; // refuses a skewed camera
+//! let out = rasterizer.try_forward(&splats, &camera, &RenderOptions::default())?;
 //! let centre = 16 * 32 + 16;
 //! assert!(out.alpha[centre] > 0.8);
 //! assert!(out.rgb[3 * centre] > out.rgb[3 * centre + 2]); // more red than blue
