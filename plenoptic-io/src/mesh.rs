@@ -194,16 +194,12 @@ impl Texture {
 mod colour_tests {
     use super::*;
 
-    fn quad(colors: Option<Vec<[f32; 3]>>) -> Mesh {
+    /// One triangle in the z = 0 plane with the given vertex colours.
+    fn triangle(colors: Option<Vec<[f32; 3]>>) -> Mesh {
         Mesh {
-            positions: vec![
-                Vec3::new(-1.0, -1.0, 0.0),
-                Vec3::new(1.0, -1.0, 0.0),
-                Vec3::new(1.0, 1.0, 0.0),
-                Vec3::new(-1.0, 1.0, 0.0),
-            ],
+            positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y],
             colors,
-            triangles: vec![[0, 1, 2], [0, 2, 3]],
+            triangles: vec![[0, 1, 2]],
             ..Default::default()
         }
     }
@@ -246,12 +242,11 @@ mod colour_tests {
 
     #[test]
     fn material_texture_and_vertex_colours_multiply() {
-        let mut mesh = quad(Some(vec![[0.5, 1.0, 1.0]; 4]));
+        let mut mesh = triangle(Some(vec![[0.5, 1.0, 1.0]; 3]));
         mesh.uvs = Some(vec![
             Vec2::new(0.0, 1.0),
             Vec2::new(1.0, 1.0),
             Vec2::new(1.0, 0.0),
-            Vec2::new(0.0, 0.0),
         ]);
         mesh.textures = vec![Texture {
             width: 1,
@@ -263,8 +258,8 @@ mod colour_tests {
             base_color: [1.0, 1.0, 0.5, 1.0],
             texture: Some(0),
         }];
-        mesh.triangle_materials = vec![0, 0];
-        let c = mesh.albedo_at(1, [0.2, 0.3, 0.5]);
+        mesh.triangle_materials = vec![0];
+        let c = mesh.albedo_at(0, [0.2, 0.3, 0.5]);
         assert_eq!(c, [0.5, 0.5, 0.5]);
     }
 }
