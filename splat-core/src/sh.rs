@@ -139,6 +139,7 @@ pub fn eval_backward(
 
 /// Returns the number of SH coefficients per colour channel for a degree: 1, 4, 9, 16.
 #[must_use]
+#[inline]
 pub const fn num_sh_coeffs(degree: u32) -> usize {
     ((degree + 1) * (degree + 1)) as usize
 }
