@@ -234,7 +234,7 @@ mod tests {
             (DVec3::new(-900.0, 400.0, 50.0), 128),
         ] {
             let cam = camera(eye, DVec3::ZERO, w, w, 40.0);
-            let img = render_cloud(&cloud, &cam, &ViewOptions::default()).unwrap();
+            let img = render_cloud(&cloud, &cam, &ViewOptions::single_sample()).unwrap();
             // Every pixel whose ray meets a ball slightly smaller than the voxel hull must be covered.
             let mut inside = 0;
             for y in 0..w {
@@ -274,7 +274,7 @@ mod tests {
             // A tiny cube covers at most the one pixel whose centre is nearest its projection.
             let opts = ViewOptions {
                 point_size: 0.05,
-                ..Default::default()
+                ..ViewOptions::single_sample()
             };
             let uv = cam.project(p.as_dvec3()).unwrap();
             // Shift the point so its projection lands on a pixel centre, then check that pixel alone.
@@ -330,7 +330,7 @@ mod tests {
             &cam,
             &ViewOptions {
                 point_size: 4.0,
-                ..Default::default()
+                ..ViewOptions::single_sample()
             },
         )
         .unwrap();
@@ -348,7 +348,7 @@ mod tests {
             &back,
             &ViewOptions {
                 point_size: 4.0,
-                ..Default::default()
+                ..ViewOptions::single_sample()
             },
         )
         .unwrap();
@@ -365,7 +365,7 @@ mod tests {
         let opts = ViewOptions {
             point_size: 4.0,
             background: [0.25, 0.5, 0.75],
-            ..Default::default()
+            ..ViewOptions::single_sample()
         };
         let img = render_cloud(&cloud, &cam, &opts).unwrap();
         assert_eq!(img.rgb_at(16, 16), [0.0, 0.0, 1.0]);
@@ -389,7 +389,7 @@ mod tests {
         let opts = ViewOptions {
             point_shape: PointShape::Disc,
             point_size: 10.0,
-            ..Default::default()
+            ..ViewOptions::single_sample()
         };
         let img = render_cloud(&cloud, &cam, &opts).unwrap();
         let r_px = 100.0 * disc_radius(10.0) / 50.0;
@@ -414,7 +414,7 @@ mod tests {
         let opts = ViewOptions {
             point_size: 10.0,
             supersample: 4,
-            ..Default::default()
+            ..ViewOptions::single_sample()
         };
         let img = render_cloud(&cloud, &cam, &opts).unwrap();
         assert_eq!((img.width, img.height), (16, 16));
@@ -445,12 +445,12 @@ mod tests {
             30.0,
         );
         let cloud = cloud_of(vec![Vec3::ZERO], vec![[1.0; 3]]);
-        let err = render_cloud(&cloud, &cam, &ViewOptions::default()).unwrap_err();
+        let err = render_cloud(&cloud, &cam, &ViewOptions::single_sample()).unwrap_err();
         assert!(matches!(err, Error::InvalidCamera(_)), "{err}");
         let small = camera(DVec3::new(0.0, 0.0, 100.0), DVec3::ZERO, 4096, 4096, 30.0);
         let opts = ViewOptions {
             supersample: 4,
-            ..Default::default()
+            ..ViewOptions::single_sample()
         };
         assert!(matches!(
             render_cloud(&cloud, &small, &opts),
@@ -502,7 +502,7 @@ mod tests {
                     point_shape: shape,
                     point_size: 4.0,
                     supersample,
-                    ..Default::default()
+                    ..ViewOptions::single_sample()
                 };
                 let mut a = rig(with_near.len());
                 a.positions = with_near.clone();
@@ -529,7 +529,7 @@ mod tests {
         let cam = camera(DVec3::new(0.0, 0.0, 100.0), DVec3::ZERO, 8, 8, 30.0);
         let cloud = cloud_of(vec![Vec3::ZERO, Vec3::ONE], vec![[1.0; 3]]);
         assert!(matches!(
-            render_cloud(&cloud, &cam, &ViewOptions::default()),
+            render_cloud(&cloud, &cam, &ViewOptions::single_sample()),
             Err(Error::InvalidModel(_))
         ));
     }

@@ -59,7 +59,9 @@ pub use degenerate::DegenerateError;
 pub use error::Error;
 pub use image::ViewImage;
 pub use mesh::{check_mesh, render_mesh};
-pub use options::{PointShape, ViewOptions};
+pub use options::{
+    DEFAULT_SUPERSAMPLE, PIXEL_FILTER_VARIANCE, PixelFilter, PointShape, ViewOptions,
+};
 pub use output::{
     BitDepth, ViewFiles, write_alpha_png, write_depth_exr, write_rgb_png, write_view_images,
 };

@@ -295,7 +295,7 @@ mod tests {
                 DVec3::Y,
             ),
         );
-        let img = render_mesh(&mesh, &cam, &ViewOptions::default()).unwrap();
+        let img = render_mesh(&mesh, &cam, &ViewOptions::single_sample()).unwrap();
         let mut checked = 0;
         for y in 0..100 {
             for x in 0..200 {
@@ -342,7 +342,7 @@ mod tests {
             Intrinsics::from_fov_y(300, 300, 30.0),
             Pose::look_at(DVec3::new(0.3, 0.2, 4.5), DVec3::ZERO, DVec3::Y),
         );
-        let img = render_mesh(&mesh, &cam, &ViewOptions::default()).unwrap();
+        let img = render_mesh(&mesh, &cam, &ViewOptions::single_sample()).unwrap();
         let inner = (std::f64::consts::PI / n as f64).cos() - 1e-3;
         let mut inside = 0;
         for y in 0..300 {
@@ -386,7 +386,7 @@ mod tests {
             Intrinsics::from_fov_y(64, 64, 40.0),
             Pose::look_at(DVec3::new(0.0, 0.0, 5.0), DVec3::ZERO, DVec3::Y),
         );
-        let img = render_mesh(&mesh, &cam, &ViewOptions::default()).unwrap();
+        let img = render_mesh(&mesh, &cam, &ViewOptions::single_sample()).unwrap();
         // Each vertex's view colour, by the one interpolation, then mixed by perspective-correct barycentrics.
         let viewer = Vec3::new(0.0, 0.0, 5.0);
         let caps = [Vec3::new(0.0, 0.0, 100.0), Vec3::new(0.0, 0.0, -100.0)];
@@ -444,7 +444,7 @@ mod tests {
             Intrinsics::from_fov_y(8, 8, 40.0),
             Pose::look_at(DVec3::new(0.0, 0.0, 5.0), DVec3::ZERO, DVec3::Y),
         );
-        let err = render_mesh(&mesh, &cam, &ViewOptions::default()).unwrap_err();
+        let err = render_mesh(&mesh, &cam, &ViewOptions::single_sample()).unwrap_err();
         assert!(err.to_string().contains("triangle 2"), "{err}");
     }
 
@@ -464,7 +464,7 @@ mod tests {
             Intrinsics::from_fov_y(40, 40, 60.0),
             Pose::look_at(DVec3::ZERO, DVec3::new(0.0, -0.3, -1.0), DVec3::Y),
         );
-        let img = render_mesh(&mesh, &cam, &ViewOptions::default()).unwrap();
+        let img = render_mesh(&mesh, &cam, &ViewOptions::single_sample()).unwrap();
         assert_eq!(img.alpha_at(20, 39), 1.0);
         assert_eq!(img.alpha_at(20, 0), 0.0);
         let ray = cam.ray(glam::DVec2::new(20.5, 39.5));

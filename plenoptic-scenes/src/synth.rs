@@ -161,7 +161,7 @@ pub fn synth_from_mesh(mesh: &Mesh, config: &SynthConfig) -> Result<PlenopticClo
         .collect();
     let depth_maps: Vec<ViewImage> = cameras
         .iter()
-        .map(|c| views::render_mesh(mesh, c, &ViewOptions::default()))
+        .map(|c| views::render_mesh(mesh, c, &ViewOptions::single_sample()))
         .collect::<Result<_, _>>()?;
 
     let gloss = Gloss {

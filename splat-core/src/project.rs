@@ -34,6 +34,7 @@ pub(crate) struct ViewConsts {
     pub tiles_y: u32,
     pub degree: u32,
     pub antialiased: bool,
+    pub linear_colour: bool,
 }
 
 impl ViewConsts {
@@ -60,6 +61,7 @@ impl ViewConsts {
             tiles_y: cam.height.div_ceil(crate::TILE_SIZE),
             degree: opts.active_sh_degree.min(splats.sh_degree),
             antialiased: opts.antialiased,
+            linear_colour: opts.linear_colour,
         }
     }
 }
@@ -251,8 +253,13 @@ pub(crate) fn project(splats: &Splats, i: usize, v: &ViewConsts) -> Result<Inter
     let d = mean - v.center;
     let dir_len = d.length();
     let dir = d / dir_len;
-    let color_raw = sh::eval(v.degree, dir, coeffs) + 0.5;
-    let color = color_raw.max(Vec3::ZERO);
+    let (color_raw, color) = if v.linear_colour {
+        let c = sh::eval(v.degree, dir, coeffs);
+        (c, c)
+    } else {
+        let raw = sh::eval(v.degree, dir, coeffs) + 0.5;
+        (raw, raw.max(Vec3::ZERO))
+    };
     if !finite3(color) {
         return Err(Cull::NonFinite);
     }
@@ -350,7 +357,7 @@ pub(crate) fn project_backward(
     // Colour: clamped channels pass no gradient (Inria's `clamped` flags).
     let mut d_raw = Vec3::from(g.color);
     for ch in 0..3 {
-        if it.color_raw[ch] < 0.0 {
+        if !v.linear_colour && it.color_raw[ch] < 0.0 {
             d_raw[ch] = 0.0;
         }
     }

@@ -13,6 +13,10 @@ pub struct RenderOptions {
     pub active_sh_degree: u32,
     /// gsplat's antialiased mode: opacity multiplied by √(det Σ₂ / det(Σ₂ + 0.3·I)).
     pub antialiased: bool,
+    /// Colour is the SH sum alone, without the +0.5 offset and the clamp at 0, so that with
+    /// geometry and opacity fixed the image is a linear function of the SH coefficients (the
+    /// least-squares colour solve renders this way). Off for every ordinary render.
+    pub linear_colour: bool,
 }
 
 impl Default for RenderOptions {
@@ -21,6 +25,7 @@ impl Default for RenderOptions {
             background: Vec3::ZERO,
             active_sh_degree: 3,
             antialiased: false,
+            linear_colour: false,
         }
     }
 }

@@ -86,6 +86,7 @@ fn forward_matches_brute_force_reference() {
             background: Vec3::new(0.2, 0.5, 0.9),
             active_sh_degree: 3,
             antialiased,
+            linear_colour: false,
         };
         let (max_err, frac_bad) = compare(&s, &cam, &opts, 5e-5);
         assert!(

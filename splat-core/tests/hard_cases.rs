@@ -729,6 +729,7 @@ fn zero_scales() {
     assert_eq!(g.log_scales[0], Vec3::ZERO, "d/d log-scale = d/d scale · 0");
     let aa = RenderOptions {
         antialiased: true,
+        linear_colour: false,
         ..opts
     };
     let (_, _, stats) = render_checked(&point, &c, &aa);

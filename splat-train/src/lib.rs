@@ -52,8 +52,8 @@ pub use config::{Background, DensifyConfig, Frozen, LearningRates, TrainConfig, 
 pub use dataset::{Dataset, DatasetError, read_dataset};
 pub use error::Error;
 pub use eval::{
-    EvalError, EvalOptions, Evaluation, Metrics, RenderedView, SurfaceDistance, ViewMetrics,
-    ViewScore, evaluate, evaluate_views, evaluate_with,
+    ErrorBreakdown, EvalError, EvalOptions, Evaluation, Metrics, RegionError, RenderedView,
+    SurfaceDistance, ViewMetrics, ViewScore, evaluate, evaluate_views, evaluate_with,
 };
 pub use strategy::{DensifyStrategy, InriaDensify, RefineContext, RefineReport};
 pub use trainer::{HistoryEntry, NonFinite, Progress, StepStats, Timings, TrainReport, Trainer};

@@ -362,6 +362,7 @@ impl Trainer {
                 self.max_sh_degree,
             ),
             antialiased: self.config.antialiased,
+            linear_colour: false,
         };
         let coarse = self.config.warmup.is_some_and(|w| iteration <= w.until);
         let li = usize::from(coarse && self.levels.len() > 1);

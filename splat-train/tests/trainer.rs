@@ -68,6 +68,7 @@ fn render_views(model: &Splats, cams: &[Camera], prefix: &str) -> Vec<View> {
         background: Vec3::ZERO,
         active_sh_degree: model.sh_degree,
         antialiased: false,
+        linear_colour: false,
     };
     cams.iter()
         .enumerate()
@@ -213,6 +214,7 @@ fn masked_views() -> (Splats, Vec<View>) {
         background: Vec3::ZERO,
         active_sh_degree: 1,
         antialiased: false,
+        linear_colour: false,
     };
     for (v, c) in views.iter_mut().zip(&cams) {
         let out = r.forward(&truth, &RenderCamera::try_from(c).unwrap(), &opts);

@@ -39,7 +39,7 @@ fn textured_box_shows_its_texture_where_camera_model_projects_it() {
     .unwrap();
     let mut checked = 0;
     for cam in &cams {
-        let img = views::render_mesh(&mesh, cam, &ViewOptions::default()).unwrap();
+        let img = views::render_mesh(&mesh, cam, &ViewOptions::single_sample()).unwrap();
         // For each visible triangle, its centroid projects (camera_model) to a pixel whose colour is
         // base × texture at the centroid's uv, when no nearer triangle covers that pixel.
         for (t, tri) in mesh.triangles.iter().enumerate() {
@@ -116,7 +116,7 @@ fn single_point_lands_where_camera_model_projects_it() {
         let opts = ViewOptions {
             point_size: 0.3,
             supersample: 1,
-            ..ViewOptions::default()
+            ..ViewOptions::single_sample()
         };
         let img = views::render_cloud(&cloud, &cam, &opts).unwrap();
         let uv = cam.project(p.as_dvec3()).unwrap();
@@ -208,7 +208,7 @@ fn synth_on_the_spider_keeps_its_texture_and_rig() {
         },
     )
     .unwrap();
-    for img in views::render_views(&model, &cams, &ViewOptions::default()).unwrap() {
+    for img in views::render_views(&model, &cams, &ViewOptions::single_sample()).unwrap() {
         assert!(img.alpha.iter().filter(|&&a| a > 0.0).count() > 500);
     }
 }
@@ -269,7 +269,7 @@ fn demo_scene_renders_watertight_with_the_highlight_moving() {
             Intrinsics::from_fov_y(200, 200, 30.0),
             Pose::look_at(caps[k].as_dvec3(), c, DVec3::Y),
         );
-        let img = views::render_cloud(&cloud, &cam, &ViewOptions::default()).unwrap();
+        let img = views::render_cloud(&cloud, &cam, &ViewOptions::single_sample()).unwrap();
         // Watertight: no background pixel with covered pixels on both sides in a row and a column
         // (a hole), apart from the silhouette's concavities which the closed scene does not have.
         let w = 200;

@@ -67,6 +67,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         background: bg,
         active_sh_degree: args.sh_degree.unwrap_or(splats.sh_degree),
         antialiased: args.antialiased,
+        linear_colour: false,
     };
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;

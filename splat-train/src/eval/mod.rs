@@ -7,8 +7,11 @@
 //!
 //! - [`evaluate`] / [`evaluate_with`] score on one background (the trainer's, during a run).
 //! - [`evaluate_views`] scores on black and on white (a floater that happens to match one
-//!   background shows on the other), measures how well the rendered coverage matches the
-//!   views' masks, and, given the input's surface points, how far the splats are from them.
+//!   background shows on the other), also over the object's pixels only (masked PSNR, as MPEG's
+//!   Gaussian-splat coding evaluations report it, since a mostly empty background inflates the
+//!   full-image figure), splits the error by region and into its alpha part ([`breakdown`]),
+//!   measures how well the rendered coverage matches the views' masks, and, given the input's
+//!   surface points, how far the splats are from them.
 
 use std::borrow::Cow;
 
@@ -16,6 +19,10 @@ use glam::Vec3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use splat_core::{Rasterizer, RenderOptions, Splats};
+
+pub mod breakdown;
+
+pub use breakdown::{ErrorBreakdown, MASKED_ALPHA, RegionError};
 
 use crate::init::PointIndex;
 use crate::metrics::{psnr, ssim};
@@ -115,6 +122,7 @@ fn render_options(splats: &Splats, background: Vec3) -> RenderOptions {
         background,
         active_sh_degree: splats.sh_degree,
         antialiased: false,
+        linear_colour: false,
     }
 }
 
@@ -124,6 +132,7 @@ struct Scored {
     ssim: f64,
     rgb: Vec<f32>,
     alpha: Vec<f32>,
+    target: Vec<f32>,
 }
 
 /// The one scoring path: render over `opts.background`, clamp to [0, 1], PSNR and SSIM against
@@ -146,6 +155,7 @@ fn score(
         ssim: ssim(&rgb, &target, cam.width, cam.height),
         rgb,
         alpha: out.alpha.clone(),
+        target,
     })
 }
 
@@ -162,6 +172,16 @@ pub struct ViewMetrics {
     pub ssim_black: f64,
     /// SSIM on a white background.
     pub ssim_white: f64,
+    /// PSNR (dB) on black over the pixels where the reference or the render has coverage above
+    /// [`MASKED_ALPHA`] (the object only).
+    #[serde(default)]
+    pub masked_psnr_black: f64,
+    /// PSNR (dB) on white over the same pixels.
+    #[serde(default)]
+    pub masked_psnr_white: f64,
+    /// The error split by region and into its alpha part.
+    #[serde(default)]
+    pub breakdown: ErrorBreakdown,
     /// Intersection over union of rendered coverage and the reference mask (both thresholded).
     pub alpha_iou: f64,
     /// Mean missing coverage (1 − rendered alpha) where the reference is fully covered: holes.
@@ -202,6 +222,15 @@ pub struct Metrics {
     pub ssim_black: f64,
     /// Mean SSIM on white.
     pub ssim_white: f64,
+    /// Mean masked PSNR (dB) on black (see [`ViewMetrics::masked_psnr_black`]).
+    #[serde(default)]
+    pub masked_psnr_black: f64,
+    /// Mean masked PSNR (dB) on white.
+    #[serde(default)]
+    pub masked_psnr_white: f64,
+    /// Mean error breakdown over the views (see [`ErrorBreakdown`]).
+    #[serde(default)]
+    pub breakdown: ErrorBreakdown,
     /// Mean alpha IoU.
     pub alpha_iou: f64,
     /// Mean hole alpha (see [`ViewMetrics::hole_alpha`]).
@@ -273,12 +302,23 @@ pub fn evaluate_views(
         let white = score(&mut raster, splats, v, &render_options(splats, Vec3::ONE))?;
         let alpha_iou = iou(&black.alpha, reference, opts.alpha_threshold);
         let (hole_alpha, free_alpha) = coverage_errors(&black.alpha, reference);
+        let (breakdown, [masked_psnr_black, masked_psnr_white]) =
+            breakdown::analyse(&breakdown::Pair {
+                width: v.camera.intrinsics.width as usize,
+                reference_alpha: reference,
+                rendered_alpha: &black.alpha,
+                reference: [&black.target, &white.target],
+                rendered: [&black.rgb, &white.rgb],
+            });
         per_view.push(ViewMetrics {
             name: v.name.clone(),
             psnr_black: black.psnr,
             psnr_white: white.psnr,
             ssim_black: black.ssim,
             ssim_white: white.ssim,
+            masked_psnr_black,
+            masked_psnr_white,
+            breakdown,
             alpha_iou,
             hole_alpha,
             free_alpha,
@@ -297,6 +337,9 @@ pub fn evaluate_views(
         psnr_white: mean(|v| v.psnr_white),
         ssim_black: mean(|v| v.ssim_black),
         ssim_white: mean(|v| v.ssim_white),
+        masked_psnr_black: mean(|v| v.masked_psnr_black),
+        masked_psnr_white: mean(|v| v.masked_psnr_white),
+        breakdown: ErrorBreakdown::mean(scored.iter().map(|v| &v.breakdown)),
         alpha_iou: mean(|v| v.alpha_iou),
         hole_alpha: mean(|v| v.hole_alpha),
         free_alpha: mean(|v| v.free_alpha),
@@ -489,6 +532,17 @@ mod tests {
         assert_eq!(m.ssim_black, m.views[1].ssim_black);
         // On white the uncovered pixels are white in both: MSE = 8·3·0.25 / 48 again.
         assert!((m.psnr_white - expected).abs() < 1e-9, "{}", m.psnr_white);
+        // Masked, only the 8 covered pixels count: MSE 0.25 on both backgrounds, and on white
+        // all of it is the missing coverage (0.5 grey on white against white).
+        let masked = -10.0 * 0.25f64.log10();
+        assert!((m.masked_psnr_black - masked).abs() < 1e-9);
+        assert!((m.masked_psnr_white - masked).abs() < 1e-9);
+        let b = &m.views[1].breakdown;
+        assert_eq!(
+            b.interior.pixels + b.silhouette.pixels + b.background.pixels,
+            16
+        );
+        assert!((b.interior.mse_alpha + b.silhouette.mse_alpha - 0.5).abs() < 1e-9);
         // Nothing rendered: the 8 covered pixels are all hole, the rest free space with 0.
         assert_eq!(
             (
