@@ -142,6 +142,9 @@ pub struct InitConfig {
     pub free_positions: bool,
     /// Densify surface splats too (sparse init always densifies).
     pub densify_surface: bool,
+    /// Surface init: conjugate-gradient iterations of the least-squares colour solve against
+    /// the training views after the per-camera SH fit (`colour_solve`); 0 keeps the fit.
+    pub colour_solve_iterations: u32,
 }
 
 impl Default for InitConfig {
@@ -164,6 +167,7 @@ impl Default for InitConfig {
             random_points: 5_000,
             free_positions: false,
             densify_surface: false,
+            colour_solve_iterations: crate::SolveOptions::default().iterations,
         }
     }
 }

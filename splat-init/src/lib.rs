@@ -40,6 +40,7 @@ use std::path::PathBuf;
 use serde::Serialize;
 use splat_core::Splats;
 
+pub mod colour_solve;
 pub mod config;
 pub mod neighbours;
 pub mod points;
@@ -50,6 +51,7 @@ mod surface;
 #[cfg(test)]
 mod tests;
 
+pub use colour_solve::{SolveError, SolveOptions, SolveReport, solve_colours};
 pub use config::{InitConfig, InitMode, MeshPoints, Sampling, ShDegree};
 pub use neighbours::{pca_normals, point_spacing};
 pub use points::{SurfacePoints, sample_mesh};

@@ -210,6 +210,17 @@ impl Trainer {
                 name: v.name.clone(),
                 problem,
             })?;
+            // Without coverage the image's pixels already hold its own background: a random
+            // one cannot go behind them, and the model would learn to paint it opaque.
+            if config.background == Background::Random && v.mask.is_none() {
+                return Err(Error::View {
+                    index,
+                    name: v.name.clone(),
+                    problem: "has no mask or alpha channel, so a random background cannot be \
+                              composited under it; train on a fixed background or give it a mask"
+                        .into(),
+                });
+            }
         }
         let centres: Vec<glam::DVec3> = views.iter().map(|v| v.camera.center()).collect();
         let extent = camera_extent(&centres) as f32;

@@ -24,7 +24,8 @@ use splat_train::{TrainConfig, Trainer, View};
 use crate::config::{Config, InitMode};
 use crate::progress::{Event, Observer};
 use crate::report::{
-    CurvePoint, InputInfo, Report, RunReport, StageTiming, ViewPictures, write_report,
+    CurvePoint, HeldoutScore, InputInfo, Report, RunReport, StageTiming, StepZero, ViewPictures,
+    write_report,
 };
 use crate::resume::{
     self, InputStamp, ModeState, ResumeError, RunState, Schedule, Status, TrainedState,
@@ -64,6 +65,9 @@ pub enum PipelineError {
     /// Initialisation failed.
     #[error("initialisation: {0}")]
     Init(Box<init::InitError>),
+    /// The least-squares colour solve refused a training view.
+    #[error("initialisation: {0}")]
+    ColourSolve(#[from] splat_init::SolveError),
     /// The trainer refused its inputs.
     #[error("training: {0}")]
     Train(Box<splat_train::Error>),
@@ -642,6 +646,7 @@ pub struct TrainedModel {
 struct Initialised {
     summary: InitSummary,
     schedule: Schedule,
+    step_zero: Option<StepZero>,
     /// Fresh splats; `None` when training continues from the checkpoint.
     fresh: Option<Splats>,
 }
@@ -658,15 +663,7 @@ fn init_train_eval(
     observer: Observer<'_>,
 ) -> Result<TrainedModel, PipelineError> {
     let mut clock = StageClock::default();
-    let init = initialise(
-        run,
-        &surfaces.init,
-        &refs.train,
-        cfg,
-        layout,
-        state,
-        observer,
-    )?;
+    let init = initialise(run, surfaces, refs, cfg, layout, state, observer)?;
     clock.lap("init");
     let (splats, train_report) = train(
         run,
@@ -687,6 +684,7 @@ fn init_train_eval(
         iterations: train_report.iterations,
         train_seconds: train_report.elapsed_s,
         stopped_by_budget: train_report.stopped_by_budget,
+        step_zero: init.step_zero,
         curve: train_report
             .history
             .iter()
@@ -716,8 +714,8 @@ fn init_train_eval(
 /// train on the same one even when it came from timed probe steps.
 fn initialise(
     run: &RunOf,
-    surface: &SurfacePoints,
-    train_views: &[View],
+    surfaces: &Surfaces,
+    refs: &References,
     cfg: &Config,
     layout: &Layout,
     state: &mut RunState,
@@ -756,6 +754,7 @@ fn initialise(
         return Ok(Initialised {
             summary: m.init.clone(),
             schedule: m.schedule,
+            step_zero: m.step_zero.clone(),
             fresh: None,
         });
     }
@@ -766,8 +765,12 @@ fn initialise(
     });
     let mut init_cfg = cfg.init.clone();
     init_cfg.mode = mode;
-    let (splats, summary) =
-        init::initialise(surface, &init_cfg, cfg.renderer.exponent, cfg.training.seed)?;
+    let (mut splats, summary) = init::initialise(
+        &surfaces.init,
+        &init_cfg,
+        cfg.renderer.exponent,
+        cfg.training.seed,
+    )?;
     observer(Event::Note(format!(
         "{} splats, SH degree {}{}",
         summary.splats,
@@ -780,15 +783,17 @@ fn initialise(
             ))
             .unwrap_or_default()
     )));
+    let step_zero = colour_solve(mode, &mut splats, surfaces, refs, cfg, observer)?;
     let schedule = match &saved {
         Some(m) => m.schedule,
         None => {
             let base = cfg.train_config(mode, summary.sh_degree);
-            let schedule = plan(&splats, train_views, &base, cfg.training.scale_densify)?;
+            let schedule = plan(&splats, &refs.train, &base, cfg.training.scale_densify)?;
             state.modes.push(ModeState {
                 mode,
                 init: summary.clone(),
                 schedule,
+                step_zero: Some(step_zero.clone()),
                 trained: None,
             });
             state.save(out)?;
@@ -798,7 +803,61 @@ fn initialise(
     Ok(Initialised {
         summary,
         schedule,
+        step_zero: Some(step_zero),
         fresh: Some(splats),
+    })
+}
+
+/// Stage 3 (end): scores the initial splats on the held-out views and, for surface init with
+/// `init.colour_solve_iterations` > 0, replaces their SH coefficients by the least-squares solve
+/// against the training views (`splat_init::colour_solve`) and scores them again.
+fn colour_solve(
+    mode: InitMode,
+    splats: &mut Splats,
+    surfaces: &Surfaces,
+    refs: &References,
+    cfg: &Config,
+    observer: Observer<'_>,
+) -> Result<StepZero, PipelineError> {
+    let score = |s: &Splats| -> Result<HeldoutScore, PipelineError> {
+        let (m, _) = evaluate_views(
+            s,
+            &refs.heldout,
+            Some((&surfaces.distance, surfaces.spacing)),
+            &EvalOptions::from(&cfg.eval),
+        )?;
+        Ok(HeldoutScore::from(&m))
+    };
+    let fit = score(splats)?;
+    let iterations = cfg.init.colour_solve_iterations;
+    if mode != InitMode::Surface || iterations == 0 {
+        return Ok(StepZero {
+            fit,
+            solved: None,
+            solve: None,
+            solve_seconds: 0.0,
+        });
+    }
+    let start = Instant::now();
+    let report = splat_init::solve_colours(
+        splats,
+        &refs.train,
+        &splat_init::SolveOptions {
+            iterations,
+            ..splat_init::SolveOptions::default()
+        },
+    )?;
+    let solve_seconds = start.elapsed().as_secs_f64();
+    let solved = score(splats)?;
+    observer(Event::Note(format!(
+        "colour solve ({} iterations, {solve_seconds:.1} s): held-out PSNR at step 0 {:.2} → {:.2} dB on black, {:.2} → {:.2} dB on white",
+        report.iterations, fit.psnr_black, solved.psnr_black, fit.psnr_white, solved.psnr_white
+    )));
+    Ok(StepZero {
+        fit,
+        solved: Some(solved),
+        solve: Some(report),
+        solve_seconds,
     })
 }
 

@@ -9,7 +9,7 @@ use std::fmt::Write as _;
 use std::io;
 use std::path::{Path, PathBuf};
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::config::Config;
 use atomic_output::write_atomic;
@@ -55,6 +55,44 @@ pub struct CurvePoint {
     pub splats: usize,
 }
 
+/// Held-out scores of a model before any training step.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct HeldoutScore {
+    /// PSNR (dB) on black.
+    pub psnr_black: f64,
+    /// PSNR (dB) on white.
+    pub psnr_white: f64,
+    /// Masked (object-only) PSNR (dB) on black.
+    pub masked_psnr_black: f64,
+    /// Masked PSNR (dB) on white.
+    pub masked_psnr_white: f64,
+}
+
+impl From<&Metrics> for HeldoutScore {
+    fn from(m: &Metrics) -> Self {
+        Self {
+            psnr_black: m.psnr_black,
+            psnr_white: m.psnr_white,
+            masked_psnr_black: m.masked_psnr_black,
+            masked_psnr_white: m.masked_psnr_white,
+        }
+    }
+}
+
+/// What the initialisation alone is worth: held-out scores at step 0 of the per-camera SH fit
+/// and, when it ran, of the least-squares colour solve that followed it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StepZero {
+    /// The initial splats as initialisation made them (for surface init: the per-camera fit).
+    pub fit: HeldoutScore,
+    /// After the colour solve.
+    pub solved: Option<HeldoutScore>,
+    /// The solve's record.
+    pub solve: Option<splat_init::SolveReport>,
+    /// Seconds the solve took.
+    pub solve_seconds: f64,
+}
+
 /// One initialise-train-evaluate run.
 #[derive(Debug, Clone, Serialize)]
 pub struct RunReport {
@@ -66,6 +104,9 @@ pub struct RunReport {
     pub train_seconds: f64,
     /// True when the time budget stopped training.
     pub stopped_by_budget: bool,
+    /// Held-out scores before training (absent when training continued from a checkpoint made
+    /// by an older version).
+    pub step_zero: Option<StepZero>,
     /// Training curve.
     pub curve: Vec<CurvePoint>,
     /// Held-out metrics.

@@ -85,6 +85,9 @@ pub struct ModeState {
     pub init: InitSummary,
     /// Its training schedule.
     pub schedule: Schedule,
+    /// Held-out scores at step 0, for the report.
+    #[serde(default)]
+    pub step_zero: Option<crate::report::StepZero>,
     /// `Some` once training is over (its last state is in the checkpoint): whether the time
     /// budget stopped it.
     pub trained: Option<TrainedState>,

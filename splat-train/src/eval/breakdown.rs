@@ -34,6 +34,10 @@ pub struct RegionError {
     /// Contribution of the coverage error alone, `Σ (A_m − A_r)² / N` over the region's pixels:
     /// what the white MSE would gain if the colour were exact.
     pub mse_alpha: f64,
+    /// Signed coverage error `Σ (A_m − A_r) / N` over the region's pixels: negative when the
+    /// render covers less than the reference (eroded edges, holes), positive when more (halos).
+    #[serde(default)]
+    pub alpha_bias: f64,
 }
 
 /// A view's error by region of the reference's coverage in each pixel's 3×3 neighbourhood.
@@ -75,6 +79,7 @@ impl ErrorBreakdown {
                 s.mse_black += r.mse_black;
                 s.mse_white += r.mse_white;
                 s.mse_alpha += r.mse_alpha;
+                s.alpha_bias += r.alpha_bias;
             }
         }
         let n = n.max(1) as f64;
@@ -82,6 +87,7 @@ impl ErrorBreakdown {
             s.mse_black /= n;
             s.mse_white /= n;
             s.mse_alpha /= n;
+            s.alpha_bias /= n;
         }
         sum
     }
@@ -141,6 +147,7 @@ pub(crate) fn analyse(p: &Pair<'_>) -> (ErrorBreakdown, [f64; 2]) {
             region.mse_black += black / values;
             region.mse_white += white / values;
             region.mse_alpha += da * da / n as f64;
+            region.alpha_bias += da / n as f64;
             if p.reference_alpha[i] > MASKED_ALPHA || p.rendered_alpha[i] > MASKED_ALPHA {
                 masked[0] += black;
                 masked[1] += white;
@@ -202,6 +209,8 @@ mod tests {
         assert!(close(b.interior.mse_black, 3.0 * 0.04 / (3.0 * n)));
         assert!(close(b.interior.mse_white, 3.0 * 0.09 / (3.0 * n)));
         assert!(close(b.interior.mse_alpha, 0.25 / n));
+        assert!(close(b.interior.alpha_bias, -0.5 / n));
+        assert!(close(b.background.alpha_bias, 0.1 / n));
         // Halo at (0, 0): 0.4·0.1 on black, (0.4 − 1)·0.1 on white.
         assert!(close(b.background.mse_black, 3.0 * 0.0016 / (3.0 * n)));
         assert!(close(b.background.mse_white, 3.0 * 0.0036 / (3.0 * n)));

@@ -199,6 +199,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         views,
         reconstruction: rec,
     } = read_dataset(&args.dataset, args.downscale)?;
+    if args.background != BackgroundArg::Black
+        && let Some(v) = views.iter().find(|v| v.mask.is_none())
+    {
+        anyhow::bail!(
+            "--background {}: {} has no mask in {} and no alpha channel, so its pixels already \
+             hold their own background and another cannot be put behind them; train with \
+             --background black, or add masks/ (coverage images named like the images)",
+            format!("{:?}", args.background).to_lowercase(),
+            v.name,
+            args.dataset.join("masks").display()
+        );
+    }
     let eval_views = match &args.heldout {
         Some(dir) => read_dataset(dir, args.downscale)?.views,
         None => views.clone(),
