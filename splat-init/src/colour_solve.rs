@@ -1,10 +1,14 @@
 //! Colour that starts right: the SH coefficients of fixed splats by linear least squares against
 //! the training views.
 //!
-//! With positions, shapes and opacities fixed, a render over black is
-//! `Σᵢ wᵢ(p)·(shᵢ(dᵢ)·xᵢ + 0.5)` per channel (before the clamp at 0, which a good colour rarely
-//! hits): a linear map A of the coefficients x plus `0.5·α(p)`. The solve minimises
-//! `Σ_views ‖A x + 0.5·α − y‖² + λ‖x − x₀‖²` from the per-camera fit x₀ by conjugate gradients on
+//! With positions, shapes and opacities fixed, a render over a background b is
+//! `Σᵢ wᵢ(p)·(shᵢ(dᵢ)·xᵢ + 0.5) + (1 − α(p))·b` per channel (before the clamp at 0, which a good
+//! colour rarely hits): a linear map A of the coefficients x plus a constant. The solve compares
+//! on mid grey, b = 0.5, where the constant is exactly 0.5 whatever the coverage α: on black the
+//! colour would learn to make up for coverage errors (darker where the splats cover too much),
+//! which shows on white, and the other way round; grey is both backgrounds' mean and the mean of
+//! the random backgrounds training uses. It minimises `Σ_views ‖A x + 0.5 − y_grey‖² + λ‖x − x₀‖²`
+//! from the per-camera fit x₀ by conjugate gradients on
 //! the normal equations, one solve per channel sharing every render: A p is a render in
 //! `linear_colour` mode of the coefficients p, and Aᵀ r is the rasteriser's backward pass of
 //! `Σ r·rgb` with respect to the SH coefficients (its adjoint, checked in splat-core's tests).
@@ -41,7 +45,7 @@ impl Default for SolveOptions {
 pub struct SolveReport {
     /// Iterations run (fewer than asked when the residual vanished).
     pub iterations: u32,
-    /// Root-mean-square error of the linear model over all views' pixel values (over black),
+    /// Root-mean-square error of the linear model over all views' pixel values (over mid grey),
     /// before the solve.
     pub rms_before: f64,
     /// Norm of the normal equations' residual after each iteration, relative to the first
@@ -85,7 +89,7 @@ pub fn solve_colours(
             })
         })
         .collect::<Result<Vec<_>, _>>()?;
-    let targets: Vec<Vec<f32>> = views.iter().map(|v| v.on_background([0.0; 3])).collect();
+    let targets: Vec<Vec<f32>> = views.iter().map(|v| v.on_background([0.5; 3])).collect();
     let render = RenderOptions {
         background: Vec3::ZERO,
         active_sh_degree: splats.sh_degree,
@@ -95,20 +99,14 @@ pub fn solve_colours(
     let mut raster = Rasterizer::new();
     let mut grads = SplatGrads::zeros_like(splats);
 
-    // Right-hand side: g = Aᵀ(y − 0.5·α − A x₀), the gradient at the start, with δ = x − x₀.
+    // Right-hand side: g = Aᵀ(y − 0.5 − A x₀), the gradient at the start, with δ = x − x₀.
     let mut work = splats.clone();
     let mut sq_error = 0.0f64;
     let mut values = 0usize;
     grads.reset(&work);
     for (cam, y) in cameras.iter().zip(&targets) {
         let out = raster.forward(&work, cam, &render);
-        let residual: Vec<f32> = out
-            .rgb
-            .chunks_exact(3)
-            .zip(&out.alpha)
-            .zip(y.chunks_exact(3))
-            .flat_map(|((ax, &a), y)| [0, 1, 2].map(|c| y[c] - 0.5 * a - ax[c]))
-            .collect();
+        let residual: Vec<f32> = out.rgb.iter().zip(y).map(|(ax, y)| y - 0.5 - ax).collect();
         sq_error += residual.iter().map(|r| f64::from(*r).powi(2)).sum::<f64>();
         values += residual.len();
         raster.backward(&work, cam, &render, &residual, None, None, &mut grads);

@@ -83,7 +83,8 @@ pub struct TrainingConfig {
     pub ssim_weight: f32,
     /// Weight of the L1 loss of rendered alpha against the reference masks.
     pub alpha_loss: f32,
-    /// One more SH band every this many steps (0 = all bands from the start).
+    /// Sparse init: one more SH band every this many steps (0 = all bands from the start).
+    /// Surface init, whose fit sets every band, trains them all from the start.
     pub sh_degree_interval: u32,
     /// A random background colour every step, so the splats cannot bake the background in.
     pub random_background: bool,
@@ -203,7 +204,10 @@ impl Config {
             lr: t.lr,
             ssim_weight: t.ssim_weight,
             sh_degree: Some(sh_degree),
-            sh_degree_interval: t.sh_degree_interval,
+            // Surface init fits every band to the input's colours: switching the higher ones
+            // off for the first steps would train the DC to stand in for them, and switch them
+            // back on stale. Sparse init starts them at zero and steps them in, as Inria does.
+            sh_degree_interval: if surface { 0 } else { t.sh_degree_interval },
             densify: if !surface || cfg.init.densify_surface {
                 Some(t.densify)
             } else {

@@ -207,10 +207,12 @@ pub fn render_html(report: &Report, pictures: &[ViewPictures]) -> io::Result<Str
         esc(&report.version),
     );
     metrics_table(&mut h, report, &names);
+    breakdown_table(&mut h, report, &names);
     timings_table(&mut h, report, &names);
     h.push_str(&format!(
         "<h2>Training PSNR against wall time</h2>\n<p>PSNR of the training view of each logged \
-         step, as a moving mean over {CURVE_WINDOW} log points (single views vary a lot).</p>\n"
+         step, as a moving mean over {CURVE_WINDOW} log points (single views vary a lot); circles: \
+         held-out PSNR on black at step 0 (before any training step) and at the end.</p>\n"
     ));
     h.push_str(&curve_svg(report, &names));
     h.push_str(&format!(
@@ -263,12 +265,40 @@ fn metrics_table(h: &mut String, report: &Report, names: &[String]) {
     }
     h.push_str("</tr>\n");
     type Row = (&'static str, fn(&RunReport) -> String);
-    let rows: [Row; 18] = [
+    let rows: [Row; 22] = [
         ("PSNR, black background (dB)", |r| {
             format!("{:.2}", r.metrics.psnr_black)
         }),
         ("PSNR, white background (dB)", |r| {
             format!("{:.2}", r.metrics.psnr_white)
+        }),
+        ("masked PSNR (object only), black / white (dB)", |r| {
+            format!(
+                "{:.2} / {:.2}",
+                r.metrics.masked_psnr_black, r.metrics.masked_psnr_white
+            )
+        }),
+        ("step 0, initial fit: PSNR black / white (dB)", |r| {
+            r.step_zero.as_ref().map_or("–".into(), |z| {
+                format!("{:.2} / {:.2}", z.fit.psnr_black, z.fit.psnr_white)
+            })
+        }),
+        (
+            "step 0, after the colour solve: PSNR black / white (dB)",
+            |r| {
+                r.step_zero
+                    .as_ref()
+                    .and_then(|z| z.solved)
+                    .map_or("–".into(), |s| {
+                        format!("{:.2} / {:.2}", s.psnr_black, s.psnr_white)
+                    })
+            },
+        ),
+        ("colour solve: iterations, seconds", |r| {
+            r.step_zero
+                .as_ref()
+                .and_then(|z| z.solve.as_ref().map(|s| (s.iterations, z.solve_seconds)))
+                .map_or("–".into(), |(i, t)| format!("{i}, {t:.1}"))
         }),
         ("SSIM, black", |r| format!("{:.4}", r.metrics.ssim_black)),
         ("SSIM, white", |r| format!("{:.4}", r.metrics.ssim_white)),
@@ -324,6 +354,36 @@ fn metrics_table(h: &mut String, report: &Report, names: &[String]) {
             let _ = write!(h, "<td>{}</td>", esc(&f(r)));
         }
         h.push_str("</tr>\n");
+    }
+    h.push_str("</table>\n");
+}
+
+/// Where the held-out error comes from: each region's share of the MSE on black and on white,
+/// and the part of it that is coverage error (`splat_train::eval::breakdown`).
+fn breakdown_table(h: &mut String, report: &Report, names: &[String]) {
+    h.push_str(
+        "<h2>Where the held-out error comes from</h2>\n<p>Pixels by the reference's coverage in \
+         their 3×3 neighbourhood. Each cell is the region's contribution to the image MSE \
+         (×10⁻⁴; the regions add up to the whole). On white the error is colour minus coverage \
+         error, so a gap between the backgrounds that sits in the silhouette's alpha column is \
+         edge coverage, not colour.</p>\n<table><tr><th>run</th><th>region</th><th>pixels \
+         (all views)</th><th>MSE black</th><th>MSE white</th><th>alpha error²</th><th>alpha \
+         bias</th></tr>\n",
+    );
+    for (r, n) in report.runs.iter().zip(names) {
+        for (region, e) in r.metrics.breakdown.regions() {
+            let _ = writeln!(
+                h,
+                "<tr><td>{}</td><td>{region}</td><td>{}</td><td>{:.3}</td><td>{:.3}</td>\
+                 <td>{:.3}</td><td>{:+.3}</td></tr>",
+                esc(n),
+                e.pixels,
+                1e4 * e.mse_black,
+                1e4 * e.mse_white,
+                1e4 * e.mse_alpha,
+                1e4 * e.alpha_bias
+            );
+        }
     }
     h.push_str("</table>\n");
 }
@@ -387,7 +447,13 @@ const RUN_COLOURS: [&str; 4] = ["#1f77b4", "#d62728", "#2ca02c", "#9467bd"];
 fn curve_svg(report: &Report, names: &[String]) -> String {
     let (w, h, left, bottom, top, right) = (720.0, 360.0, 60.0, 40.0, 15.0, 20.0);
     let curves: Vec<Vec<(f64, f64)>> = report.runs.iter().map(|r| smoothed(&r.curve)).collect();
-    let points: Vec<(f64, f64)> = curves.iter().flatten().copied().collect();
+    let markers: Vec<Vec<(f64, f64, &str)>> = report.runs.iter().map(heldout_markers).collect();
+    let points: Vec<(f64, f64)> = curves
+        .iter()
+        .flatten()
+        .copied()
+        .chain(markers.iter().flatten().map(|m| (m.0, m.1)))
+        .collect();
     if points.is_empty() {
         return "<p>(no training history)</p>\n".into();
     }
@@ -457,8 +523,39 @@ fn curve_svg(report: &Report, names: &[String]) -> String {
             esc(name)
         );
     }
+    for (i, run) in markers.iter().enumerate() {
+        let colour = RUN_COLOURS[i % RUN_COLOURS.len()];
+        for &(t, p, label) in run {
+            let _ = write!(
+                s,
+                "<circle cx=\"{:.1}\" cy=\"{:.1}\" r=\"4\" fill=\"white\" stroke=\"{colour}\" \
+                 stroke-width=\"2\"><title>{label}: {p:.2} dB</title></circle>\
+                 <text x=\"{:.1}\" y=\"{:.1}\" fill=\"{colour}\" font-size=\"10\">{label}</text>",
+                x(t),
+                y(p),
+                x(t) + 6.0,
+                y(p) - 6.0
+            );
+        }
+    }
     s.push_str("</svg>\n");
     s
+}
+
+/// Held-out PSNRs on black of a run as (time, PSNR, label): at step 0 (the initial fit, and the
+/// colour solve when it ran) and at the end of training.
+fn heldout_markers(r: &RunReport) -> Vec<(f64, f64, &'static str)> {
+    let mut m = Vec::new();
+    if let Some(z) = &r.step_zero {
+        m.push((0.0, z.fit.psnr_black, "held-out, step 0 (fit)"));
+        if let Some(s) = z.solved {
+            m.push((0.0, s.psnr_black, "held-out, step 0 (solve)"));
+        }
+    }
+    if r.metrics.psnr_black.is_finite() {
+        m.push((r.train_seconds, r.metrics.psnr_black, "held-out, end"));
+    }
+    m
 }
 
 /// Per-pixel error heat map (RGB): mean absolute error over channels through a black–red–yellow–white ramp.
