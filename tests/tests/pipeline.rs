@@ -99,8 +99,8 @@ fn pipeline_on_a_small_plenoptic_cloud() {
         outcome.report.runs[1].metrics.psnr_black,
         outcome.report.runs[1].metrics.psnr_white
     );
-    // Measured: surface 31.7 dB on black, 29.0 dB on white (the scene is dark, so soft silhouettes
-    // cost more against white), SSIM 0.954, IoU 0.985; sparse 21.6 / 21.0 dB. (Before the
+    // Measured: surface 32.1 dB on black, 29.1 dB on white (the scene is dark, so soft silhouettes
+    // cost more against white), SSIM 0.959, IoU 0.985; sparse 21.6 / 21.0 dB. (Before the
     // references were anti-aliased and the colour solved: 26.4 / 23.4 dB.)
     assert!(m.psnr_black > 29.0, "PSNR on black {}", m.psnr_black);
     assert!(m.psnr_white > 26.5, "PSNR on white {}", m.psnr_white);
@@ -120,14 +120,16 @@ fn pipeline_on_a_small_plenoptic_cloud() {
         (mse - per_view_mse).abs() < 1e-3 * per_view_mse,
         "{mse} {per_view_mse}"
     );
-    // Step 0: the least-squares colour solve starts well above the per-camera fit.
+    // Step 0: the least-squares colour solve starts above the per-camera fit on both
+    // backgrounds (measured: 26.5 → 27.6 dB on black, 22.2 → 22.6 dB on white).
     let z = main.step_zero.as_ref().unwrap();
     let solved = z.solved.unwrap();
     eprintln!(
         "step 0: fit {:.2} / {:.2} dB, solve {:.2} / {:.2} dB",
         z.fit.psnr_black, z.fit.psnr_white, solved.psnr_black, solved.psnr_white
     );
-    assert!(solved.psnr_black > z.fit.psnr_black + 1.0, "{z:?}");
+    assert!(solved.psnr_black > z.fit.psnr_black + 0.5, "{z:?}");
+    assert!(solved.psnr_white > z.fit.psnr_white, "{z:?}");
     assert!(m.alpha_iou > 0.97, "alpha IoU {}", m.alpha_iou);
     assert!(m.hole_alpha < 0.05, "holes {}", m.hole_alpha);
     let sparse = &outcome.report.runs[1].metrics;
