@@ -27,7 +27,7 @@ pub enum PixelFilter {
 }
 
 /// Variance in px² of [`PixelFilter::Gaussian`]: the 3DGS rasteriser's dilation
-/// (`splat_core::DILATION`; the workspace tests check the two agree).
+/// (`splat_core::constants::DILATION`; the workspace tests check the two agree).
 pub const PIXEL_FILTER_VARIANCE: f32 = 0.3;
 
 /// Options of the reference renderer.

@@ -295,3 +295,13 @@ fn demo_scene_renders_watertight_with_the_highlight_moving() {
     }
     assert_ne!(brightest[0], brightest[1]);
 }
+
+/// The reference renderer's Gaussian pixel filter is the rasteriser's 0.3 px² dilation: the two
+/// constants live in crates that do not depend on each other, so this is where they meet.
+#[test]
+fn reference_pixel_filter_is_the_rasterisers_dilation() {
+    assert_eq!(
+        plenoptic_render::PIXEL_FILTER_VARIANCE,
+        splat_core::constants::DILATION
+    );
+}

@@ -84,6 +84,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         metrics.ssim_white,
         metrics.alpha_iou
     );
+    println!(
+        "masked PSNR (object pixels only): {:.2} dB on black, {:.2} dB on white",
+        metrics.masked_psnr_black, metrics.masked_psnr_white
+    );
     if let Some(d) = &metrics.surface {
         println!(
             "distance to surface: mean {:.4}, p95 {:.4} (spacing {:.4}); {} floaters beyond {:.4} hold {:.2}% of the opacity",

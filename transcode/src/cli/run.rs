@@ -65,11 +65,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 pub fn print_outcome(outcome: &transcode::pipeline::Outcome) {
     for r in &outcome.report.runs {
         println!(
-            "{} init: held-out PSNR {:.2} dB (black background), {:.2} dB (white); SSIM {:.4} / {:.4}; \
-             alpha IoU {:.4}; {} splats; trained {:.1} s",
+            "{} init: held-out PSNR {:.2} dB (black background), {:.2} dB (white); masked (object \
+             only) {:.2} / {:.2} dB; SSIM {:.4} / {:.4}; alpha IoU {:.4}; {} splats; trained {:.1} s",
             r.init.mode,
             r.metrics.psnr_black,
             r.metrics.psnr_white,
+            r.metrics.masked_psnr_black,
+            r.metrics.masked_psnr_white,
             r.metrics.ssim_black,
             r.metrics.ssim_white,
             r.metrics.alpha_iou,
