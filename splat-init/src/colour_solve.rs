@@ -292,8 +292,9 @@ mod tests {
             let mask = v.mask.as_ref().unwrap();
             for (i, (&a, &m)) in out.alpha.iter().zip(mask).enumerate() {
                 if a >= COVERED && m >= COVERED {
-                    for c in 3 * i..3 * i + 3 {
-                        sum += f64::from(out.rgb[c] - target[c]).powi(2);
+                    let (got, want) = (&out.rgb[3 * i..3 * i + 3], &target[3 * i..3 * i + 3]);
+                    for (g, w) in got.iter().zip(want) {
+                        sum += f64::from(g - w).powi(2);
                         n += 1;
                     }
                 }
