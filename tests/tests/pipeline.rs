@@ -20,6 +20,7 @@ fn small_config() -> Config {
     c.rig.heldout_cameras = 4;
     c.training.iterations = 300;
     c.eval.report_views = 2;
+    c.init.colour_solve_iterations = 5;
     c
 }
 
