@@ -169,6 +169,21 @@ fn pipeline_on_a_small_plenoptic_cloud() {
     assert!(html.matches("data:image/png;base64,").count() >= 2 * 5);
     assert!(html.contains("<svg") && html.contains("<polyline"));
     assert!(!html.contains("src=\"http"));
+    // Step-0 and final held-out markers on the curve, masked PSNR and the error breakdown.
+    assert!(html.contains("held-out, step 0 (fit)") && html.contains("held-out, step 0 (solve)"));
+    assert!(html.contains("masked PSNR") && html.contains("Where the held-out error comes from"));
+    assert!(
+        json["runs"][0]["step_zero"]["fit"]["psnr_black"]
+            .as_f64()
+            .unwrap()
+            > 0.0
+    );
+    assert!(
+        json["runs"][0]["metrics"]["breakdown"]["silhouette"]["pixels"]
+            .as_u64()
+            .unwrap()
+            > 0
+    );
 
     // Sparse init from a COLMAP points3D: the dataset's own sparse/0 (the input points with their
     // colours), trained with the densification schedule scaled to the run's 120 steps.
