@@ -9,7 +9,7 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use glam::{DVec3, Vec3};
 use plenoptic_io::{CaptureCamera, Model, PlenopticCloud};
 use plenoptic_render::RigConfig;
-use plenoptic_render::{self as views, ViewOptions};
+use plenoptic_render::{self as views, PixelFilter, ViewOptions};
 use rand::{RngExt, SeedableRng};
 
 /// A closed voxelised sphere shell of radius `r` (voxels inside the ball with a 6-neighbour
@@ -99,9 +99,24 @@ fn bench(c: &mut Criterion) {
     g.sample_size(10)
         .warm_up_time(Duration::from_secs(1))
         .measurement_time(Duration::from_secs(20));
-    g.bench_function("1_view", |b| {
-        b.iter(|| black_box(views::render_model(&model, &cameras[0], &opts).unwrap()))
-    });
+    // One view at each anti-aliasing setting: the default (3× Gaussian), 3× box and one sample
+    // a pixel, so the default's cost is on record beside the aliased render's.
+    let variants = [
+        ("1_view", opts.clone()),
+        (
+            "1_view_box3",
+            ViewOptions {
+                pixel_filter: PixelFilter::Box,
+                ..ViewOptions::default()
+            },
+        ),
+        ("1_view_single_sample", ViewOptions::single_sample()),
+    ];
+    for (name, o) in &variants {
+        g.bench_function(*name, |b| {
+            b.iter(|| black_box(views::render_model(&model, &cameras[0], o).unwrap()))
+        });
+    }
     g.bench_function("44_views", |b| {
         b.iter(|| {
             views::render_each(&model, &cameras, &opts, |_, img| {
