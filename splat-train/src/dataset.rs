@@ -150,6 +150,16 @@ fn read_view(
         for (p, m) in rgba.pixels_mut().zip(mask.pixels()) {
             p[3] = m[0];
         }
+    } else if has_alpha {
+        // Straight colour with alpha: premultiplied here so the reduction averages colour
+        // weighted by coverage (whatever colour a transparent pixel holds adds nothing), and
+        // divided back below like a masked image.
+        for p in rgba.pixels_mut() {
+            let a = p[3];
+            for c in &mut p.0[..3] {
+                *c *= a;
+            }
+        }
     }
     let mut intrinsics = k;
     if downscale > 1.0 {
@@ -166,14 +176,14 @@ fn read_view(
         .flat_map(|p| [p[0], p[1], p[2]])
         .collect();
     let alpha = || px.chunks_exact(4).map(|p| p[3]).collect::<Vec<f32>>();
-    Ok(if mask.is_some() {
+    Ok(if mask.is_some() || has_alpha {
         View::from_premultiplied(name.to_string(), camera, &rgb, alpha())
     } else {
         View {
             name: name.to_string(),
             camera,
             image: rgb,
-            mask: has_alpha.then(alpha),
+            mask: None,
         }
     })
 }
@@ -341,6 +351,53 @@ mod tests {
         let p = read_dataset(&plain, 1.0).unwrap();
         assert!(p.views[0].mask.is_none());
         assert!((p.views[0].image[1] - 170.0 / 255.0).abs() < 1e-7);
+    }
+
+    /// An RGBA image without a mask is straight colour with its coverage: it reads as the same
+    /// view as the masked RGB image of the same content, whatever colour its transparent pixels
+    /// hold, at full size and reduced.
+    #[test]
+    fn rgba_images_read_like_masked_ones() {
+        let dir = tempfile::tempdir().unwrap();
+        let (masked, rgba) = (dir.path().join("masked"), dir.path().join("rgba"));
+        write(&masked, [0, 0, 0], true);
+        write(&rgba, [0, 0, 0], false);
+        for name in ["a.png", "b.png"] {
+            let on_black = image::open(masked.join("images").join(name))
+                .unwrap()
+                .to_rgb8();
+            let mask = image::open(masked.join("masks").join(name))
+                .unwrap()
+                .to_luma8();
+            let img = image::RgbaImage::from_fn(W, H, |x, y| {
+                let (c, a) = (on_black.get_pixel(x, y).0, mask.get_pixel(x, y).0[0]);
+                if a == 0 {
+                    // Garbage colour under full transparency.
+                    return image::Rgba([250, 20, 140, 0]);
+                }
+                // Straight colour, as PNG stores it.
+                let straight =
+                    |v: u8| ((f32::from(v) * 255.0 / f32::from(a)).round()).min(255.0) as u8;
+                image::Rgba([straight(c[0]), straight(c[1]), straight(c[2]), a])
+            });
+            img.save(rgba.join("images").join(name)).unwrap();
+        }
+        for downscale in [1.0, 2.0] {
+            let a = read_dataset(&masked, downscale).unwrap().views;
+            let b = read_dataset(&rgba, downscale).unwrap().views;
+            for (va, vb) in a.iter().zip(&b) {
+                let (ma, mb) = (va.mask.as_ref().unwrap(), vb.mask.as_ref().unwrap());
+                assert!(ma.iter().zip(mb).all(|(x, y)| (x - y).abs() < 1e-6));
+                let on = |v: &View| v.on_background([0.0; 3]);
+                let worst = on(va)
+                    .iter()
+                    .zip(&on(vb))
+                    .map(|(x, y)| (x - y).abs())
+                    .fold(0.0f32, f32::max);
+                // 8-bit rounding of the straight colour, at most half a step times the coverage.
+                assert!(worst < 1.0 / 255.0, "÷{downscale}: {worst}");
+            }
+        }
     }
 
     /// Downscaling reduces image and mask together and scales the intrinsics.
