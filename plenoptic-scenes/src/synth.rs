@@ -394,7 +394,7 @@ mod tests {
             Intrinsics::from_fov_y(128, 128, 40.0),
             Pose::look_at(DVec3::new(0.3, 0.2, 5.0), DVec3::ZERO, WORLD_UP),
         );
-        let map = views::render_mesh(&mesh, &cam, &ViewOptions::default()).unwrap();
+        let map = views::render_mesh(&mesh, &cam, &ViewOptions::single_sample()).unwrap();
         for p in [
             Vec3::new(0.1, 0.2, 0.0),
             Vec3::new(-0.7, 0.5, 0.0),
@@ -470,7 +470,7 @@ mod tests {
     /// cloud leaves uncovered at the renderer's default one-voxel cubes, over three views; and
     /// the number of pixels checked.
     fn count_holes(mesh: &Mesh, cloud: &PlenopticCloud, margin: i32) -> (usize, usize) {
-        let opts = ViewOptions::default();
+        let opts = ViewOptions::single_sample();
         assert_eq!(opts.point_size, 1.0);
         let (mut holes, mut checked) = (0, 0);
         for eye in [
