@@ -75,18 +75,35 @@ fn render_once(
             draw_discs(&cloud.positions, &view, disc_radius(opts.point_size), &zbuf)
         }
     }
+    // A point's colour depends on the point and the viewer, not on the pixel: shade each visible
+    // point once rather than each of its pixels (a supersampled point covers many).
+    let mut visible = vec![false; cloud.len()];
+    for pixel in 0..view.pixels() {
+        if let Some((_, id)) = zbuf.get(pixel) {
+            visible[id as usize] = true;
+        }
+    }
     let viewer = view.center;
     let exponent = opts.exponent;
+    let colours: Vec<[f32; 3]> = visible
+        .par_iter()
+        .enumerate()
+        .map(|(i, &seen)| {
+            if !seen {
+                return [0.0; 3];
+            }
+            interpolate(
+                cloud.positions[i],
+                viewer,
+                capture,
+                cloud.camera_colors_of(i),
+                cloud.colors[i],
+                exponent,
+            )
+        })
+        .collect();
     Ok(shade_pixels(&view, &zbuf, opts.background, |id, _, _| {
-        let i = id as usize;
-        interpolate(
-            cloud.positions[i],
-            viewer,
-            capture,
-            cloud.camera_colors_of(i),
-            cloud.colors[i],
-            exponent,
-        )
+        colours[id as usize]
     }))
 }
 
