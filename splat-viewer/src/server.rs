@@ -201,6 +201,10 @@ impl Handler {
             }
             Err(e @ Refusal::Malformed(_)) => plain(StatusCode::BAD_REQUEST, &format!("{e}\n")),
             Err(e @ Refusal::Forbidden(_)) => plain(StatusCode::FORBIDDEN, &format!("{e}\n")),
+            // Browsers ask for an icon no page named: "no content" rather than an error.
+            Err(Refusal::NotFound) if uri.path() == "/favicon.ico" => {
+                plain(StatusCode::NO_CONTENT, "")
+            }
             Err(Refusal::NotFound) => plain(StatusCode::NOT_FOUND, "not found\n"),
         }
     }

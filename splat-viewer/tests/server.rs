@@ -123,6 +123,7 @@ fn serves_files_with_their_type_and_a_strict_policy() {
         "{r}"
     );
     assert_eq!(status(&get(running.addr, "/missing.html")), 404);
+    assert_eq!(status(&get(running.addr, "/favicon.ico")), 204);
     // HEAD has the headers and no body; other methods are refused.
     let r = raw(
         running.addr,

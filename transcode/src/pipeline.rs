@@ -954,6 +954,16 @@ fn report(
     });
     let renders: Vec<Vec<RenderedView>> = trained.iter().map(|t| t.renders.clone()).collect();
     let pictures = pick_pictures(&refs.heldout, &renders, cfg.eval.report_views);
+    if let Some(main) = trained.first() {
+        let title = format!("transcode: {}", loaded.info.path.display());
+        crate::viewer::write_report_viewer(
+            &layout.report_dir,
+            &title,
+            &main.splats,
+            &refs.heldout,
+            &main.renders,
+        )?;
+    }
     let mut report = Report {
         version: env!("CARGO_PKG_VERSION").to_string(),
         input: loaded.info.clone(),

@@ -391,7 +391,8 @@ class Viewer {
             this.fail(e);
             return;
         }
-        if (this.lastFrame) {
+        // Frames come on demand: only back-to-back frames (a moving camera) measure the rate.
+        if (this.lastFrame && time - this.lastFrame < 500) {
             STATE.frameMs.push(time - this.lastFrame);
             if (STATE.frameMs.length > 60) {
                 STATE.frameMs.shift();
@@ -411,8 +412,7 @@ class Viewer {
         const parts = [`${this.model.count.toLocaleString('en')} splats`,
             `SH degree ${this.model.shDegree}`, `${k.width}×${k.height} px`,
             `sort ${this.sorter.lastMs.toFixed(1)} ms${this.sorter.worker ? ' (worker)' : ''}`];
-        // Frames come on demand: the rate means something only while the camera moves.
-        if (mean > 0 && mean < 1000) {
+        if (mean > 0) {
             parts.push(`${(1000 / mean).toFixed(0)} fps while moving`);
         }
         if (this.viewIndex >= 0) {
