@@ -315,7 +315,8 @@ def main():
         )
 
         if args.bench:
-            browser.open(f"{args.url}?bench={args.bench}")
+            # The camera moves every frame, so there is no "ready": wait for the result.
+            browser.call("Page.navigate", url=f"{args.url}?view={views[0]}&bench={args.bench}")
             bench = None
             deadline = time.time() + 300
             while bench is None and time.time() < deadline:

@@ -89,6 +89,9 @@ pub enum PipelineError {
     /// The saved run cannot be resumed, or its state cannot be saved.
     #[error(transparent)]
     Resume(#[from] ResumeError),
+    /// The viewer beside the report could not be written.
+    #[error("cannot write the viewer: {0}")]
+    Viewer(Box<crate::viewer::ViewerError>),
 }
 
 /// Boxes the large error types of the stages into [`PipelineError`].
@@ -101,7 +104,7 @@ macro_rules! boxed_from {
         }
     )*};
 }
-boxed_from!(Load: plenoptic_io::Error, Views: views::Error, Init: init::InitError, Train: splat_train::Error, Eval: splat_train::EvalError);
+boxed_from!(Load: plenoptic_io::Error, Views: views::Error, Init: init::InitError, Train: splat_train::Error, Eval: splat_train::EvalError, Viewer: crate::viewer::ViewerError);
 
 fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> PipelineError + '_ {
     move |source| PipelineError::Io {

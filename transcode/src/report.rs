@@ -118,6 +118,9 @@ pub struct ViewPictures {
     pub renders: Vec<Vec<f32>>,
 }
 
+/// The interactive viewer's folder beside report.html (written by [`crate::viewer`]).
+pub const VIEWER_DIR: &str = "viewer";
+
 /// Absolute error (mean over channels) at which the heat map saturates.
 pub const HEAT_MAX_ERROR: f32 = 0.25;
 
@@ -167,7 +170,7 @@ pub fn render_html(report: &Report, pictures: &[ViewPictures]) -> io::Result<Str
         report.total_seconds,
         esc(&report.version),
     );
-    h.push_str(&splat_viewer::report_section(crate::viewer::VIEWER_DIR));
+    h.push_str(&splat_viewer::report_section(VIEWER_DIR));
     metrics_table(&mut h, report, &names);
     timings_table(&mut h, report, &names);
     h.push_str(&format!(

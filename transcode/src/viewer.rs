@@ -12,11 +12,34 @@ use splat_train::View;
 use splat_train::eval::RenderedView;
 use splat_viewer::{Scene, SceneModel, SceneView, ViewCamera, ViewImages};
 
-use crate::pipeline::PipelineError;
-use crate::report::{heat_map, png_bytes};
+use crate::report::{VIEWER_DIR, heat_map, png_bytes};
 
-/// The viewer's folder inside the report folder.
-pub const VIEWER_DIR: &str = "viewer";
+/// Why the viewer could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum ViewerError {
+    /// The model could not be packed as SPZ.
+    #[error("cannot pack the model as SPZ: {0}")]
+    Model(Box<splat_core::Error>),
+    /// The held-out cameras could not be written as a COLMAP model.
+    #[error("cannot write the held-out cameras in {}: {source}", path.display())]
+    Cameras {
+        /// The folder.
+        path: PathBuf,
+        /// The cause.
+        source: Box<colmap_io::Error>,
+    },
+    /// A picture could not be encoded, or a folder created or removed.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file or folder.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// The viewer's files could not be written.
+    #[error(transparent)]
+    Files(#[from] splat_viewer::Error),
+}
 /// The held-out cameras' COLMAP model inside the viewer's folder.
 pub const HELDOUT_DIR: &str = "heldout";
 /// The model's file in the viewer's folder.
@@ -43,28 +66,24 @@ pub fn view_camera(camera: &Camera) -> ViewCamera {
 /// `renders` of them (in the same order), replacing an earlier one.
 ///
 /// # Errors
-/// [`PipelineError::Model`] when the model cannot be packed as SPZ, [`PipelineError::Dataset`]
-/// when the cameras cannot be written as COLMAP, [`PipelineError::Io`] for any other file.
+/// A [`ViewerError`] naming what could not be packed or written.
 pub fn write_report_viewer(
     report_dir: &Path,
     title: &str,
     splats: &Splats,
     views: &[View],
     renders: &[RenderedView],
-) -> Result<PathBuf, PipelineError> {
+) -> Result<PathBuf, ViewerError> {
     let dir = report_dir.join(VIEWER_DIR);
     let io = |path: &Path| {
         let path = path.to_path_buf();
-        move |source: std::io::Error| PipelineError::Io { path, source }
+        move |source: std::io::Error| ViewerError::Io { path, source }
     };
     if dir.exists() {
         std::fs::remove_dir_all(&dir).map_err(io(&dir))?;
     }
-    let model_path = dir.join(MODEL_FILE);
-    let model = encode_spz(splats, &SpzOptions::default()).map_err(|e| PipelineError::Model {
-        path: model_path.clone(),
-        source: Box::new(e),
-    })?;
+    let model =
+        encode_spz(splats, &SpzOptions::default()).map_err(|e| ViewerError::Model(Box::new(e)))?;
     let mut pictures = Vec::new();
     let mut scene_views = Vec::new();
     for (v, render) in views.iter().zip(renders) {
@@ -101,13 +120,12 @@ pub fn write_report_viewer(
         }),
         views: scene_views,
     };
-    splat_viewer::write_folder(&dir, &scene, &model, pictures)
-        .map_err(|e| io(&dir)(std::io::Error::other(e)))?;
+    splat_viewer::write_folder(&dir, &scene, &model, pictures)?;
     let heldout = dir.join(HELDOUT_DIR);
     let names: Vec<String> = views.iter().map(|v| format!("{}.png", v.name)).collect();
-    let dataset_err = |e: colmap_io::Error| PipelineError::Dataset {
+    let dataset_err = |source: colmap_io::Error| ViewerError::Cameras {
         path: heldout.clone(),
-        message: e.to_string(),
+        source: Box::new(source),
     };
     let rec = colmap_io::dataset::reconstruction_from_cameras(
         names

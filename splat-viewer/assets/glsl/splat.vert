@@ -1,5 +1,5 @@
 #version 300 es
-// One splat as an instanced quad: splat-core's EWA projection (`splat_core::project`), its SH
+// One splat as a quad: splat-core's EWA projection (`splat_core::project`), its SH
 // colour (`splat_core::sh`) and its constants (`splat_core::constants`), so the viewer draws
 // what the CPU rasteriser draws. Frames as in splat-core: COLMAP camera (x right, y down,
 // z forward), world→camera rotation and translation, pixel (0, 0)'s centre at (0.5, 0.5).
@@ -7,10 +7,13 @@ precision highp float;
 precision highp int;
 precision highp sampler2D;
 
-// Per instance: the splat's index, back to front (from the sort worker).
-layout(location = 0) in uint a_index;
-// Per vertex: the quad's corner, (±1, ±1).
-layout(location = 1) in vec2 a_corner;
+// Six vertices (two triangles) per splat, no attributes: vertex v draws the splat at place
+// v / 6 of the back-to-front order (from the sort worker), corner v % 6 of its quad. One plain
+// draw rather than instancing: software renderers (SwiftShader) set every instance up anew,
+// which cost about 0.1 ms a splat.
+uniform highp usampler2D u_order;
+const vec2 CORNERS[6] = vec2[6](vec2(-1.0, -1.0), vec2(1.0, -1.0), vec2(-1.0, 1.0),
+    vec2(-1.0, 1.0), vec2(1.0, -1.0), vec2(1.0, 1.0));
 
 // 4 texels per splat: (mean, opacity), (M col 0, dc.r), (M col 1, dc.g), (M col 2, dc.b) with
 // M = R·S, so the world covariance is M·Mᵀ.
@@ -58,6 +61,11 @@ ivec2 texel(sampler2D tex, int index) {
     return ivec2(index % w, index / w);
 }
 
+int splatIndex(int place) {
+    int w = textureSize(u_order, 0).x;
+    return int(texelFetch(u_order, ivec2(place % w, place / w), 0).r);
+}
+
 void cull() {
     // Outside the clip volume: the quad produces no fragment.
     gl_Position = vec4(0.0, 0.0, 2.0, 1.0);
@@ -101,7 +109,8 @@ vec3 shRest(int i, vec3 dir) {
 }
 
 void main() {
-    int i = int(a_index);
+    int i = splatIndex(gl_VertexID / 6);
+    vec2 corner = CORNERS[gl_VertexID % 6];
     vec4 t0 = texelFetch(u_splats, texel(u_splats, 4 * i), 0);
     vec4 t1 = texelFetch(u_splats, texel(u_splats, 4 * i + 1), 0);
     vec4 t2 = texelFetch(u_splats, texel(u_splats, 4 * i + 2), 0);
@@ -147,14 +156,21 @@ void main() {
     // The quad covers the ellipse where o·G ≥ 1/255: q ≤ 2·ln(255·o), with
     // `splat_core::projected::quad_bound`'s margin, along the covariance's eigenvectors.
     float qMax = 2.0 * log(255.0 * opacity) * 1.001 + 1e-3;
+    vec2 centre = u_focal * uRaw + u_principal;
+    // Off screen (its bounding box misses the image): culled before the SH, as splat-core culls
+    // a splat that touches no tile.
+    vec2 halfSize = sqrt(qMax * vec2(a, c));
+    if (any(lessThan(centre + halfSize, vec2(0.0))) || any(greaterThan(centre - halfSize, u_size))) {
+        cull();
+        return;
+    }
     float mid = 0.5 * (a + c);
     float l1 = mid + sqrt(max(0.25 * (a - c) * (a - c) + b * b, 0.0));
     float l2 = det / l1;
     vec2 axis = vec2(b, l1 - a);
     axis = dot(axis, axis) > 1e-20 ? normalize(axis) : vec2(1.0, 0.0);
-    vec2 offset = a_corner.x * sqrt(qMax * l1) * axis
-        + a_corner.y * sqrt(qMax * l2) * vec2(-axis.y, axis.x);
-    vec2 centre = u_focal * uRaw + u_principal;
+    vec2 offset = corner.x * sqrt(qMax * l1) * axis
+        + corner.y * sqrt(qMax * l2) * vec2(-axis.y, axis.x);
     vec2 pixel = centre + offset;
     gl_Position = vec4(2.0 * pixel.x / u_size.x - 1.0, 1.0 - 2.0 * pixel.y / u_size.y, 0.0, 1.0);
     v_offset = offset;

@@ -1,10 +1,10 @@
-// WebGL2 drawing: the splats' data textures, the instanced quads in the sort worker's order,
+// WebGL2 drawing: the splats' data textures, one quad per splat in the sort worker's order,
 // blended back to front into a floating-point target, then put over the background.
 
 const SH_TEXELS = [0, 3, 6, 12]; // texels of SH bands 1..degree per splat (9, 24, 45 floats)
 
 class SplatRenderer {
-    constructor(canvas) {
+    constructor(canvas, eightBit) {
         const gl = canvas.getContext('webgl2', {
             alpha: false,
             antialias: false,
@@ -21,26 +21,15 @@ class SplatRenderer {
         this.canvas = canvas;
         // Blending in 8 bits rounds at every splat; a half-float target keeps the sum of
         // hundreds of layers close to splat-core's f32 compositing.
-        this.floatTarget = !!gl.getExtension('EXT_color_buffer_float')
-            || !!gl.getExtension('EXT_color_buffer_half_float');
+        this.floatTarget = !eightBit && (!!gl.getExtension('EXT_color_buffer_float')
+            || !!gl.getExtension('EXT_color_buffer_half_float'));
         this.splatProgram = program(gl, VIEWER_SOURCES['splat.vert'], VIEWER_SOURCES['splat.frag']);
         this.compositeProgram = program(gl, VIEWER_SOURCES['composite.vert'],
             VIEWER_SOURCES['composite.frag']);
         this.uniforms = uniformLocations(gl, this.splatProgram);
         this.compositeUniforms = uniformLocations(gl, this.compositeProgram);
+        // The draw reads no attribute (splat.vert takes everything from textures).
         this.vao = gl.createVertexArray();
-        gl.bindVertexArray(this.vao);
-        const corners = gl.createBuffer();
-        gl.bindBuffer(gl.ARRAY_BUFFER, corners);
-        gl.bufferData(gl.ARRAY_BUFFER, new Float32Array([-1, -1, 1, -1, -1, 1, 1, 1]), gl.STATIC_DRAW);
-        gl.enableVertexAttribArray(1);
-        gl.vertexAttribPointer(1, 2, gl.FLOAT, false, 0, 0);
-        this.orderBuffer = gl.createBuffer();
-        gl.bindBuffer(gl.ARRAY_BUFFER, this.orderBuffer);
-        gl.enableVertexAttribArray(0);
-        gl.vertexAttribIPointer(0, 1, gl.UNSIGNED_INT, 0, 0);
-        gl.vertexAttribDivisor(0, 1);
-        gl.bindVertexArray(null);
         this.instances = 0;
         this.model = null;
         this.target = null;
@@ -79,14 +68,29 @@ class SplatRenderer {
             gl.RGBA16F);
         this.model = { count: n, shDegree: model.shDegree, shTexels: texels,
             antialiased: model.antialiased };
+        this.orderWidth = Math.min(Math.max(n, 1), maxWidth);
+        this.orderRows = Math.ceil(Math.max(n, 1) / this.orderWidth);
+        if (this.orderTexture) {
+            gl.deleteTexture(this.orderTexture);
+        }
+        this.orderTexture = gl.createTexture();
+        gl.bindTexture(gl.TEXTURE_2D, this.orderTexture);
+        gl.texStorage2D(gl.TEXTURE_2D, 1, gl.R32UI, this.orderWidth, this.orderRows);
+        setNearest(gl);
         this.instances = 0;
     }
 
-    /// Sets the back-to-front order to draw (from the sort worker).
+    /// Sets the back-to-front order to draw (from the sort worker), as whole texture rows.
     setOrder(order) {
         const gl = this.gl;
-        gl.bindBuffer(gl.ARRAY_BUFFER, this.orderBuffer);
-        gl.bufferData(gl.ARRAY_BUFFER, order, gl.DYNAMIC_DRAW);
+        const rows = Math.ceil(order.length / this.orderWidth);
+        if (rows > 0) {
+            const padded = new Uint32Array(rows * this.orderWidth);
+            padded.set(order);
+            gl.bindTexture(gl.TEXTURE_2D, this.orderTexture);
+            gl.texSubImage2D(gl.TEXTURE_2D, 0, 0, 0, this.orderWidth, rows, gl.RED_INTEGER,
+                gl.UNSIGNED_INT, padded);
+        }
         this.instances = order.length;
     }
 
@@ -116,6 +120,9 @@ class SplatRenderer {
             gl.activeTexture(gl.TEXTURE1);
             gl.bindTexture(gl.TEXTURE_2D, this.shTexture);
             gl.uniform1i(u.u_sh, 1);
+            gl.activeTexture(gl.TEXTURE2);
+            gl.bindTexture(gl.TEXTURE_2D, this.orderTexture);
+            gl.uniform1i(u.u_order, 2);
             gl.uniform1i(u.u_shTexels, this.model.shTexels);
             gl.uniform1i(u.u_degree, Math.min(shDegree, this.model.shDegree));
             // GLSL matrices are column-major: R's columns are its transpose's rows.
@@ -131,7 +138,7 @@ class SplatRenderer {
             // Back to front, premultiplied: dst = src + (1 − src.a)·dst.
             gl.blendFunc(gl.ONE, gl.ONE_MINUS_SRC_ALPHA);
             gl.bindVertexArray(this.vao);
-            gl.drawArraysInstanced(gl.TRIANGLE_STRIP, 0, 4, this.instances);
+            gl.drawArrays(gl.TRIANGLES, 0, 6 * this.instances);
             gl.bindVertexArray(null);
             gl.disable(gl.BLEND);
         }

@@ -118,9 +118,12 @@ fn file_site(model: &Path, colmap: Option<&Path>) -> anyhow::Result<Site> {
     Ok(site)
 }
 
+/// Files to serve from memory: (path, content).
+type Pictures = Vec<(String, Vec<u8>)>;
+
 /// The cameras of a COLMAP model as the viewer's views, and the images beside them (a dataset's
 /// `images/`) as reference pictures.
-fn colmap_views(dir: &Path) -> anyhow::Result<(Vec<SceneView>, Vec<(String, Vec<u8>)>)> {
+fn colmap_views(dir: &Path) -> anyhow::Result<(Vec<SceneView>, Pictures)> {
     let model = super::render::model_dir(dir);
     let rec = colmap_io::read_model(&model)
         .with_context(|| format!("reading the COLMAP model in {}", model.display()))?;
