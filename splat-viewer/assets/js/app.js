@@ -430,9 +430,11 @@ class Viewer {
         const kind = this.compareKind.value;
         const file = view && view.images ? view.images[kind] : null;
         this.compare.hidden = !(view && view.images);
-        const show = this.atView && !!file;
+        const live = Number(this.wipe.value);
+        // All live (100): no picture and no divider at the edge.
+        const show = this.atView && !!file && live < 100;
         this.overlay.hidden = !show;
-        this.divider.hidden = !show;
+        this.divider.hidden = !show || live <= 0;
         if (!show) {
             return;
         }
@@ -440,7 +442,6 @@ class Viewer {
         if (this.overlay.getAttribute('src') !== src) {
             this.overlay.src = src;
         }
-        const live = Number(this.wipe.value);
         this.overlay.style.clipPath = `inset(0 0 0 ${live}%)`;
         this.divider.style.left = `${(live / 100) * this.cssSize[0]}px`;
         this.divider.style.height = `${this.cssSize[1]}px`;
