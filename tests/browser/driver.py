@@ -19,6 +19,7 @@ import json
 import os
 import re
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -272,6 +273,8 @@ def main():
         else:
             failed += 1
 
+    # A timeout's SIGTERM unwinds through `finally`, so Chromium is not left behind.
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(1))
     browser = Browser(args.chromium)
     try:
         info = browser.evaluate(
