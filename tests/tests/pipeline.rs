@@ -184,6 +184,25 @@ fn pipeline_on_a_small_plenoptic_cloud() {
             .unwrap()
             > 0
     );
+    // The viewer beside it: the main model, one camera with three pictures per held-out view.
+    assert!(html.contains("<script src=\"viewer/viewer.js\">"));
+    let viewer = out.join("report/viewer");
+    let spz = splat_core::spz::read_spz(&viewer.join("model.spz")).unwrap();
+    assert_eq!(spz.splats.len(), splats.len());
+    let heldout = colmap_io::read_model(&viewer.join("heldout")).unwrap();
+    assert_eq!(
+        heldout.images.len(),
+        json["heldout_views"].as_u64().unwrap() as usize
+    );
+    for image in heldout.images.values() {
+        let stem = image.name.trim_end_matches(".png");
+        for kind in ["reference", "render", "error"] {
+            assert!(
+                viewer.join(format!("views/{stem}-{kind}.png")).is_file(),
+                "{stem} {kind}"
+            );
+        }
+    }
 
     // Sparse init from a COLMAP points3D: the dataset's own sparse/0 (the input points with their
     // colours), trained with the densification schedule scaled to the run's 120 steps.

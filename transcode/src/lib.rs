@@ -10,6 +10,7 @@
 //! - [`progress`]: the events a run reports to its caller (the library never prints).
 //! - [`report`]: the run report (JSON and HTML).
 //! - [`resume`]: the run state that lets a killed run continue.
+//! - [`viewer`]: the interactive viewer written beside the report.
 //!
 //! ```
 //! use transcode::config::Config;
@@ -28,3 +29,4 @@ pub mod pipeline;
 pub mod progress;
 pub mod report;
 pub mod resume;
+pub mod viewer;

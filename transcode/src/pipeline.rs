@@ -93,6 +93,9 @@ pub enum PipelineError {
     /// The saved run cannot be resumed, or its state cannot be saved.
     #[error(transparent)]
     Resume(#[from] ResumeError),
+    /// The viewer beside the report could not be written.
+    #[error("cannot write the viewer: {0}")]
+    Viewer(Box<crate::viewer::ViewerError>),
 }
 
 /// Boxes the large error types of the stages into [`PipelineError`].
@@ -105,7 +108,7 @@ macro_rules! boxed_from {
         }
     )*};
 }
-boxed_from!(Load: plenoptic_io::Error, Views: views::Error, Init: init::InitError, Train: splat_train::Error, Eval: splat_train::EvalError);
+boxed_from!(Load: plenoptic_io::Error, Views: views::Error, Init: init::InitError, Train: splat_train::Error, Eval: splat_train::EvalError, Viewer: crate::viewer::ViewerError);
 
 fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> PipelineError + '_ {
     move |source| PipelineError::Io {
@@ -1013,6 +1016,16 @@ fn report(
     });
     let renders: Vec<Vec<RenderedView>> = trained.iter().map(|t| t.renders.clone()).collect();
     let pictures = pick_pictures(&refs.heldout, &renders, cfg.eval.report_views);
+    if let Some(main) = trained.first() {
+        let title = format!("transcode: {}", loaded.info.path.display());
+        crate::viewer::write_report_viewer(
+            &layout.report_dir,
+            &title,
+            &main.splats,
+            &refs.heldout,
+            &main.renders,
+        )?;
+    }
     let mut report = Report {
         version: env!("CARGO_PKG_VERSION").to_string(),
         input: loaded.info.clone(),

@@ -1,9 +1,11 @@
 //! The run report: report.json and a self-contained report.html.
 //!
-//! The HTML page needs nothing beside it: pictures are PNG data URIs, the training curve is inline
-//! SVG, there is no script. It shows, for several held-out views, the reference, each run's splats
+//! The HTML page's own content needs nothing beside it: pictures are PNG data URIs, the training
+//! curve is inline SVG. It shows, for several held-out views, the reference, each run's splats
 //! and an error heat map side by side; the metrics of every run (surface and sparse init when both
-//! ran); the time of each stage; and held-out-independent training PSNR against wall time.
+//! ran); the time of each stage; and held-out-independent training PSNR against wall time. Its
+//! one script is the interactive viewer, in the `viewer/` folder the pipeline writes beside it
+//! ([`crate::viewer`]).
 
 use std::fmt::Write as _;
 use std::io;
@@ -157,6 +159,9 @@ pub struct ViewPictures {
     pub renders: Vec<Vec<f32>>,
 }
 
+/// The interactive viewer's folder beside report.html (written by [`crate::viewer`]).
+pub const VIEWER_DIR: &str = "viewer";
+
 /// Absolute error (mean over channels) at which the heat map saturates.
 pub const HEAT_MAX_ERROR: f32 = 0.25;
 
@@ -206,6 +211,7 @@ pub fn render_html(report: &Report, pictures: &[ViewPictures]) -> io::Result<Str
         report.total_seconds,
         esc(&report.version),
     );
+    h.push_str(&splat_viewer::report_section(VIEWER_DIR));
     metrics_table(&mut h, report, &names);
     breakdown_table(&mut h, report, &names);
     timings_table(&mut h, report, &names);
@@ -578,6 +584,14 @@ pub fn heat_map(reference: &[f32], render: &[f32]) -> Vec<f32> {
 
 /// An RGB image in [0, 1] as an 8-bit PNG data URI.
 pub fn png_data_uri(rgb: &[f32], width: u32, height: u32) -> io::Result<String> {
+    Ok(format!(
+        "data:image/png;base64,{}",
+        base64(&png_bytes(rgb, width, height)?)
+    ))
+}
+
+/// An RGB image in [0, 1] as 8-bit PNG bytes.
+pub fn png_bytes(rgb: &[f32], width: u32, height: u32) -> io::Result<Vec<u8>> {
     let bytes: Vec<u8> = rgb
         .iter()
         .map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
@@ -587,7 +601,7 @@ pub fn png_data_uri(rgb: &[f32], width: u32, height: u32) -> io::Result<String> 
     let mut png = io::Cursor::new(Vec::new());
     img.write_to(&mut png, image::ImageFormat::Png)
         .map_err(io::Error::other)?;
-    Ok(format!("data:image/png;base64,{}", base64(png.get_ref())))
+    Ok(png.into_inner())
 }
 
 /// Standard base64 (RFC 4648 §4) with padding.

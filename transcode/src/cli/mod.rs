@@ -14,6 +14,7 @@ mod run;
 #[cfg(feature = "scenes")]
 mod synth;
 mod train;
+mod view;
 mod views;
 
 /// Turn plenoptic point clouds and meshes into 3D Gaussian Splatting models.
@@ -49,6 +50,8 @@ enum Command {
     Synth(synth::Args),
     /// Print or check the configuration shared by all subcommands.
     Config(config::Args),
+    /// Serve the splat viewer on this machine: an output folder's report, or any PLY/SPZ model.
+    View(view::Args),
 }
 
 /// Runs the chosen subcommand.
@@ -66,5 +69,6 @@ pub fn dispatch(cli: Cli) -> anyhow::Result<()> {
         #[cfg(feature = "scenes")]
         Command::Synth(a) => synth::run(a),
         Command::Config(a) => config::run(a),
+        Command::View(a) => view::run(a),
     }
 }

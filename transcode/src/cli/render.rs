@@ -1,5 +1,6 @@
-//! `transcode render SPLATS.ply --colmap DIR --out OUTDIR [--background R,G,B] [--images NAME,...]`:
-//! renders a 3DGS PLY from the cameras of a COLMAP model to PNG files named like its images.
+//! `transcode render SPLATS.ply|SPLATS.spz --colmap DIR --out OUTDIR [--background R,G,B]
+//! [--images NAME,...]`: renders a 3DGS PLY or SPZ from the cameras of a COLMAP model to PNG files
+//! named like its images.
 
 use std::path::{Path, PathBuf};
 
@@ -10,7 +11,8 @@ use splat_core::{Rasterizer, RenderCamera, RenderOptions};
 /// Arguments of `transcode render`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// The 3DGS PLY to render (Inria layout; any property order, float or double).
+    /// The model to render: a 3DGS PLY (Inria layout; any property order, float or double) or
+    /// an SPZ file (by its extension).
     pub splats: PathBuf,
     /// COLMAP model folder (with cameras/images files), or a dataset root holding sparse/0.
     #[arg(long)]
@@ -33,7 +35,7 @@ pub struct Args {
 }
 
 /// The model folder: `DIR` itself if it holds a model, else `DIR/sparse/0`.
-fn model_dir(dir: &Path) -> PathBuf {
+pub(crate) fn model_dir(dir: &Path) -> PathBuf {
     let nested = dir.join("sparse").join("0");
     if colmap_io::detect_format(dir).is_none() && colmap_io::detect_format(&nested).is_some() {
         nested
@@ -44,7 +46,7 @@ fn model_dir(dir: &Path) -> PathBuf {
 
 /// Renders every selected image of the model and writes it as PNG.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let splats = splat_core::ply::read_splats(&args.splats)?;
+    let (splats, antialiased) = read_splats(&args.splats)?;
     let model = model_dir(&args.colmap);
     let rec = colmap_io::read_model(&model)
         .with_context(|| format!("reading the COLMAP model in {}", model.display()))?;
@@ -66,7 +68,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let opts = RenderOptions {
         background: bg,
         active_sh_degree: args.sh_degree.unwrap_or(splats.sh_degree),
-        antialiased: args.antialiased,
+        antialiased: args.antialiased || antialiased,
         linear_colour: false,
     };
     std::fs::create_dir_all(&args.out)
@@ -110,4 +112,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     bar.finish_with_message(format!("wrote {}", args.out.display()));
     Ok(())
+}
+
+/// Reads a 3DGS PLY, or an SPZ file by its extension; returns the splats and whether the file
+/// says they were trained antialiased (SPZ's flag).
+fn read_splats(path: &Path) -> anyhow::Result<(splat_core::Splats, bool)> {
+    let spz = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("spz"));
+    Ok(if spz {
+        let m = splat_core::spz::read_spz(path)?;
+        (m.splats, m.antialiased)
+    } else {
+        (splat_core::ply::read_splats(path)?, false)
+    })
 }

@@ -1,0 +1,174 @@
+//! `transcode view MODEL_OR_OUTDIR [--host ADDR] [--port N] [--colmap DIR]`: serves the splat
+//! viewer on this machine and prints its address: an output folder's report and viewer as they
+//! are, or any 3DGS PLY or SPZ file (with cameras to jump to from a COLMAP model).
+
+use std::net::{IpAddr, Ipv4Addr, SocketAddr};
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+use splat_viewer::{SceneView, Server, Site, ViewImages, model_site};
+
+/// Arguments of `transcode view`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// A 3DGS model (.ply or .spz), or an output folder of `transcode run` or `demo` (its report
+    /// with the viewer is served, and nothing outside the folder).
+    pub path: PathBuf,
+    /// Address to listen on. The default is reachable from this machine only; an address such
+    /// as 0.0.0.0 shows the folder to the whole network.
+    #[arg(long, default_value_t = IpAddr::V4(Ipv4Addr::LOCALHOST))]
+    pub host: IpAddr,
+    /// Port to listen on (0: any free port).
+    #[arg(long, default_value_t = 0)]
+    pub port: u16,
+    /// For a model file: cameras to jump to, from a COLMAP model (a folder with cameras and
+    /// images files, or a dataset root holding sparse/0); a dataset's images become the
+    /// reference pictures to compare with.
+    #[arg(long)]
+    pub colmap: Option<PathBuf>,
+}
+
+/// Pages an output folder may hold, in the order they are looked for.
+const ENTRY_PAGES: [&str; 4] = [
+    "report/report.html",
+    "report.html",
+    "viewer/index.html",
+    "index.html",
+];
+
+/// Models an output folder may hold, when it has no page.
+const MODELS: [&str; 2] = ["model/splats.spz", "model/splats.ply"];
+
+/// Serves until the process is stopped.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let (site, what, entry) = if args.path.is_dir() {
+        folder_site(&args.path, args.colmap.as_deref())?
+    } else {
+        let site = file_site(&args.path, args.colmap.as_deref())?;
+        (
+            site,
+            args.path.display().to_string(),
+            "index.html".to_string(),
+        )
+    };
+    let server = Server::bind(SocketAddr::new(args.host, args.port), site)?;
+    let addr = server.local_addr()?;
+    println!("serving {what}");
+    println!("open http://{addr}/{entry}   (Ctrl-C stops the server)");
+    if !args.host.is_loopback() {
+        println!(
+            "note: listening on {}, so other machines on the network can read these files",
+            args.host
+        );
+    }
+    server.run()?;
+    Ok(())
+}
+
+/// An output folder: its page if it has one (the folder is the root), else its model.
+fn folder_site(dir: &Path, colmap: Option<&Path>) -> anyhow::Result<(Site, String, String)> {
+    if let Some(entry) = ENTRY_PAGES.iter().find(|p| dir.join(p).is_file()) {
+        if colmap.is_some() {
+            bail!(
+                "--colmap applies to a model file; {} has its own cameras",
+                dir.display()
+            );
+        }
+        let site = Site::new(*entry).with_root(dir)?;
+        return Ok((site, dir.display().to_string(), (*entry).to_string()));
+    }
+    match MODELS.iter().map(|m| dir.join(m)).find(|p| p.is_file()) {
+        Some(model) => Ok((
+            file_site(&model, colmap)?,
+            model.display().to_string(),
+            "index.html".to_string(),
+        )),
+        None => bail!(
+            "{} has no report or viewer page ({}) and no model ({})",
+            dir.display(),
+            ENTRY_PAGES.join(", "),
+            MODELS.join(", ")
+        ),
+    }
+}
+
+/// The viewer of one model file, in memory: the viewer's files, the model and the reference
+/// pictures of `colmap`'s cameras; nothing else is served.
+fn file_site(model: &Path, colmap: Option<&Path>) -> anyhow::Result<Site> {
+    let ext = model
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    if ext != "ply" && ext != "spz" {
+        bail!(
+            "{}: the viewer reads 3DGS PLY and SPZ files (.ply, .spz)",
+            model.display()
+        );
+    }
+    let bytes = std::fs::read(model).with_context(|| format!("reading {}", model.display()))?;
+    let (views, pictures) = match colmap {
+        Some(dir) => colmap_views(dir)?,
+        None => (Vec::new(), Vec::new()),
+    };
+    let title = format!("splats: {}", model.display());
+    let mut site = model_site(&title, &format!("model.{ext}"), bytes, views)?;
+    for (name, bytes) in pictures {
+        site.add(&name, bytes);
+    }
+    Ok(site)
+}
+
+/// Files to serve from memory: (path, content).
+type Pictures = Vec<(String, Vec<u8>)>;
+
+/// The cameras of a COLMAP model as the viewer's views, and the images beside them (a dataset's
+/// `images/`) as reference pictures.
+fn colmap_views(dir: &Path) -> anyhow::Result<(Vec<SceneView>, Pictures)> {
+    let model = super::render::model_dir(dir);
+    let rec = colmap_io::read_model(&model)
+        .with_context(|| format!("reading the COLMAP model in {}", model.display()))?;
+    let images_dir = dir.join("images");
+    let mut views = Vec::new();
+    let mut pictures = Vec::new();
+    for (id, image) in &rec.images {
+        let camera = rec
+            .camera_of(*id)
+            .with_context(|| format!("camera of image {}", image.name))?;
+        let stem = Path::new(&image.name).file_stem().map_or_else(
+            || format!("image_{id}"),
+            |s| s.to_string_lossy().into_owned(),
+        );
+        let reference = std::fs::read(images_dir.join(&image.name))
+            .ok()
+            .map(|bytes| {
+                let name = format!("references/{id}-{}", sanitise(&image.name));
+                pictures.push((name.clone(), bytes));
+                name
+            });
+        views.push(SceneView {
+            name: stem,
+            camera: transcode::viewer::view_camera(&camera),
+            images: reference.map(|r| ViewImages {
+                reference: Some(r),
+                render: None,
+                error: None,
+            }),
+        });
+    }
+    Ok((views, pictures))
+}
+
+/// A file name with only letters, digits, `.`, `-` and `_` (others become `_`), no leading dot.
+fn sanitise(name: &str) -> String {
+    let s: String = name
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || matches!(c, '.' | '-' | '_') {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    s.trim_start_matches('.').to_string()
+}
