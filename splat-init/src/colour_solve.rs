@@ -109,35 +109,30 @@ pub fn solve_colours(
     let mut raster = Rasterizer::new();
     let mut grads = SplatGrads::zeros_like(splats);
 
-    // Per view, 1/α on the pixels both cover and 0 elsewhere: the row scaling of B = D⁻¹A
-    // restricted to those pixels (coverage does not depend on colour, so one pass finds it).
+    // One pass over the views at x₀ gives both, since coverage does not depend on colour:
+    // - per view, 1/α on the pixels both cover and 0 elsewhere: the row scaling of B = D⁻¹A
+    //   restricted to those pixels;
+    // - the right-hand side g = Bᵀ(y − 0.5 − B x₀), with δ = x − x₀.
     let mut work = splats.clone();
-    let scales: Vec<Vec<f32>> = cameras
-        .iter()
-        .zip(&targets)
-        .map(|(cam, (_, mask))| {
-            let out = raster.forward(&work, cam, &render);
-            out.alpha
-                .iter()
-                .enumerate()
-                .map(|(i, &a)| {
-                    let reference = mask.map_or(1.0, |m| m[i]);
-                    if a >= COVERED && reference >= COVERED {
-                        1.0 / a
-                    } else {
-                        0.0
-                    }
-                })
-                .collect()
-        })
-        .collect();
-
-    // Right-hand side: g = Bᵀ(y − 0.5 − B x₀), with δ = x − x₀.
+    let mut scales: Vec<Vec<f32>> = Vec::with_capacity(cameras.len());
     let mut sq_error = 0.0f64;
     let mut values = 0usize;
     grads.reset(&work);
-    for ((cam, (y, _)), scale) in cameras.iter().zip(&targets).zip(&scales) {
+    for (cam, (y, mask)) in cameras.iter().zip(&targets) {
         let out = raster.forward(&work, cam, &render);
+        let scale: Vec<f32> = out
+            .alpha
+            .iter()
+            .enumerate()
+            .map(|(i, &a)| {
+                let reference = mask.map_or(1.0, |m| m[i]);
+                if a >= COVERED && reference >= COVERED {
+                    1.0 / a
+                } else {
+                    0.0
+                }
+            })
+            .collect();
         let mut d_rgb = vec![0.0f32; out.rgb.len()];
         for (i, &s) in scale.iter().enumerate() {
             if s == 0.0 {
@@ -151,6 +146,7 @@ pub fn solve_colours(
             }
         }
         raster.backward(&work, cam, &render, &d_rgb, None, None, &mut grads);
+        scales.push(scale);
     }
     let rms_before = (sq_error / values.max(1) as f64).sqrt();
 
