@@ -43,6 +43,7 @@ fn pipeline_on_a_small_plenoptic_cloud() {
     let out = tmp.path().join("out");
     let mut cfg = small_config();
     cfg.output.compare_init = true;
+    cfg.eval.every = 100;
     let outcome =
         transcode::pipeline::run(&input, &out, &cfg, &transcode::progress::ignore).unwrap();
 
@@ -131,6 +132,19 @@ fn pipeline_on_a_small_plenoptic_cloud() {
     );
     assert!(solved.psnr_black > z.fit.psnr_black + 0.5, "{z:?}");
     assert!(solved.psnr_white > z.fit.psnr_white, "{z:?}");
+    // The held-out curve: scored at step 0 (the solved colours training starts from), every 100
+    // steps and at the end, where it is the end's evaluation itself.
+    let curve = &main.heldout_curve;
+    let steps: Vec<u32> = curve.iter().map(|p| p.iteration).collect();
+    assert_eq!(steps, [0, 100, 200, 300]);
+    assert!((curve[0].score.psnr_black - solved.psnr_black).abs() < 1e-9);
+    let end = curve.last().unwrap();
+    assert!((end.score.psnr_black - m.psnr_black).abs() < 1e-9);
+    assert!((end.score.masked_psnr_white - m.masked_psnr_white).abs() < 1e-9);
+    assert!((end.ssim_white - m.ssim_white).abs() < 1e-9);
+    assert!(curve.windows(2).all(|w| w[0].elapsed_s <= w[1].elapsed_s));
+    assert!(end.elapsed_s <= main.train_seconds + 1e-9);
+    assert!(end.score.psnr_black > curve[0].score.psnr_black);
     assert!(m.alpha_iou > 0.97, "alpha IoU {}", m.alpha_iou);
     assert!(m.hole_alpha < 0.05, "holes {}", m.hole_alpha);
     let sparse = &outcome.report.runs[1].metrics;
@@ -168,6 +182,10 @@ fn pipeline_on_a_small_plenoptic_cloud() {
     let html = std::fs::read_to_string(&outcome.html).unwrap();
     assert!(html.matches("data:image/png;base64,").count() >= 2 * 5);
     assert!(html.contains("<svg") && html.contains("<polyline"));
+    assert!(
+        html.contains("stroke-dasharray"),
+        "the held-out curve is drawn"
+    );
     assert!(!html.contains("src=\"http"));
     // Step-0 and final held-out markers on the curve, masked PSNR and the error breakdown.
     assert!(html.contains("held-out, step 0 (fit)") && html.contains("held-out, step 0 (solve)"));
@@ -246,6 +264,30 @@ fn pipeline_on_a_small_plenoptic_cloud() {
         "{} → {} splats",
         r.init.splats,
         r.metrics.splats
+    );
+    assert!(r.heldout_curve.is_empty());
+
+    // Scoring the held-out views while training changes nothing the training computes, also
+    // with densification: the same model, bit for bit, with a curve at 0, 50, 100 and 120.
+    let mut scored_cfg = sparse_cfg.clone();
+    scored_cfg.eval.every = 50;
+    let scored_out = tmp.path().join("sparse-scored");
+    let scored = transcode::pipeline::run(
+        &input,
+        &scored_out,
+        &scored_cfg,
+        &transcode::progress::ignore,
+    )
+    .unwrap();
+    let steps: Vec<u32> = scored.report.runs[0]
+        .heldout_curve
+        .iter()
+        .map(|p| p.iteration)
+        .collect();
+    assert_eq!(steps, [0, 50, 100, 120]);
+    assert_eq!(
+        std::fs::read(sparse_out.join("model/splats.ply")).unwrap(),
+        std::fs::read(scored_out.join("model/splats.ply")).unwrap()
     );
 }
 

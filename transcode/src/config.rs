@@ -129,6 +129,9 @@ pub struct EvalConfig {
     pub alpha_threshold: f32,
     /// Held-out views shown side by side in the report.
     pub report_views: usize,
+    /// Score the held-out views every this many training steps (and at step 0 and the last
+    /// step) for the report's held-out curve; 0: only at the end. Scoring is not training time.
+    pub every: u32,
 }
 
 impl Default for EvalConfig {
@@ -137,6 +140,7 @@ impl Default for EvalConfig {
             floater_spacings: 2.0,
             alpha_threshold: 0.5,
             report_views: 4,
+            every: 0,
         }
     }
 }

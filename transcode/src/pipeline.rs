@@ -24,8 +24,8 @@ use splat_train::{TrainConfig, Trainer, View};
 use crate::config::{Config, InitMode};
 use crate::progress::{Event, Observer};
 use crate::report::{
-    CurvePoint, HeldoutScore, InputInfo, Report, RunReport, StageTiming, StepZero, ViewPictures,
-    write_report,
+    CurvePoint, HeldoutPoint, HeldoutScore, InputInfo, Report, RunReport, StageTiming, StepZero,
+    ViewPictures, write_report,
 };
 use crate::resume::{
     self, InputStamp, ModeState, ResumeError, RunState, Schedule, Status, TrainedState,
@@ -668,12 +668,12 @@ fn init_train_eval(
     let mut clock = StageClock::default();
     let init = initialise(run, surfaces, refs, cfg, layout, state, observer)?;
     clock.lap("init");
-    let (splats, train_report) = train(
+    let (splats, train_report, heldout_curve) = train(
         run,
         init.fresh,
         &init.schedule,
         init.summary.sh_degree,
-        &refs.train,
+        refs,
         cfg,
         layout,
         state,
@@ -698,6 +698,7 @@ fn init_train_eval(
                 splats: h.splats,
             })
             .collect(),
+        heldout_curve,
         metrics,
         model_path: run.model_path.clone(),
         // Filled in when the model is written, after every run is done.
@@ -797,6 +798,7 @@ fn initialise(
                 init: summary.clone(),
                 schedule,
                 step_zero: Some(step_zero.clone()),
+                heldout_curve: Vec::new(),
                 trained: None,
             });
             state.save(out)?;
@@ -865,20 +867,20 @@ fn colour_solve(
 }
 
 /// Stage 4: trains from `fresh` splats, or from the run's checkpoint, to the end of the schedule
-/// (or finds it trained already), checkpointing as it goes. Returns the splats and the trainer's
-/// report.
+/// (or finds it trained already), checkpointing as it goes. Returns the splats, the trainer's
+/// report and the held-out curve (`eval.every`).
 #[allow(clippy::too_many_arguments)]
 fn train(
     run: &RunOf,
     fresh: Option<Splats>,
     schedule: &Schedule,
     sh_degree: u32,
-    train_views: &[View],
+    refs: &References,
     cfg: &Config,
     layout: &Layout,
     state: &mut RunState,
     observer: Observer<'_>,
-) -> Result<(Splats, splat_train::TrainReport), PipelineError> {
+) -> Result<(Splats, splat_train::TrainReport, Vec<HeldoutPoint>), PipelineError> {
     let (mode, k, out) = (run.mode, run.index, &layout.out);
     let ckpt = resume::checkpoint_path(out, mode);
     observer(Event::Stage {
@@ -901,14 +903,26 @@ fn train(
         )));
     }
     let mut trainer = match fresh {
-        Some(splats) => Trainer::new(splats, train_views.to_vec(), tc)?,
-        None => Trainer::resume(&ckpt, train_views.to_vec(), tc).map_err(|e| {
-            ResumeError::Checkpoint {
+        Some(splats) => Trainer::new(splats, refs.train.clone(), tc)?,
+        None => {
+            Trainer::resume(&ckpt, refs.train.clone(), tc).map_err(|e| ResumeError::Checkpoint {
                 path: ckpt.clone(),
                 problem: e.to_string(),
-            }
-        })?,
+            })?
+        }
     };
+    // The curve as far as the checkpoint: points taken after it are taken again.
+    let mut probe = HeldoutProbe {
+        views: &refs.heldout,
+        every: cfg.eval.every,
+        options: EvalOptions::from(&cfg.eval),
+        curve: state
+            .modes
+            .get(k)
+            .map(|m| m.heldout_curve.clone())
+            .unwrap_or_default(),
+    };
+    probe.curve.retain(|p| p.iteration <= trainer.iteration());
     let already = state.modes.get(k).and_then(|m| m.trained);
     let report = match already {
         Some(t) => {
@@ -926,7 +940,14 @@ fn train(
                 )));
             }
             let every = Duration::from_secs_f64(cfg.output.checkpoint_interval_s);
-            let report = train_to_end(&mut trainer, &ckpt, every, observer)?;
+            let saving = Saving {
+                checkpoint: &ckpt,
+                every,
+                state,
+                mode_index: k,
+                out,
+            };
+            let report = train_to_end(&mut trainer, saving, &mut probe, observer)?;
             if let Some(m) = state.modes.get_mut(k) {
                 m.trained = Some(TrainedState {
                     stopped_by_budget: report.stopped_by_budget,
@@ -936,7 +957,30 @@ fn train(
             report
         }
     };
-    Ok((trainer.splats().clone(), report))
+    Ok((trainer.splats().clone(), report, probe.curve))
+}
+
+/// Scores the model on the held-out views every `every` steps while it trains.
+struct HeldoutProbe<'a> {
+    views: &'a [View],
+    every: u32,
+    options: EvalOptions,
+    curve: Vec<HeldoutPoint>,
+}
+
+impl HeldoutProbe<'_> {
+    /// Adds the point of the trainer's current step when one is due: at step 0, every `every`
+    /// steps and at the last step (`last`).
+    fn take(&mut self, trainer: &Trainer, elapsed_s: f64, last: bool) -> Result<(), PipelineError> {
+        let it = trainer.iteration();
+        let due = self.every > 0 && (it.is_multiple_of(self.every) || last);
+        if !due || self.curve.last().is_some_and(|p| p.iteration >= it) {
+            return Ok(());
+        }
+        let (metrics, _) = evaluate_views(trainer.splats(), self.views, None, &self.options)?;
+        self.curve.push(HeldoutPoint::new(it, elapsed_s, &metrics));
+        Ok(())
+    }
 }
 
 /// Stage 5: scores a trained model on the held-out views.
@@ -1130,15 +1174,39 @@ fn scheduled_config(mut tc: TrainConfig, schedule: &Schedule) -> TrainConfig {
     tc
 }
 
-/// Trains to the end, reporting progress, saving the trainer's state to `ckpt` whenever `every`
-/// has passed since the last save, and once more at the end (the later stages resume from that).
+/// Where and how often [`train_to_end`] saves its progress.
+struct Saving<'a> {
+    checkpoint: &'a Path,
+    /// Wall time between checkpoints.
+    every: Duration,
+    state: &'a mut RunState,
+    mode_index: usize,
+    out: &'a Path,
+}
+
+impl Saving<'_> {
+    /// Saves the held-out curve so far in the run state, then the trainer's checkpoint. The
+    /// state goes first: a point newer than the checkpoint is dropped and taken again on resume.
+    fn save(&mut self, trainer: &Trainer, curve: &[HeldoutPoint]) -> Result<(), PipelineError> {
+        if let Some(m) = self.state.modes.get_mut(self.mode_index) {
+            m.heldout_curve = curve.to_vec();
+        }
+        self.state.save(self.out)?;
+        trainer.save_checkpoint(self.checkpoint)?;
+        Ok(())
+    }
+}
+
+/// Runs `trainer` to the end of its schedule one step at a time, reporting progress, taking
+/// the held-out curve's points, and checkpointing every `saving.every` of wall time and once
+/// more at the end (the later stages resume from that).
 ///
-/// The trainer pauses between two steps to save, which changes nothing it computes: a run
-/// checkpointed at any moments ends bit-identical to one that never stopped.
+/// The trainer pauses between two steps to save or score, which changes nothing it computes: a
+/// run checkpointed or scored at any moments ends bit-identical to one that never stopped.
 fn train_to_end(
     trainer: &mut Trainer,
-    ckpt: &Path,
-    every: Duration,
+    mut saving: Saving<'_>,
+    probe: &mut HeldoutProbe<'_>,
     observer: Observer<'_>,
 ) -> Result<splat_train::TrainReport, PipelineError> {
     let total = trainer.config().iterations;
@@ -1147,6 +1215,9 @@ fn train_to_end(
         total: u64::from(total),
         done: u64::from(trainer.iteration()),
     });
+    if trainer.iteration() == 0 {
+        probe.take(trainer, 0.0, false)?;
+    }
     let mut saved_at = Instant::now();
     let report = loop {
         let r = trainer.run_until(trainer.iteration() + 1, |p| {
@@ -1157,15 +1228,17 @@ fn train_to_end(
                 message,
             });
         });
-        if r.iterations >= total || r.stopped_by_budget {
+        let last = r.iterations >= total || r.stopped_by_budget;
+        probe.take(trainer, r.elapsed_s, last)?;
+        if last {
             break r;
         }
-        if saved_at.elapsed() >= every {
-            trainer.save_checkpoint(ckpt)?;
+        if saved_at.elapsed() >= saving.every {
+            saving.save(trainer, &probe.curve)?;
             saved_at = Instant::now();
         }
     };
-    trainer.save_checkpoint(ckpt)?;
+    saving.save(trainer, &probe.curve)?;
     observer(Event::End);
     Ok(report)
 }

@@ -81,6 +81,40 @@ impl From<&Metrics> for HeldoutScore {
     }
 }
 
+/// One point of the held-out curve (`eval.every`): the model scored on the held-out views
+/// during training.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct HeldoutPoint {
+    /// Steps done (0: the initial splats).
+    pub iteration: u32,
+    /// Training time in seconds up to that step (scoring excluded).
+    pub elapsed_s: f64,
+    /// Splats at that step.
+    pub splats: usize,
+    /// PSNRs on black and white, full and masked.
+    #[serde(flatten)]
+    pub score: HeldoutScore,
+    /// Mean SSIM on black.
+    pub ssim_black: f64,
+    /// Mean SSIM on white.
+    pub ssim_white: f64,
+}
+
+impl HeldoutPoint {
+    /// The point of `metrics` taken after `iteration` steps and `elapsed_s` seconds of training.
+    #[must_use]
+    pub fn new(iteration: u32, elapsed_s: f64, metrics: &Metrics) -> Self {
+        Self {
+            iteration,
+            elapsed_s,
+            splats: metrics.splats,
+            score: HeldoutScore::from(metrics),
+            ssim_black: metrics.ssim_black,
+            ssim_white: metrics.ssim_white,
+        }
+    }
+}
+
 /// What the initialisation alone is worth: held-out scores at step 0 of the per-camera SH fit
 /// and, when it ran, of the least-squares colour solve that followed it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -111,6 +145,8 @@ pub struct RunReport {
     pub step_zero: Option<StepZero>,
     /// Training curve.
     pub curve: Vec<CurvePoint>,
+    /// Held-out scores during training, every `eval.every` steps (empty when 0).
+    pub heldout_curve: Vec<HeldoutPoint>,
     /// Held-out metrics.
     pub metrics: Metrics,
     /// The model file written.
@@ -218,7 +254,9 @@ pub fn render_html(report: &Report, pictures: &[ViewPictures]) -> io::Result<Str
     h.push_str(&format!(
         "<h2>Training PSNR against wall time</h2>\n<p>PSNR of the training view of each logged \
          step, as a moving mean over {CURVE_WINDOW} log points (single views vary a lot); circles: \
-         held-out PSNR on black at step 0 (before any training step) and at the end.</p>\n"
+         held-out PSNR on black at step 0 (before any training step) and at the end; dashed: \
+         held-out PSNR on black during training, when the run scored it (<code>eval.every</code>, \
+         <code>--eval-every</code>).</p>\n"
     ));
     h.push_str(&curve_svg(report, &names));
     h.push_str(&format!(
@@ -454,8 +492,19 @@ fn curve_svg(report: &Report, names: &[String]) -> String {
     let (w, h, left, bottom, top, right) = (720.0, 360.0, 60.0, 40.0, 15.0, 20.0);
     let curves: Vec<Vec<(f64, f64)>> = report.runs.iter().map(|r| smoothed(&r.curve)).collect();
     let markers: Vec<Vec<(f64, f64, &str)>> = report.runs.iter().map(heldout_markers).collect();
+    let heldout: Vec<Vec<(f64, f64)>> = report
+        .runs
+        .iter()
+        .map(|r| {
+            r.heldout_curve
+                .iter()
+                .map(|p| (p.elapsed_s, p.score.psnr_black))
+                .collect()
+        })
+        .collect();
     let points: Vec<(f64, f64)> = curves
         .iter()
+        .chain(&heldout)
         .flatten()
         .copied()
         .chain(markers.iter().flatten().map(|m| (m.0, m.1)))
@@ -527,6 +576,19 @@ fn curve_svg(report: &Report, names: &[String]) -> String {
             left + 10.0,
             top + 14.0 + 16.0 * i as f64,
             esc(name)
+        );
+    }
+    for (i, curve) in heldout.iter().enumerate().filter(|c| !c.1.is_empty()) {
+        let colour = RUN_COLOURS[i % RUN_COLOURS.len()];
+        let pts: Vec<String> = curve
+            .iter()
+            .map(|&(t, p)| format!("{:.1},{:.1}", x(t), y(p)))
+            .collect();
+        let _ = write!(
+            s,
+            "<polyline fill=\"none\" stroke=\"{colour}\" stroke-width=\"1.5\" \
+             stroke-dasharray=\"5 3\" points=\"{}\"><title>held-out PSNR on black</title></polyline>",
+            pts.join(" ")
         );
     }
     for (i, run) in markers.iter().enumerate() {

@@ -88,6 +88,9 @@ pub struct ModeState {
     /// Held-out scores at step 0, for the report.
     #[serde(default)]
     pub step_zero: Option<crate::report::StepZero>,
+    /// Held-out curve up to the last checkpoint (`eval.every`).
+    #[serde(default)]
+    pub heldout_curve: Vec<crate::report::HeldoutPoint>,
     /// `Some` once training is over (its last state is in the checkpoint): whether the time
     /// budget stopped it.
     pub trained: Option<TrainedState>,

@@ -68,6 +68,9 @@ pub struct Overrides {
     /// Training time budget in seconds.
     #[arg(long, value_name = "SECONDS")]
     pub time_budget: Option<f64>,
+    /// Score the held-out views every K training steps for the report's held-out curve.
+    #[arg(long, value_name = "K")]
+    pub eval_every: Option<u32>,
     /// Random seed.
     #[arg(long)]
     pub seed: Option<u64>,
@@ -129,6 +132,9 @@ impl Overrides {
         }
         if let Some(v) = o.iterations {
             c.training.iterations = v;
+        }
+        if let Some(v) = o.eval_every {
+            c.eval.every = v;
         }
         if o.time_budget.is_some() {
             c.training.time_budget_s = o.time_budget;
