@@ -500,6 +500,9 @@ def main() -> int:
     out = args.out.resolve()
     out.mkdir(parents=True, exist_ok=True)
     logs = out / "logs"
+    # A result of an earlier run in OUT must not outlive a failure of this one.
+    for stale in ("paper.json", "paper.md"):
+        (out / stale).unlink(missing_ok=True)
     tc = args.transcode
     try:
         if args.frame:

@@ -29,6 +29,7 @@ iterations = 160
 
 [eval]
 report_views = 1
+every = 40
 
 [output]
 compare_init = true
@@ -231,6 +232,29 @@ fn a_run_killed_at_random_moments_resumes_to_the_same_model() {
     let report: serde_json::Value =
         serde_json::from_slice(&std::fs::read(killed.join("report/report.json")).unwrap()).unwrap();
     assert_eq!(report["runs"][0]["iterations"], 160);
+    // The held-out curves too: the same steps and scores (points after a checkpoint were taken
+    // again from the same splats), only the training times differ.
+    let whole_report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(whole.join("report/report.json")).unwrap()).unwrap();
+    let scores = |r: &serde_json::Value, k: usize| -> Vec<(u64, f64, f64)> {
+        r["runs"][k]["heldout_curve"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|p| {
+                (
+                    p["iteration"].as_u64().unwrap(),
+                    p["psnr_black"].as_f64().unwrap(),
+                    p["ssim_white"].as_f64().unwrap(),
+                )
+            })
+            .collect()
+    };
+    for k in 0..2 {
+        let steps: Vec<u64> = scores(&whole_report, k).iter().map(|p| p.0).collect();
+        assert_eq!(steps, [0, 40, 80, 120, 160], "run {k}");
+        assert_eq!(scores(&report, k), scores(&whole_report, k), "run {k}");
+    }
 
     // Resuming a finished run redoes nothing.
     let model = killed.join(MODELS[0]);
