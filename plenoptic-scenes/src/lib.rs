@@ -12,7 +12,10 @@
 //! still gives them weight. The main colour is that same diffuse shade.
 //!
 //! - [`demo_scene`]: the built-in demo (a checkered matte slab and a glossy sphere).
-//! - [`synth_from_mesh`]: a plenoptic frame on an 8iVSLF-like voxel grid from a real mesh.
+//! - [`synth_from_mesh`]: a plenoptic frame on an 8iVSLF-like voxel grid from a real mesh;
+//!   [`synth_in_volume`] the same on a given grid and rig ([`CaptureVolume`]).
+//! - [`SequenceSynth`]: a sequence of such frames, the mesh moved and bent by a [`Motion`], on one
+//!   grid and rig, named by [`frame_file_name`] as 8iVSLF names its frames.
 //! - [`Shading`]: the shading model both use.
 //!
 //! These are test and demonstration inputs: the transcoder's pipeline does not need them.
@@ -30,12 +33,16 @@
 
 mod capture;
 mod demo;
+mod sequence;
 mod shading;
 mod synth;
 
 pub use demo::{DemoConfig, demo_scene};
+pub use sequence::{Motion, SequenceSynth, frame_file_name};
 pub use shading::Shading;
-pub use synth::{AUTO_GRID, SynthConfig, auto_grid, synth_from_mesh};
+pub use synth::{
+    AUTO_GRID, CaptureVolume, SynthConfig, auto_grid, synth_from_mesh, synth_in_volume,
+};
 
 pub(crate) use capture::{capture_cameras, capture_directions, to_u8_grid};
 pub(crate) use shading::Gloss;

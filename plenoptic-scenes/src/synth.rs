@@ -110,6 +110,57 @@ struct Sample {
     albedo: [f32; 3],
 }
 
+/// Where a synthesised frame sits, in mesh units: the voxel grid's corner and the length its
+/// `grid − 1` voxels span, and the centre and radius the capture rig is placed around. A sequence
+/// has one for all its frames, so they share the grid and the rig, as 8iVSLF frames do.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CaptureVolume {
+    /// The grid's corner (voxel 0, 0, 0).
+    pub lo: Vec3,
+    /// The length the grid's longest side spans.
+    pub extent: f32,
+    /// The rig's centre.
+    pub center: Vec3,
+    /// The radius the rig frames (half the bounding box's diagonal).
+    pub radius: f32,
+}
+
+impl CaptureVolume {
+    /// The bounding box of `positions` (all frames' vertices, for a sequence).
+    ///
+    /// # Errors
+    /// [`Error::EmptyMesh`] when the box has no extent or is not finite.
+    pub fn of_points(positions: impl IntoIterator<Item = Vec3>) -> Result<Self, Error> {
+        let (lo, hi) = positions
+            .into_iter()
+            .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| {
+                (lo.min(p), hi.max(p))
+            });
+        let extent = (hi - lo).max_element();
+        if !(extent > 0.0 && extent.is_finite()) {
+            return Err(Error::EmptyMesh(format!(
+                "the mesh's bounding box has extent {extent}"
+            )));
+        }
+        Ok(Self {
+            lo,
+            extent,
+            center: 0.5 * (lo + hi),
+            radius: 0.5 * (hi - lo).length(),
+        })
+    }
+}
+
+/// The grid width `config` asks for on `mesh` within `volume`: its own, or [`auto_grid`]'s.
+pub(crate) fn grid_for(mesh: &Mesh, config: &SynthConfig, volume: &CaptureVolume) -> u32 {
+    if config.grid == AUTO_GRID {
+        let area: f64 = triangle_areas(mesh).iter().sum();
+        auto_grid(area, f64::from(volume.extent), config.points)
+    } else {
+        config.grid
+    }
+}
+
 /// Samples `config.points` points on the mesh (area-weighted), shades them towards 13 (or
 /// `config.cameras`) capture cameras on two rings, and voxelises them into an 8iVSLF-layout cloud.
 ///
@@ -121,30 +172,26 @@ struct Sample {
 pub fn synth_from_mesh(mesh: &Mesh, config: &SynthConfig) -> Result<PlenopticCloud, Error> {
     config.validate()?;
     views::check_mesh(mesh)?;
+    let volume = CaptureVolume::of_points(mesh.positions.iter().copied())?;
+    synth_in_volume(mesh, config, &volume)
+}
+
+/// [`synth_from_mesh`] on the grid and rig of `volume` instead of the mesh's own bounding box
+/// (the mesh should lie inside it): what every frame of a sequence uses.
+pub fn synth_in_volume(
+    mesh: &Mesh,
+    config: &SynthConfig,
+    volume: &CaptureVolume,
+) -> Result<PlenopticCloud, Error> {
+    config.validate()?;
+    views::check_mesh(mesh)?;
     let samples = sample_surface(mesh, config.points, config.seed)?;
 
-    // Bounds and the voxel frame: voxel = (p − lo) · scale.
-    let (lo, hi) = mesh
-        .positions
-        .iter()
-        .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), &p| {
-            (lo.min(p), hi.max(p))
-        });
-    let extent = (hi - lo).max_element();
-    if !(extent > 0.0 && extent.is_finite()) {
-        return Err(Error::EmptyMesh(format!(
-            "the mesh's bounding box has extent {extent}"
-        )));
-    }
-    let area: f64 = triangle_areas(mesh).iter().sum();
-    let grid = if config.grid == AUTO_GRID {
-        auto_grid(area, f64::from(extent), config.points)
-    } else {
-        config.grid
-    };
-    let scale = f64::from(grid - 1) / f64::from(extent);
-    let center = 0.5 * (lo + hi);
-    let radius = 0.5 * (hi - lo).length();
+    // The voxel frame: voxel = (p − lo) · scale.
+    let grid = grid_for(mesh, config, volume);
+    let lo = volume.lo;
+    let scale = f64::from(grid - 1) / f64::from(volume.extent);
+    let (center, radius) = (volume.center, volume.radius);
 
     // Capture cameras in mesh units, with depth maps for visibility.
     let res = config.visibility_resolution;

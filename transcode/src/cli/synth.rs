@@ -5,7 +5,9 @@ use std::time::Duration;
 
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
-use plenoptic_scenes::{AUTO_GRID, SynthConfig, synth_from_mesh};
+use plenoptic_scenes::{
+    AUTO_GRID, Motion, SequenceSynth, SynthConfig, frame_file_name, synth_from_mesh,
+};
 
 /// Arguments of `transcode synth`.
 #[derive(Debug, clap::Args)]
@@ -13,9 +15,23 @@ pub struct Args {
     /// The mesh to sample (OBJ, glTF/GLB or PLY with faces).
     #[arg(long)]
     pub mesh: PathBuf,
-    /// Output plenoptic PLY.
+    /// Output plenoptic PLY; with `--frames` above 1, the folder the frames are written to
+    /// (`MESH_voxB_0001.ply`, …, 8iVSLF-style names that sort in frame order).
     #[arg(long)]
     pub out: PathBuf,
+    /// Number of frames: above 1, a sequence of the mesh turning, shifting and bending on one
+    /// voxel grid with one capture rig (see `--turn`, `--shift`, `--bend`).
+    #[arg(long, default_value_t = 1)]
+    pub frames: usize,
+    /// Turn about the vertical axis over the sequence, in degrees.
+    #[arg(long, default_value_t = Motion::default().turn_deg)]
+    pub turn: f64,
+    /// Shift along x over the sequence, in bounding radii of the mesh.
+    #[arg(long, default_value_t = Motion::default().shift)]
+    pub shift: f64,
+    /// Amplitude of the back-and-forth bend (top and bottom swaying along x), in radii.
+    #[arg(long, default_value_t = Motion::default().bend)]
+    pub bend: f64,
     /// Number of capture cameras (on two rings around the mesh).
     #[arg(long, default_value_t = SynthConfig::default().cameras)]
     pub cameras: usize,
@@ -56,6 +72,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         seed: args.seed,
         ..SynthConfig::default()
     };
+    if args.frames > 1 {
+        spinner.finish_and_clear();
+        return sequence(&args, &mesh, &config);
+    }
     spinner.set_message(format!(
         "sampling {} points and shading them for {} cameras",
         args.points, args.cameras
@@ -72,6 +92,50 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         cloud.len(),
         cloud.num_cameras,
         cloud.width.map_or(0, |w| w + 1)
+    );
+    Ok(())
+}
+
+/// `synth --frames N`: the sequence, frame by frame, into the folder `args.out`.
+fn sequence(args: &Args, mesh: &plenoptic_io::Mesh, config: &SynthConfig) -> anyhow::Result<()> {
+    let motion = Motion {
+        turn_deg: args.turn,
+        shift: args.shift,
+        bend: args.bend,
+    };
+    let plan = SequenceSynth::new(mesh, config, motion, args.frames)
+        .with_context(|| format!("cannot plan a sequence from {}", args.mesh.display()))?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create the folder {}", args.out.display()))?;
+    let name = args
+        .mesh
+        .file_stem()
+        .map_or_else(|| "frame".into(), |s| s.to_string_lossy().into_owned());
+    let bar = ProgressBar::new(args.frames as u64).with_style(
+        ProgressStyle::with_template("{bar:30} {pos}/{len} frames {msg} [{elapsed}, ETA {eta}]")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let mut points = Vec::with_capacity(args.frames);
+    for k in 0..args.frames {
+        let path = args.out.join(frame_file_name(&name, plan.grid(), k));
+        bar.set_message(path.display().to_string());
+        let cloud = plan
+            .frame(k)
+            .with_context(|| format!("cannot synthesise frame {}", k + 1))?;
+        plenoptic_io::write_cloud(&path, &cloud)
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        points.push(cloud.len());
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    println!(
+        "wrote {} frames to {} ({}–{} points, {} capture cameras, grid {})",
+        args.frames,
+        args.out.display(),
+        points.iter().min().unwrap_or(&0),
+        points.iter().max().unwrap_or(&0),
+        config.cameras,
+        plan.grid()
     );
     Ok(())
 }

@@ -1,0 +1,84 @@
+//! `transcode synth --frames N`: a sequence of plenoptic frames on one grid and rig.
+
+use std::process::Command;
+
+const BIN: &str = env!("CARGO_BIN_EXE_transcode");
+
+fn spider() -> String {
+    format!(
+        "{}/../testdata/meshes/spider/spider.obj",
+        env!("CARGO_MANIFEST_DIR")
+    )
+}
+
+#[test]
+fn a_sequence_is_written_frame_by_frame_with_one_rig() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("seq");
+    let run = Command::new(BIN)
+        .args([
+            "synth",
+            "--mesh",
+            &spider(),
+            "--points",
+            "20000",
+            "--frames",
+            "3",
+        ])
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let mut names: Vec<String> = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    assert_eq!(names.len(), 3, "{names:?}");
+    assert!(names[0].starts_with("spider_vox") && names[0].ends_with("_0001.ply"));
+    assert!(names[2].ends_with("_0003.ply"));
+    let frames: Vec<_> = names
+        .iter()
+        .map(|n| plenoptic_io::read_cloud(&out.join(n)).unwrap())
+        .collect();
+    for f in &frames {
+        assert_eq!(f.num_cameras, 13);
+        assert_eq!(f.cameras, frames[0].cameras, "one rig");
+        assert_eq!(f.width, frames[0].width, "one grid");
+        assert_eq!(
+            f.frame_to_world_translation,
+            frames[0].frame_to_world_translation
+        );
+    }
+    // It moves: the first and last frames' voxel centroids are apart.
+    let centroid = |f: &plenoptic_io::PlenopticCloud| {
+        f.positions.iter().copied().sum::<glam::Vec3>() / f.len() as f32
+    };
+    assert!((centroid(&frames[0]) - centroid(&frames[2])).length() > 2.0);
+
+    let bad = Command::new(BIN)
+        .args([
+            "synth",
+            "--mesh",
+            &spider(),
+            "--frames",
+            "2",
+            "--bend",
+            "NaN",
+        ])
+        .arg("--out")
+        .arg(tmp.path().join("bad"))
+        .output()
+        .unwrap();
+    assert!(!bad.status.success());
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(
+        err.contains("finite") && err.contains("spider.obj"),
+        "{err}"
+    );
+}
