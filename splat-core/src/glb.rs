@@ -365,7 +365,7 @@ fn split_container(data: &[u8]) -> Result<(&[u8], Option<&[u8]>), (&'static str,
             ));
         }
         let (len, ty) = (word(pos) as usize, word(pos + 4));
-        let end = pos + 8 + len;
+        let end = (pos + 8).saturating_add(len);
         if end > total {
             return Err((
                 name,
