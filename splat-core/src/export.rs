@@ -142,7 +142,7 @@ mod tests {
             Vec3::new(0.0, -1.0, 0.5),
             [2.0 * q.w, 2.0 * q.x, 2.0 * q.y, 2.0 * q.z],
             0.0,
-            &[crate::rgb_to_sh_dc([1.0, 0.5, 0.0])],
+            &[rgb_to_sh_dc([1.0, 0.5, 0.0])],
         );
         let r = encode_record(&s, 0);
         let f = |o: usize| f32::from_le_bytes(r[o..o + 4].try_into().unwrap());

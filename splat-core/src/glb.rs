@@ -254,7 +254,7 @@ pub fn decode_glb(path: &Path, data: &[u8]) -> Result<Splats, Error> {
         place: place.to_string(),
         message,
     };
-    let (json, bin) = split_container(data).map_err(|(place, m)| err(place, m))?;
+    let Container { json, bin } = split_container(data).map_err(|(place, m)| err(place, m))?;
     let doc: Value = serde_json::from_slice(json)
         .map_err(|e| err("JSON chunk", format!("not a JSON document: {e}")))?;
     let doc = Document {
@@ -320,9 +320,18 @@ pub fn decode_glb(path: &Path, data: &[u8]) -> Result<Splats, Error> {
     Ok(y_up_frame(&s))
 }
 
+/// The chunks of a GLB container.
+struct Container<'a> {
+    json: &'a [u8],
+    bin: Option<&'a [u8]>,
+}
+
+/// A problem with a GLB container: where (the header or a chunk) and what.
+type ContainerError = (&'static str, String);
+
 /// Splits a GLB container into its JSON chunk and its binary chunk (if any), checking the
 /// header and every chunk length against the bytes present. Errors name the place and problem.
-fn split_container(data: &[u8]) -> Result<(&[u8], Option<&[u8]>), (&'static str, String)> {
+fn split_container(data: &[u8]) -> Result<Container<'_>, ContainerError> {
     let word = |o: usize| u32::from_le_bytes([data[o], data[o + 1], data[o + 2], data[o + 3]]);
     if data.len() < 12 {
         return Err((
@@ -395,7 +404,7 @@ fn split_container(data: &[u8]) -> Result<(&[u8], Option<&[u8]>), (&'static str,
         }
         pos = next;
     }
-    Ok((json, bin))
+    Ok(Container { json, bin })
 }
 
 /// Returns the SH degree whose attributes are all present (0 to 3), or why they are not whole.

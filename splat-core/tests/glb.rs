@@ -188,7 +188,7 @@ fn models_glb_cannot_hold_are_refused() {
 /// A `.glb` assembled from a JSON document and a binary chunk (for editing written files).
 fn assemble(json: &serde_json::Value, bin: &[u8]) -> Vec<u8> {
     let mut text = serde_json::to_vec(json).unwrap();
-    while text.len() % 4 != 0 {
+    while !text.len().is_multiple_of(4) {
         text.push(b' ');
     }
     let total = 12 + 8 + text.len() + 8 + bin.len();
