@@ -6,6 +6,7 @@ declared counts rewritten to match, so the mutator spends its time on structure,
 """
 import pathlib
 import gzip
+import json
 import re
 import shutil
 import struct
@@ -140,6 +141,41 @@ def main():
     v2[4] = 2
     v2 += bytes([127, 127, 127, 200, 90, 30]) + payload[16 + 9 * n + 7 * n + 4 * n:]
     put("splat_spz", "v2-content.bin", b"\x00" + bytes(v2))
+    # .splat: two 32-byte records (position, linear scale, RGBA, quaternion bytes w x y z).
+    put("splat_dotsplat", "two.splat",
+        struct.pack("<6f4B4B", 0, 0, 0, 0.1, 0.2, 0.3, 255, 128, 0, 200, 255, 128, 128, 128)
+        + struct.pack("<6f4B4B", 1, -2, 3, 1, 1, 0.01, 10, 20, 30, 40, 128, 218, 128, 38))
+    # .glb: two degree-1 splats with KHR_gaussian_splatting, the layout glb::encode_glb writes.
+    put("splat_glb", "two-sh1.glb", splat_glb(2, 1))
+    put("splat_glb", "one-sh0.glb", splat_glb(1, 0))
+
+
+def splat_glb(n, degree):
+    """A .glb holding n splats of SH degree `degree` as KHR_gaussian_splatting float accessors."""
+    ext = "KHR_gaussian_splatting"
+    attrs = [("POSITION", "VEC3", 3), (ext + ":SCALE", "VEC3", 3),
+             (ext + ":ROTATION", "VEC4", 4), (ext + ":OPACITY", "SCALAR", 1)]
+    attrs += [(f"{ext}:SH_DEGREE_{d}_COEF_{c}", "VEC3", 3)
+              for d in range(degree + 1) for c in range(2 * d + 1)]
+    bin_, views, accessors, names = b"", [], [], {}
+    for k, (name, kind, width) in enumerate(attrs):
+        values = [0.5 + 0.25 * ((i * width + c) % 3) for i in range(n) for c in range(width)]
+        data = struct.pack(f"<{len(values)}f", *values)
+        views.append({"buffer": 0, "byteOffset": len(bin_), "byteLength": len(data)})
+        accessors.append({"bufferView": k, "componentType": 5126, "count": n, "type": kind})
+        names[name] = k
+        bin_ += data
+    accessors[0]["min"], accessors[0]["max"] = [0.5] * 3, [1.0] * 3
+    doc = {"asset": {"version": "2.0"}, "extensionsUsed": [ext], "scene": 0,
+           "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
+           "meshes": [{"primitives": [{"attributes": names, "mode": 0,
+                                       "extensions": {ext: {"kernel": "ellipse"}}}]}],
+           "buffers": [{"byteLength": len(bin_)}], "bufferViews": views, "accessors": accessors}
+    text = json.dumps(doc, separators=(",", ":")).encode()
+    text += b" " * (-len(text) % 4)
+    total = 12 + 8 + len(text) + 8 + len(bin_)
+    return (struct.pack("<III", 0x46546C67, 2, total) + struct.pack("<II", len(text), 0x4E4F534A)
+            + text + struct.pack("<II", len(bin_), 0x004E4942) + bin_)
 
 
 if __name__ == "__main__":

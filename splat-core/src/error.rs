@@ -43,6 +43,25 @@ pub enum Error {
         /// What is wrong.
         message: String,
     },
+    /// A `.glb` file that is not a binary glTF container, or whose splat primitive is missing or
+    /// broken (a chunk cut short, an accessor outside its buffer, counts that disagree).
+    #[error("{path}: glTF: {place}: {message}")]
+    Glb {
+        /// The file.
+        path: PathBuf,
+        /// Where in the file: the header, a chunk, or an accessor and its attribute.
+        place: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// A `.splat` file that is not whole 32-byte records.
+    #[error("{path}: .splat: {message}")]
+    DotSplat {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
     /// An attribute of a splat is NaN or infinite (or a double beyond the f32 range).
     #[error("{path}: vertex {index}, property {property}: {value:?}")]
     NonFinite {

@@ -1,10 +1,14 @@
 //! Compact exports for web viewers: the antimatter15 `.splat` layout (`antimatter15/splat`,
-//! `convert.py`): 32 bytes per splat, no header, view-dependent SH dropped.
+//! `convert.py`): 32 bytes per splat, no header, view-dependent SH dropped. Written and read:
+//! reading gives SH degree 0 with the colour, opacity and rotation rounded to 8 bits.
 
 use std::io::Write;
 use std::path::Path;
 
-use crate::{Error, Splats, sh_dc_to_rgb, sigmoid};
+use glam::Vec3;
+
+use crate::ply::MAX_SPLATS;
+use crate::{Error, Splats, logit, rgb_to_sh_dc, sh_dc_to_rgb, sigmoid};
 
 /// Bytes per splat in the `.splat` layout.
 pub const SPLAT_RECORD_BYTES: usize = 32;
@@ -53,6 +57,77 @@ pub fn write_splat(path: &Path, splats: &Splats) -> Result<(), Error> {
     .map_err(|e| Error::io(path, e))
 }
 
+/// Reads a `.splat` file (see [`decode_splat`]).
+pub fn read_splat(path: &Path) -> Result<Splats, Error> {
+    let data = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    decode_splat(path, &data)
+}
+
+/// Decodes the bytes of a `.splat` file into splats of SH degree 0, in file order; `path` is
+/// used in error messages. The inverse of [`encode_record`]: log-scale = ln(scale), DC from the
+/// 8-bit colour, opacity logit from the 8-bit alpha (clamped as [`logit`] does), quaternion
+/// (byte − 128)/128, normalised on use like every stored quaternion.
+pub fn decode_splat(path: &Path, data: &[u8]) -> Result<Splats, Error> {
+    let err = |message: String| Error::DotSplat {
+        path: path.to_path_buf(),
+        message,
+    };
+    let (n, rest) = (
+        data.len() / SPLAT_RECORD_BYTES,
+        data.len() % SPLAT_RECORD_BYTES,
+    );
+    if rest != 0 {
+        return Err(err(format!(
+            "{} bytes are not whole {SPLAT_RECORD_BYTES}-byte records: {n} records and {rest} \
+             bytes over from byte offset {} (cut short, or not a .splat file)",
+            data.len(),
+            n * SPLAT_RECORD_BYTES
+        )));
+    }
+    if n == 0 {
+        return Err(err("an empty file: no records".into()));
+    }
+    if n > MAX_SPLATS {
+        return Err(err(format!(
+            "{n} records (at most {MAX_SPLATS} are accepted)"
+        )));
+    }
+    const NAMES: [&str; 6] = ["x", "y", "z", "scale_0", "scale_1", "scale_2"];
+    let mut splats = Splats::new(0);
+    for (i, r) in data.chunks_exact(SPLAT_RECORD_BYTES).enumerate() {
+        let mut f = [0.0_f32; 6];
+        for (k, v) in f.iter_mut().enumerate() {
+            *v = f32::from_le_bytes([r[4 * k], r[4 * k + 1], r[4 * k + 2], r[4 * k + 3]]);
+            if !v.is_finite() {
+                return Err(Error::NonFinite {
+                    path: path.to_path_buf(),
+                    index: i,
+                    property: NAMES[k].into(),
+                    value: f64::from(*v),
+                });
+            }
+        }
+        if let Some(k) = (3..6).find(|&k| f[k] <= 0.0) {
+            return Err(err(format!(
+                "record {i} (byte offset {}): {} = {}; scales must be positive",
+                i * SPLAT_RECORD_BYTES + 4 * k,
+                NAMES[k],
+                f[k]
+            )));
+        }
+        let byte = |o: usize| f32::from(r[o]) / 255.0;
+        let q = |o: usize| (f32::from(r[o]) - 128.0) / 128.0;
+        splats.push(
+            Vec3::new(f[0], f[1], f[2]),
+            Vec3::new(f[3], f[4], f[5]).map(f32::ln),
+            [q(28), q(29), q(30), q(31)],
+            logit(byte(27)),
+            &[rgb_to_sh_dc([byte(24), byte(25), byte(26)])],
+        );
+    }
+    Ok(splats)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -67,7 +142,7 @@ mod tests {
             Vec3::new(0.0, -1.0, 0.5),
             [2.0 * q.w, 2.0 * q.x, 2.0 * q.y, 2.0 * q.z],
             0.0,
-            &[crate::rgb_to_sh_dc([1.0, 0.5, 0.0])],
+            &[rgb_to_sh_dc([1.0, 0.5, 0.0])],
         );
         let r = encode_record(&s, 0);
         let f = |o: usize| f32::from_le_bytes(r[o..o + 4].try_into().unwrap());

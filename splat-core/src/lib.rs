@@ -9,9 +9,9 @@
 //! - [`sh`]: real spherical harmonics of degree 0–3 with their gradients.
 //! - [`RenderCamera`], [`RenderOptions`], [`RenderOutput`], [`SplatGrads`]: rasteriser inputs/outputs.
 //! - [`Rasterizer`]: forward and backward passes (projection, tile binning, compositing).
-//! - [`ply`]: the Inria 3DGS PLY, read and write; [`export`]: the antimatter15 `.splat` layout;
-//!   [`spz`]: Niantic's compressed SPZ, read and write; [`glb`]: binary glTF with
-//!   `KHR_gaussian_splatting`; [`frame`]: the change to their y-up frame.
+//! - [`ply`]: the Inria 3DGS PLY, read and write; [`export`]: the antimatter15 `.splat` layout,
+//!   read and write; [`spz`]: Niantic's compressed SPZ, read and write; [`glb`]: binary glTF with
+//!   `KHR_gaussian_splatting`, read and write; [`frame`]: the change to their y-up frame.
 //! - [`Error`]: inconsistent models, oversized views and file errors.
 //!
 //! ```

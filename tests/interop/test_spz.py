@@ -25,12 +25,12 @@ BASIS = ["y", "z", "x", "xy", "yz", "zz", "xz", "xx", "yxx", "xyz", "yzz", "zzz"
 SH_SIGN = np.array([(-1.0) ** (m.count("y") + m.count("z")) for m in BASIS], dtype=np.float32)
 
 
-def spz_example(*args):
-    subprocess.run(
-        ["cargo", "run", "-q", "-p", "splat-core", "--example", "convert", "--", *map(str, args)],
-        cwd=REPO,
-        check=True,
-    )
+TRANSCODE = os.environ.get("TRANSCODE_BIN", "")
+
+
+def convert(*args):
+    assert TRANSCODE and Path(TRANSCODE).is_file(), "set TRANSCODE_BIN to the transcode binary"
+    subprocess.run([TRANSCODE, "convert", *map(str, args)], check=True, capture_output=True)
 
 
 def gt_arrays():
@@ -61,7 +61,7 @@ def same_rotation(a, b):
 
 def test_gsply_reads_our_spz(tmp_path):
     out = tmp_path / "gt.spz"
-    spz_example(GT, out)
+    convert(GT, out)
     got = gsply.read_spz(str(out))
     means, scales, quats, opac, dc, rest = gt_arrays()
     means, quats, rest = half_turn_x(means, quats, rest)
@@ -82,7 +82,7 @@ def test_we_read_gsply_spz(tmp_path):
     gsply.write_spz(str(src), gsply.plyread(str(GT)), version=3, fractional_bits=12)
     stored = gsply.read_spz(str(src))
     out = tmp_path / "back.ply"
-    spz_example(src, out)
+    convert(src, out)
     v = PlyData.read(str(out))["vertex"]
     means, quats, rest = half_turn_x(stored.means, stored.quats, stored.shN)
     np.testing.assert_allclose(np.stack([v["x"], v["y"], v["z"]], 1), means, atol=1e-6)

@@ -4,6 +4,7 @@ use clap::{Parser, Subcommand};
 
 mod colmap;
 mod config;
+mod convert;
 #[cfg(feature = "scenes")]
 mod demo;
 mod eval;
@@ -52,6 +53,8 @@ enum Command {
     Config(config::Args),
     /// Serve the splat viewer on this machine: an output folder's report, or any PLY/SPZ model.
     View(view::Args),
+    /// Convert a splat model between 3DGS PLY, SPZ, .splat and .glb (by extension).
+    Convert(convert::Args),
 }
 
 /// Runs the chosen subcommand.
@@ -70,5 +73,6 @@ pub fn dispatch(cli: Cli) -> anyhow::Result<()> {
         Command::Synth(a) => synth::run(a),
         Command::Config(a) => config::run(a),
         Command::View(a) => view::run(a),
+        Command::Convert(a) => convert::run(a),
     }
 }
