@@ -12,7 +12,8 @@ Steps, each logged to OUT/logs/STEP.log:
  2. `transcode views` renders its training views as a COLMAP dataset;
  3. COLMAP: SIFT features on the CPU, exhaustive matching;
  4. COLMAP `point_triangulator` with our known poses held fixed (the paper's protocol), and
-    `mapper`, a full SfM run without poses, aligned to our cameras afterwards, reported beside it;
+    `mapper`, a full SfM run without poses, aligned to our cameras afterwards (a least-squares
+    similarity of the camera centres), reported beside it;
  5. `transcode run --points3d TRIANGULATED --compare-init`: the same views, the
     same held-out cameras, one model from COLMAP's points (Inria's densification) and one from
     the surface, each scored on the held-out views every `--eval-every` steps;
@@ -128,6 +129,20 @@ def camera_centre(q: list[float], t: list[float]) -> np.ndarray:
         ]
     )
     return -r.T @ np.array(t)
+
+
+def umeyama(src: np.ndarray, dst: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """The similarity (scale s, rotation R, shift t) minimising sum |s R src_i + t - dst_i|²
+    (Umeyama 1991, closed form from the SVD of the cross-covariance)."""
+    mu_s, mu_d = src.mean(axis=0), dst.mean(axis=0)
+    a, b = src - mu_s, dst - mu_d
+    u, sig, vt = np.linalg.svd(b.T @ a / len(src))
+    d = np.eye(3)
+    if np.linalg.det(u) * np.linalg.det(vt) < 0:
+        d[2, 2] = -1.0
+    rot = u @ d @ vt
+    scale = float(np.trace(np.diag(sig) @ d) / (a ** 2).sum(axis=1).mean())
+    return scale, rot, mu_d - scale * rot @ mu_s
 
 
 def analyse(colmap: str, model: Path, step: str, logs: Path) -> dict:
@@ -293,21 +308,30 @@ def colmap_steps(args, dataset: Path, out: Path, logs: Path, surface, tree, spac
         best_stats, best = max(stats, key=lambda s: s[0]["registered_images"])
         full.update(best_stats)
         full["models"] = len(models)
-        ref = work / "camera-centres.txt"
-        with open(ref, "w") as f:
-            for name, im in ours.items():
-                c = camera_centre(im["q"], im["t"])
-                f.write(f"{name} {c[0]!r} {c[1]!r} {c[2]!r}\n")
-        aligned = work / "sfm-aligned"
-        aligned.mkdir()
-        run("colmap-mapper-alignment", [
-            colmap, "model_aligner", "--input_path", best, "--output_path", aligned,
-            "--ref_images_path", ref, "--ref_is_gps", "0", "--alignment_type", "custom",
-            "--robust_alignment", "1", "--robust_alignment_max_error", repr(10.0 * spacing),
-        ], logs)
-        txt = to_text(colmap, aligned, work / "sfm-aligned-txt", "colmap-mapper-txt", logs)
+        # Aligned by a least-squares similarity (Umeyama) of the registered cameras' centres onto
+        # ours. Not COLMAP 3.8's model_aligner: on these models it returns NaN poses ("Alignment
+        # error: -nan") yet reports success, which once gave a bogus 18-spacing distance here.
+        raw = to_text(colmap, best, work / "sfm-txt", "colmap-mapper-txt", logs)
+        raw_images = read_images_txt(raw / "images.txt")
+        ours_c = {name: camera_centre(im["q"], im["t"]) for name, im in ours.items()}
+        names = sorted(raw_images)
+        theirs = np.array([camera_centre(raw_images[n]["q"], raw_images[n]["t"]) for n in names])
+        target = np.array([ours_c[n] for n in names])
+        scale, rot, shift = umeyama(theirs, target)
+        if not (np.isfinite(scale) and scale > 0 and np.all(np.isfinite(rot))):
+            raise StepFailed(f"aligning the pose-free model to our cameras gave scale {scale}")
+        residual = np.linalg.norm((scale * (rot @ theirs.T)).T + shift - target, axis=1)
+        centre = np.mean(list(ours_c.values()), axis=0)
+        rig_radius = float(np.median([np.linalg.norm(c - centre) for c in ours_c.values()]))
+        aligned_points = (scale * (rot @ read_points3d_txt(raw / "points3D.txt").T)).T + shift
         full["surface_distance_after_alignment"] = distances_in_spacings(
-            read_points3d_txt(txt / "points3D.txt"), tree, spacing)
+            aligned_points, tree, spacing)
+        full["alignment"] = {
+            "rig_radius_spacings": rig_radius / spacing,
+            "camera_centre_residual_median_spacings": float(np.median(residual)) / spacing,
+            "camera_centre_residual_max_spacings": float(np.max(residual)) / spacing,
+            "camera_centre_residual_median_share_of_radius": float(np.median(residual)) / rig_radius,
+        }
     except StepFailed as e:
         # The pose-free run is reported beside the experiment, never used by it: its failure
         # is recorded, not fatal.
@@ -400,6 +424,14 @@ def markdown(result: dict) -> str:
             f"error {full['mean_reprojection_error_px']:.3f} px; after alignment to our cameras, "
             f"median distance to the surface {d.get('median_spacings', float('nan')):.2f} spacings "
             f"({full['seconds']:.0f} s).")
+        a = full.get("alignment")
+        if a:
+            lines.append(
+                f"- Alignment: a least-squares similarity of the registered cameras' centres onto "
+                f"ours leaves them a median {a['camera_centre_residual_median_spacings']:.1f} "
+                f"spacings ({100 * a['camera_centre_residual_median_share_of_radius']:.2f} % of the "
+                f"rig's radius of {a['rig_radius_spacings']:.0f} spacings; worst "
+                f"{a['camera_centre_residual_max_spacings']:.1f}) from ours.")
     lines += [
         "",
         "## Training",
@@ -462,6 +494,13 @@ def check(result: dict) -> list[str]:
             problems.append(f"the {mode} training did not run its {result['iterations']} steps")
         if len(m["curve"]) < 2:
             problems.append(f"the {mode} training has no held-out curve")
+    full = result["colmap"]["full_sfm"]
+    if "failed" not in full:
+        a = full.get("alignment", {})
+        d = full.get("surface_distance_after_alignment", {}).get("median_spacings")
+        if not (math.isfinite(a.get("camera_centre_residual_median_spacings", math.nan))
+                and d is not None and math.isfinite(d)):
+            problems.append(f"the pose-free model's alignment is not finite ({a}, distance {d})")
     sparse = result["comparison"]["models"]["sparse"]
     if sparse["init_source"] != "colmap" or sparse["init_splats"] != tri["points"]:
         problems.append(f"the sparse model did not start from COLMAP's {tri['points']} points "

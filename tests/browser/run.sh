@@ -14,24 +14,8 @@ here="$(cd "$(dirname "$0")" && pwd)"
 transcode="$(realpath "${1:?usage: run.sh TRANSCODE_BIN [PYTHON]}")"
 python="${2:-}"
 
-chromium_bin="$(command -v chromium || true)"
-if [ -z "$chromium_bin" ]; then
-    echo "Chromium is missing: installing Debian's chromium package"
-    if [ "$(id -u)" = 0 ]; then
-        apt_get=(apt-get)
-    elif command -v sudo > /dev/null; then
-        apt_get=(sudo -n apt-get)
-    else
-        echo "error: Chromium is not installed and neither root nor sudo can install it" >&2
-        exit 1
-    fi
-    DEBIAN_FRONTEND=noninteractive "${apt_get[@]}" update -qq
-    DEBIAN_FRONTEND=noninteractive "${apt_get[@]}" install -y -qq --no-install-recommends chromium
-    chromium_bin="$(command -v chromium)" || {
-        echo "error: installing chromium did not give a chromium command" >&2
-        exit 1
-    }
-fi
+bash "$here/../../.ci/ensure-debian-command" chromium chromium --no-install-recommends
+chromium_bin="$(command -v chromium)"
 "$chromium_bin" --version 2> /dev/null
 
 work="$(mktemp -d)"

@@ -10,24 +10,10 @@ python="$2"
 here="$(cd "$(dirname "$0")" && pwd)"
 repo="$(cd "$here/../.." && pwd)"
 
-if ! command -v colmap > /dev/null; then
-    echo "COLMAP is missing: installing Debian's colmap package"
-    if [ "$(id -u)" = 0 ]; then
-        apt_get=(apt-get)
-    elif command -v sudo > /dev/null; then
-        apt_get=(sudo -n apt-get)
-    else
-        echo "error: COLMAP is not installed and neither root nor sudo can install it" >&2
-        exit 1
-    fi
-    DEBIAN_FRONTEND=noninteractive "${apt_get[@]}" update -qq
-    DEBIAN_FRONTEND=noninteractive "${apt_get[@]}" install -y -qq colmap
-    command -v colmap > /dev/null || {
-        echo "error: installing colmap did not give a colmap command" >&2
-        exit 1
-    }
-fi
-colmap -h 2> /dev/null | head -1
+bash "$repo/.ci/ensure-debian-command" colmap colmap
+# sed, not head: head would close the pipe early and COLMAP, killed by SIGPIPE, fail the script
+# under pipefail (exit 141).
+colmap -h 2> /dev/null | sed -n 1p
 "$python" -m pip install --quiet --disable-pip-version-check -r "$repo/bench/requirements.txt"
 
 out="$(mktemp -d)"

@@ -526,6 +526,14 @@ fn curve_svg(report: &Report, names: &[String]) -> String {
     let p_max = if p_max <= p_min { p_min + 1.0 } else { p_max };
     let x = |t: f64| left + (w - left - right) * t / t_max;
     let y = |p: f64| top + (h - top - bottom) * (1.0 - (p - p_min) / (p_max - p_min));
+    // One (time, PSNR) curve as the `points` attribute of an SVG polyline in plot coordinates.
+    let polyline_points = |curve: &[(f64, f64)]| -> String {
+        let pts: Vec<String> = curve
+            .iter()
+            .map(|&(t, p)| format!("{:.1},{:.1}", x(t), y(p)))
+            .collect();
+        pts.join(" ")
+    };
     let mut s = format!(
         "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" viewBox=\"0 0 {w} {h}\" \
          font-size=\"12\"><rect width=\"{w}\" height=\"{h}\" fill=\"white\"/>\
@@ -564,15 +572,11 @@ fn curve_svg(report: &Report, names: &[String]) -> String {
     );
     for (i, (curve, name)) in curves.iter().zip(names).enumerate() {
         let colour = RUN_COLOURS[i % RUN_COLOURS.len()];
-        let pts: Vec<String> = curve
-            .iter()
-            .map(|&(t, p)| format!("{:.1},{:.1}", x(t), y(p)))
-            .collect();
         let _ = write!(
             s,
             "<polyline fill=\"none\" stroke=\"{colour}\" stroke-width=\"1.5\" points=\"{}\"/>\
              <text x=\"{:.1}\" y=\"{:.1}\" fill=\"{colour}\">{}</text>",
-            pts.join(" "),
+            polyline_points(curve),
             left + 10.0,
             top + 14.0 + 16.0 * i as f64,
             esc(name)
@@ -580,15 +584,11 @@ fn curve_svg(report: &Report, names: &[String]) -> String {
     }
     for (i, curve) in heldout.iter().enumerate().filter(|c| !c.1.is_empty()) {
         let colour = RUN_COLOURS[i % RUN_COLOURS.len()];
-        let pts: Vec<String> = curve
-            .iter()
-            .map(|&(t, p)| format!("{:.1},{:.1}", x(t), y(p)))
-            .collect();
         let _ = write!(
             s,
             "<polyline fill=\"none\" stroke=\"{colour}\" stroke-width=\"1.5\" \
              stroke-dasharray=\"5 3\" points=\"{}\"><title>held-out PSNR on black</title></polyline>",
-            pts.join(" ")
+            polyline_points(curve)
         );
     }
     for (i, run) in markers.iter().enumerate() {
