@@ -16,6 +16,7 @@
 //! - [`sampling`]: which K points carry splats; [`neighbours`]: k-d tree, spacing, PCA normals.
 //! - [`sh_fit`]: the SH fit and the automatic SH degree.
 //! - [`surface_init`], [`sparse_init`], [`initialise`]: the splats and an [`InitSummary`].
+//! - [`warm`]: a sequence's warm start, the previous frame's training corrections carried over.
 //!
 //! ```
 //! use glam::Vec3;
@@ -50,6 +51,7 @@ mod sparse;
 mod surface;
 #[cfg(test)]
 mod tests;
+pub mod warm;
 
 pub use colour_solve::{SolveError, SolveOptions, SolveReport, solve_colours};
 pub use config::{InitConfig, InitMode, MeshPoints, Sampling, ShDegree};
@@ -59,6 +61,7 @@ pub use sampling::{bounds, choose_points, farthest_point_sample, voxel_subsample
 pub use sh_fit::{ShFit, auto_degree, decide_sh_degree, sh_fit_errors};
 pub use sparse::{colmap_points, random_points, sparse_init, sparse_splats};
 pub use surface::surface_init;
+pub use warm::{CarriedTraining, RigidMotion, WarmStartError, carry_training, rigid_motion};
 
 /// Errors of initialisation.
 #[derive(Debug, thiserror::Error)]
@@ -99,6 +102,9 @@ pub struct InitSummary {
     pub normals: String,
     /// Where sparse points came from: "surface", "colmap" or "random".
     pub source: String,
+    /// A sequence's warm start: the previous frame's model whose appearance the splats took.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub warm_start: Option<PathBuf>,
 }
 
 /// Initialises splats from the input's surface points as `cfg.mode` says.

@@ -46,6 +46,7 @@ pub fn sparse_init(
         point_spacing: point_spacing(&input.positions),
         normals: "none".to_string(),
         source: source.to_string(),
+        warm_start: None,
     };
     Ok((splats, summary))
 }

@@ -51,6 +51,7 @@ pub fn surface_init(
         point_spacing: spacing,
         normals: normal_source.to_string(),
         source: "surface".to_string(),
+        warm_start: None,
     };
     Ok((splats, summary))
 }
