@@ -66,4 +66,4 @@ pub use output::{
     BitDepth, ViewFiles, write_alpha_png, write_depth_exr, write_rgb_png, write_view_images,
 };
 pub use render::{render_each, render_model, render_views};
-pub use rig::{Rig, RigConfig, bounding_sphere, build_rig, fibonacci_rig};
+pub use rig::{FramingSphere, Rig, RigConfig, bounding_sphere, build_rig, fibonacci_rig};

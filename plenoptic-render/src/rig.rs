@@ -26,6 +26,41 @@ pub struct RigConfig {
     pub heldout_cameras: usize,
     /// Distances of the held-out cameras as multiples of the training distance, used in turn.
     pub heldout_distances: Vec<f64>,
+    /// The sphere the cameras frame; `None`: the input's bounding sphere. A sequence fixes it so
+    /// that every frame is seen from the same cameras.
+    pub sphere: Option<FramingSphere>,
+}
+
+/// A sphere for the rig to frame, in the input's units.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FramingSphere {
+    /// Centre.
+    pub center: [f64; 3],
+    /// Radius (positive).
+    pub radius: f64,
+}
+
+impl FramingSphere {
+    /// The smallest sphere containing both `self` and `other`.
+    #[must_use]
+    pub fn union(self, other: Self) -> Self {
+        let (a, b) = (DVec3::from(self.center), DVec3::from(other.center));
+        let d = a.distance(b);
+        if d + other.radius <= self.radius {
+            return self;
+        }
+        if d + self.radius <= other.radius {
+            return other;
+        }
+        let radius = (d + self.radius + other.radius) / 2.0;
+        // The new centre lies on the line from a to b, `radius - self.radius` from a.
+        let center = a + (b - a) * ((radius - self.radius) / d);
+        Self {
+            center: center.to_array(),
+            radius,
+        }
+    }
 }
 
 impl Default for RigConfig {
@@ -38,6 +73,7 @@ impl Default for RigConfig {
             margin: 0.05,
             heldout_cameras: 8,
             heldout_distances: vec![0.8, 1.25],
+            sphere: None,
         }
     }
 }
@@ -60,7 +96,10 @@ pub struct Rig {
 /// the up axis (so they fall between the training ones), at the configured multiples of the
 /// training distance.
 pub fn build_rig(model: &Model, cfg: &RigConfig) -> Result<Rig, Error> {
-    let (center, radius) = bounding_sphere(model)?;
+    let (center, radius) = match cfg.sphere {
+        Some(s) => (DVec3::from(s.center), s.radius),
+        None => bounding_sphere(model)?,
+    };
     let train = fibonacci_rig(center, radius, cfg)?;
     let intrinsics = Intrinsics::from_fov_y(cfg.width, cfg.height, cfg.fov_y_deg);
     let distance = framing_distance(radius, &intrinsics, cfg.margin)
@@ -147,6 +186,50 @@ mod tests {
     use super::*;
     use glam::Vec3;
     use plenoptic_io::PlenopticCloud;
+
+    #[test]
+    fn sphere_union_contains_both_and_touches_their_far_sides() {
+        let a = FramingSphere {
+            center: [0.0, 0.0, 0.0],
+            radius: 1.0,
+        };
+        let b = FramingSphere {
+            center: [4.0, 0.0, 0.0],
+            radius: 2.0,
+        };
+        // Far sides at x = -1 and x = 6: centre 2.5, radius 3.5.
+        let u = a.union(b);
+        assert!((u.radius - 3.5).abs() < 1e-12 && (u.center[0] - 2.5).abs() < 1e-12);
+        assert_eq!(b.union(a), u);
+        // A sphere inside the other gives the other.
+        let inner = FramingSphere {
+            center: [4.5, 0.0, 0.0],
+            radius: 1.0,
+        };
+        assert_eq!(b.union(inner), b);
+        assert_eq!(inner.union(b), b);
+    }
+
+    #[test]
+    fn fixed_sphere_overrides_the_inputs_bounds() {
+        let cloud = PlenopticCloud {
+            positions: vec![Vec3::ZERO, Vec3::ONE],
+            colors: vec![[0.0; 3]; 2],
+            ..Default::default()
+        };
+        let cfg = RigConfig {
+            sphere: Some(FramingSphere {
+                center: [10.0, 20.0, 30.0],
+                radius: 5.0,
+            }),
+            ..RigConfig::default()
+        };
+        let rig = build_rig(&Model::Cloud(cloud), &cfg).unwrap();
+        assert_eq!(
+            (rig.center, rig.radius),
+            (DVec3::new(10.0, 20.0, 30.0), 5.0)
+        );
+    }
 
     #[test]
     fn rig_frames_the_sphere() {
