@@ -14,6 +14,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::config::Config;
+use crate::plot::{self, esc};
 use atomic_output::write_atomic;
 use splat_init::InitSummary;
 use splat_train::eval::Metrics;
@@ -484,130 +485,51 @@ pub fn smoothed(curve: &[CurvePoint]) -> Vec<(f64, f64)> {
         .collect()
 }
 
-/// Line colours of the runs in the plot.
-const RUN_COLOURS: [&str; 4] = ["#1f77b4", "#d62728", "#2ca02c", "#9467bd"];
-
-/// The training curves as an inline SVG line plot.
+/// The training curves as an inline SVG line plot: each run's smoothed training PSNR (solid),
+/// its held-out curve (dashed) and its held-out markers.
 fn curve_svg(report: &Report, names: &[String]) -> String {
-    let (w, h, left, bottom, top, right) = (720.0, 360.0, 60.0, 40.0, 15.0, 20.0);
-    let curves: Vec<Vec<(f64, f64)>> = report.runs.iter().map(|r| smoothed(&r.curve)).collect();
-    let markers: Vec<Vec<(f64, f64, &str)>> = report.runs.iter().map(heldout_markers).collect();
-    let heldout: Vec<Vec<(f64, f64)>> = report
-        .runs
-        .iter()
-        .map(|r| {
-            r.heldout_curve
-                .iter()
-                .map(|p| (p.elapsed_s, p.score.psnr_black))
-                .collect()
-        })
-        .collect();
-    let points: Vec<(f64, f64)> = curves
-        .iter()
-        .chain(&heldout)
-        .flatten()
-        .copied()
-        .chain(markers.iter().flatten().map(|m| (m.0, m.1)))
-        .collect();
-    if points.is_empty() {
+    let mut series = Vec::new();
+    let mut markers = Vec::new();
+    for (i, (r, name)) in report.runs.iter().zip(names).enumerate() {
+        let colour = plot::COLOURS[i % plot::COLOURS.len()];
+        series.push(plot::Series {
+            label: name.clone(),
+            title: format!("{name}: training PSNR"),
+            colour,
+            dashed: false,
+            points: smoothed(&r.curve),
+        });
+        if !r.heldout_curve.is_empty() {
+            series.push(plot::Series {
+                label: String::new(),
+                title: "held-out PSNR on black".into(),
+                colour,
+                dashed: true,
+                points: r
+                    .heldout_curve
+                    .iter()
+                    .map(|p| (p.elapsed_s, p.score.psnr_black))
+                    .collect(),
+            });
+        }
+        markers.extend(
+            heldout_markers(r)
+                .into_iter()
+                .map(|(t, p, label)| (t, p, label.to_string(), colour)),
+        );
+    }
+    if series.iter().all(|s| s.points.is_empty()) && markers.is_empty() {
         return "<p>(no training history)</p>\n".into();
     }
-    let t_max = points.iter().map(|p| p.0).fold(0.0, f64::max).max(1e-3);
-    let p_min = points
-        .iter()
-        .map(|p| p.1)
-        .fold(f64::INFINITY, f64::min)
-        .floor();
-    let p_max = points
-        .iter()
-        .map(|p| p.1)
-        .fold(f64::NEG_INFINITY, f64::max)
-        .ceil();
-    let p_max = if p_max <= p_min { p_min + 1.0 } else { p_max };
-    let x = |t: f64| left + (w - left - right) * t / t_max;
-    let y = |p: f64| top + (h - top - bottom) * (1.0 - (p - p_min) / (p_max - p_min));
-    // One (time, PSNR) curve as the `points` attribute of an SVG polyline in plot coordinates.
-    let polyline_points = |curve: &[(f64, f64)]| -> String {
-        let pts: Vec<String> = curve
-            .iter()
-            .map(|&(t, p)| format!("{:.1},{:.1}", x(t), y(p)))
-            .collect();
-        pts.join(" ")
-    };
-    let mut s = format!(
-        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" viewBox=\"0 0 {w} {h}\" \
-         font-size=\"12\"><rect width=\"{w}\" height=\"{h}\" fill=\"white\"/>\
-         <line x1=\"{left}\" y1=\"{yb}\" x2=\"{xr}\" y2=\"{yb}\" stroke=\"black\"/>\
-         <line x1=\"{left}\" y1=\"{top}\" x2=\"{left}\" y2=\"{yb}\" stroke=\"black\"/>",
-        yb = h - bottom,
-        xr = w - right
-    );
-    for k in 0..=5 {
-        let t = t_max * f64::from(k) / 5.0;
-        let _ = write!(
-            s,
-            "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{t:.0}</text>",
-            x(t),
-            h - bottom + 16.0
-        );
-        let p = p_min + (p_max - p_min) * f64::from(k) / 5.0;
-        let _ = write!(
-            s,
-            "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"end\">{p:.1}</text>\
-             <line x1=\"{left}\" y1=\"{yy:.1}\" x2=\"{xr}\" y2=\"{yy:.1}\" stroke=\"#eee\"/>",
-            left - 6.0,
-            y(p) + 4.0,
-            yy = y(p),
-            xr = w - right
-        );
-    }
-    let _ = write!(
-        s,
-        "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"middle\">wall time of training (s)</text>\
-         <text x=\"14\" y=\"{:.1}\" text-anchor=\"middle\" transform=\"rotate(-90 14 {:.1})\">PSNR (dB)</text>",
-        left + (w - left - right) / 2.0,
-        h - 4.0,
-        h / 2.0,
-        h / 2.0
-    );
-    for (i, (curve, name)) in curves.iter().zip(names).enumerate() {
-        let colour = RUN_COLOURS[i % RUN_COLOURS.len()];
-        let _ = write!(
-            s,
-            "<polyline fill=\"none\" stroke=\"{colour}\" stroke-width=\"1.5\" points=\"{}\"/>\
-             <text x=\"{:.1}\" y=\"{:.1}\" fill=\"{colour}\">{}</text>",
-            polyline_points(curve),
-            left + 10.0,
-            top + 14.0 + 16.0 * i as f64,
-            esc(name)
-        );
-    }
-    for (i, curve) in heldout.iter().enumerate().filter(|c| !c.1.is_empty()) {
-        let colour = RUN_COLOURS[i % RUN_COLOURS.len()];
-        let _ = write!(
-            s,
-            "<polyline fill=\"none\" stroke=\"{colour}\" stroke-width=\"1.5\" \
-             stroke-dasharray=\"5 3\" points=\"{}\"><title>held-out PSNR on black</title></polyline>",
-            polyline_points(curve)
-        );
-    }
-    for (i, run) in markers.iter().enumerate() {
-        let colour = RUN_COLOURS[i % RUN_COLOURS.len()];
-        for &(t, p, label) in run {
-            let _ = write!(
-                s,
-                "<circle cx=\"{:.1}\" cy=\"{:.1}\" r=\"4\" fill=\"white\" stroke=\"{colour}\" \
-                 stroke-width=\"2\"><title>{label}: {p:.2} dB</title></circle>\
-                 <text x=\"{:.1}\" y=\"{:.1}\" fill=\"{colour}\" font-size=\"10\">{label}</text>",
-                x(t),
-                y(p),
-                x(t) + 6.0,
-                y(p) - 6.0
-            );
-        }
-    }
-    s.push_str("</svg>\n");
-    s
+    plot::svg(
+        &plot::Axes {
+            x_label: "wall time of training (s)".into(),
+            y_label: "PSNR (dB)".into(),
+            round_y: true,
+        },
+        &series,
+        &markers,
+    )
 }
 
 /// Held-out PSNRs on black of a run as (time, PSNR, label): at step 0 (the initial fit, and the
@@ -689,16 +611,8 @@ pub fn base64(data: &[u8]) -> String {
     out
 }
 
-/// Escapes text for HTML.
-fn esc(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-        .replace('"', "&quot;")
-}
-
 /// Bytes in B, KiB, MiB or GiB.
-fn human_bytes(b: u64) -> String {
+pub fn human_bytes(b: u64) -> String {
     let b = b as f64;
     if b < 1024.0 {
         format!("{b} B")
