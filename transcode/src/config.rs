@@ -67,6 +67,8 @@ pub struct Config {
     pub eval: EvalConfig,
     /// What is written besides the model.
     pub output: OutputConfig,
+    /// Sequences (`transcode sequence`): warm starts between frames.
+    pub sequence: SequenceConfig,
 }
 
 /// Trainer settings; learning rates and densification are `splat_train`'s own structures.
@@ -184,6 +186,27 @@ impl Default for OutputConfig {
             glb: false,
             compare_init: false,
             checkpoint_interval_s: DEFAULT_CHECKPOINT_INTERVAL_S,
+        }
+    }
+}
+
+/// Sequence settings (`transcode sequence`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SequenceConfig {
+    /// Start each frame after the first of a shard's block from the previous frame's trained
+    /// splats (their colour and opacity carried onto the new surface) instead of from scratch.
+    pub warm_start: bool,
+    /// Training steps of a warm-started frame, as a share of `training.iterations` (and of
+    /// `training.time_budget_s` when one is set).
+    pub warm_share: f64,
+}
+
+impl Default for SequenceConfig {
+    fn default() -> Self {
+        Self {
+            warm_start: true,
+            warm_share: 0.25,
         }
     }
 }
@@ -308,6 +331,22 @@ impl Config {
                     "must be a non-empty list of factors in (0.3, 100), got {:?}",
                     r.heldout_distances
                 ),
+            );
+        }
+        if let Some(sphere) = r.sphere
+            && !(sphere.center.iter().all(|c| c.is_finite())
+                && sphere.radius.is_finite()
+                && sphere.radius > 0.0)
+        {
+            return bad(
+                "rig.sphere",
+                format!("needs a finite centre and a positive radius, got {sphere:?}"),
+            );
+        }
+        if !(self.sequence.warm_share > 0.0 && self.sequence.warm_share <= 1.0) {
+            return bad(
+                "sequence.warm_share",
+                format!("must be in (0, 1], got {}", self.sequence.warm_share),
             );
         }
         if let Err(e) = self.renderer.validate() {

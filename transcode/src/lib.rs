@@ -7,9 +7,11 @@
 //!
 //! - [`config`]: every setting ([`config::Config`]), with defaults, TOML files and validation.
 //! - [`pipeline`]: the stages, from an input file to a model, a dataset and a report.
+//! - [`plot`]: the reports' inline SVG line plots.
 //! - [`progress`]: the events a run reports to its caller (the library never prints).
 //! - [`report`]: the run report (JSON and HTML).
 //! - [`resume`]: the run state that lets a killed run continue.
+//! - [`sequence`]: many frames, warm-started, resumable, sharded for cluster engines.
 //! - [`viewer`]: the interactive viewer written beside the report.
 //!
 //! ```
@@ -26,7 +28,9 @@
 
 pub mod config;
 pub mod pipeline;
+pub mod plot;
 pub mod progress;
 pub mod report;
 pub mod resume;
+pub mod sequence;
 pub mod viewer;

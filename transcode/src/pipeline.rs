@@ -74,6 +74,14 @@ pub enum PipelineError {
     /// The trained model could not be evaluated (e.g. no held-out view covers a pixel).
     #[error("evaluation: {0}")]
     Eval(Box<splat_train::EvalError>),
+    /// The previous frame's model cannot warm-start this one.
+    #[error("warm start from {path}: {problem}")]
+    WarmStart {
+        /// The previous frame's model.
+        path: PathBuf,
+        /// What is wrong.
+        problem: String,
+    },
     /// The model could not be written.
     #[error("cannot write the model {path}: {source}")]
     Model {
@@ -177,10 +185,22 @@ pub struct Outcome {
 }
 
 /// How [`run_with`] starts.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct RunOptions {
     /// Continue the run saved in the output folder, if there is one (else start afresh).
     pub resume: bool,
+    /// A sequence's warm start: surface init adds the training corrections of the previous
+    /// frame's model ([`splat_init::warm`]).
+    pub warm_start: Option<WarmStart>,
+}
+
+/// The previous frame a warm start takes its training corrections from.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct WarmStart {
+    /// Its input file (its initialisation is reproduced from it, with this run's settings).
+    pub input: PathBuf,
+    /// Its trained model (`splats.ply`).
+    pub model: PathBuf,
 }
 
 /// How [`run_with`] ended.
@@ -205,7 +225,7 @@ pub fn run(
     cfg: &Config,
     observer: Observer<'_>,
 ) -> Result<Outcome, PipelineError> {
-    execute(input, out, cfg, observer, None)
+    execute(input, out, cfg, observer, None, None)
 }
 
 /// Runs the pipeline, or with `opts.resume` continues the run saved in `out`: a run with the same
@@ -244,7 +264,8 @@ pub fn run_with(
             .into());
         }
     }
-    execute(input, out, cfg, observer, saved).map(|o| Finish::Completed(Box::new(o)))
+    execute(input, out, cfg, observer, saved, opts.warm_start.as_ref())
+        .map(|o| Finish::Completed(Box::new(o)))
 }
 
 /// The stages of a run, in order (the numbers in [`Event::Stage`]).
@@ -258,6 +279,7 @@ fn execute(
     cfg: &Config,
     observer: Observer<'_>,
     saved: Option<RunState>,
+    warm_start: Option<&WarmStart>,
 ) -> Result<Outcome, PipelineError> {
     cfg.validate()?;
     let started = Instant::now();
@@ -289,6 +311,7 @@ fn execute(
             mode,
             index: k,
             model_path: layout.model_path(k, mode),
+            warm_start: warm_start.filter(|_| mode == InitMode::Surface),
         };
         let model = init_train_eval(&run, &surfaces, &refs, cfg, &layout, &mut state, observer)?;
         observer(Event::Note(format!(
@@ -626,12 +649,14 @@ fn init_modes(cfg: &Config) -> Vec<InitMode> {
     modes
 }
 
-/// Which model of the run: its init mode, its index among the run's modes, its file.
+/// Which model of the run: its init mode, its index among the run's modes, its file, and the
+/// previous frame's model a warm start takes its appearance from.
 #[derive(Debug, Clone)]
-struct RunOf {
+struct RunOf<'a> {
     mode: InitMode,
     index: usize,
     model_path: PathBuf,
+    warm_start: Option<&'a WarmStart>,
 }
 
 /// One trained and evaluated model, not yet written.
@@ -657,7 +682,7 @@ struct Initialised {
 /// Stages 3–5 for one init mode: initialises (or finds the checkpoint to continue from),
 /// trains and evaluates one model of the run, whose progress `state` records.
 fn init_train_eval(
-    run: &RunOf,
+    run: &RunOf<'_>,
     surfaces: &Surfaces,
     refs: &References,
     cfg: &Config,
@@ -717,7 +742,7 @@ fn init_train_eval(
 /// checkpoint. The schedule is fixed once, before the first step, and saved: a resumed run must
 /// train on the same one even when it came from timed probe steps.
 fn initialise(
-    run: &RunOf,
+    run: &RunOf<'_>,
     surfaces: &Surfaces,
     refs: &References,
     cfg: &Config,
@@ -769,12 +794,16 @@ fn initialise(
     });
     let mut init_cfg = cfg.init.clone();
     init_cfg.mode = mode;
-    let (mut splats, summary) = init::initialise(
+    let (mut splats, mut summary) = init::initialise(
         &surfaces.init,
         &init_cfg,
         cfg.renderer.exponent,
         cfg.training.seed,
     )?;
+    if let Some(previous) = run.warm_start {
+        warm_start(&mut splats, previous, &init_cfg, cfg, observer)?;
+        summary.warm_start = Some(previous.model.clone());
+    }
     observer(Event::Note(format!(
         "{} splats, SH degree {}{}",
         summary.splats,
@@ -811,6 +840,45 @@ fn initialise(
         step_zero: Some(step_zero),
         fresh: Some(splats),
     })
+}
+
+/// Warm start: reproduces the previous frame's initialisation from its input and adds what
+/// training changed in it to `splats` ([`init::carry_training`]).
+fn warm_start(
+    splats: &mut Splats,
+    previous: &WarmStart,
+    init_cfg: &init::InitConfig,
+    cfg: &Config,
+    observer: Observer<'_>,
+) -> Result<(), PipelineError> {
+    let warm_err = |problem: String| PipelineError::WarmStart {
+        path: previous.model.clone(),
+        problem,
+    };
+    let trained = splat_core::ply::read_splats(&previous.model)
+        .map_err(|e| warm_err(format!("cannot read it: {e}")))?;
+    let loaded = load(&previous.input, &crate::progress::ignore)?;
+    let surfaces = Surfaces::of(&loaded.model, cfg);
+    let (initial, _) = init::initialise(
+        &surfaces.init,
+        init_cfg,
+        cfg.renderer.exponent,
+        cfg.training.seed,
+    )?;
+    let carried =
+        init::carry_training(splats, &initial, &trained).map_err(|e| warm_err(e.to_string()))?;
+    if let Some(c) = carried {
+        observer(Event::Note(format!(
+            "warm start: {} splats took the training corrections of {} (rigid motion {:.2}° and \
+             {:.3} taken out; median distance {:.3})",
+            c.splats,
+            previous.model.display(),
+            c.motion.angle_deg(),
+            c.motion.translation.length(),
+            c.median_distance
+        )));
+    }
+    Ok(())
 }
 
 /// Stage 3 (end): scores the initial splats on the held-out views and, for surface init with
@@ -871,7 +939,7 @@ fn colour_solve(
 /// report and the held-out curve (`eval.every`).
 #[allow(clippy::too_many_arguments)]
 fn train(
-    run: &RunOf,
+    run: &RunOf<'_>,
     fresh: Option<Splats>,
     schedule: &Schedule,
     sh_degree: u32,

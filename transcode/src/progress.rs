@@ -18,6 +18,18 @@ pub enum Event {
     },
     /// A detail of the current stage.
     Note(String),
+    /// A sequence's frame begins: frame `index` of `of` (1-based), named `name`; `what` says
+    /// how it starts.
+    Frame {
+        /// Which frame, from 1, in the whole sequence.
+        index: usize,
+        /// Frames in the sequence.
+        of: usize,
+        /// The frame's name.
+        name: String,
+        /// How it starts ("cold start", "warm start from …").
+        what: String,
+    },
     /// A counted task begins: `total` `unit`s ("views", "steps"), `done` of them already done.
     Begin {
         /// What is counted.

@@ -12,6 +12,7 @@ mod info;
 mod progress;
 mod render;
 mod run;
+mod sequence;
 #[cfg(feature = "scenes")]
 mod synth;
 mod train;
@@ -39,6 +40,9 @@ enum Command {
     Train(train::Args),
     /// Run the whole pipeline: input model to 3DGS model with a report.
     Run(run::Args),
+    /// Run the pipeline on every frame of a sequence (a folder or glob), warm-started and
+    /// resumable, optionally as one shard of a cluster job.
+    Sequence(sequence::Args),
     /// Render the reference views of an input and write the COLMAP dataset only.
     Views(views::Args),
     /// Evaluate a 3DGS model against reference views with their COLMAP cameras.
@@ -65,6 +69,7 @@ pub fn dispatch(cli: Cli) -> anyhow::Result<()> {
         Command::Render(a) => render::run(a),
         Command::Train(a) => train::run(a),
         Command::Run(a) => run::run(a),
+        Command::Sequence(a) => sequence::run(a),
         Command::Views(a) => views::run(a),
         Command::Eval(a) => eval::run(a),
         #[cfg(feature = "scenes")]

@@ -30,6 +30,12 @@ impl Reporter {
         match event {
             Event::Stage { index, of, what } => eprintln!("[{index}/{of}] {what}"),
             Event::Note(note) => eprintln!("      {note}"),
+            Event::Frame {
+                index,
+                of,
+                name,
+                what,
+            } => eprintln!("== frame {index}/{of}: {name} ({what})"),
             Event::Begin { unit, total, done } => {
                 let b = ProgressBar::new(total);
                 b.set_style(

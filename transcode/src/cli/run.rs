@@ -43,6 +43,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let opts = RunOptions {
         resume: args.resume,
+        ..RunOptions::default()
     };
     let reporter = Reporter::new(args.quiet);
     let outcome =

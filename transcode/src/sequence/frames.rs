@@ -1,0 +1,209 @@
+//! The frames of a sequence: a folder's model files or a glob's matches, in natural order.
+
+use std::cmp::Ordering;
+use std::path::{Path, PathBuf};
+
+use super::SequenceError;
+
+/// File extensions (lower case) of the inputs `transcode run` reads.
+pub const FRAME_EXTENSIONS: [&str; 4] = ["ply", "obj", "gltf", "glb"];
+
+/// One frame of a sequence.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Frame {
+    /// The input file.
+    pub path: PathBuf,
+    /// Its file stem: the name of its output folder and its entry in the manifest.
+    pub name: String,
+}
+
+/// The frames named by `input`: every model file of a folder, or the files a glob pattern
+/// (`*`, `?`, `[…]`) matches, in natural order (`frame_9` before `frame_10`). Refuses an
+/// empty folder, a glob matching nothing, a path that is neither, and two frames with one stem.
+pub fn list_frames(input: &str) -> Result<Vec<Frame>, SequenceError> {
+    let as_path = Path::new(input);
+    let paths: Vec<PathBuf> = if as_path.is_dir() {
+        let entries = std::fs::read_dir(as_path).map_err(|source| SequenceError::Io {
+            path: as_path.to_path_buf(),
+            source,
+        })?;
+        let mut paths = Vec::new();
+        for entry in entries {
+            let entry = entry.map_err(|source| SequenceError::Io {
+                path: as_path.to_path_buf(),
+                source,
+            })?;
+            let path = entry.path();
+            if path.is_file() && has_frame_extension(&path) {
+                paths.push(path);
+            }
+        }
+        if paths.is_empty() {
+            return Err(SequenceError::NoFrames(format!(
+                "the folder {input} holds no frames (files ending in .{})",
+                FRAME_EXTENSIONS.join(", .")
+            )));
+        }
+        paths
+    } else if input.contains(['*', '?', '[']) {
+        let matches = glob::glob(input)
+            .map_err(|e| SequenceError::NoFrames(format!("bad glob pattern {input}: {e}")))?;
+        let mut paths = Vec::new();
+        for m in matches {
+            let path = m.map_err(|e| SequenceError::Io {
+                path: e.path().to_path_buf(),
+                source: std::io::Error::new(e.error().kind(), e.error().to_string()),
+            })?;
+            if path.is_file() {
+                paths.push(path);
+            }
+        }
+        if paths.is_empty() {
+            return Err(SequenceError::NoFrames(format!(
+                "the glob {input} matches no file"
+            )));
+        }
+        paths
+    } else if as_path.exists() {
+        return Err(SequenceError::NoFrames(format!(
+            "{input} is a file: a sequence is a folder of frames or a glob (e.g. 'frames/*.ply'); \
+             `transcode run` takes one frame"
+        )));
+    } else {
+        return Err(SequenceError::NoFrames(format!(
+            "{input} does not exist (a sequence is a folder of frames or a glob)"
+        )));
+    };
+    let mut frames: Vec<Frame> = paths
+        .into_iter()
+        .map(|path| Frame {
+            name: path
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+            path,
+        })
+        .collect();
+    frames.sort_by(|a, b| natural_cmp(&a.name, &b.name).then_with(|| a.path.cmp(&b.path)));
+    for pair in frames.windows(2) {
+        if pair[0].name == pair[1].name {
+            return Err(SequenceError::NoFrames(format!(
+                "frames {} and {} share the name {}: each frame's output folder is named by its \
+                 file stem",
+                pair[0].path.display(),
+                pair[1].path.display(),
+                pair[0].name
+            )));
+        }
+    }
+    Ok(frames)
+}
+
+fn has_frame_extension(path: &Path) -> bool {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| FRAME_EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
+}
+
+/// Natural order: runs of digits compare by value (`frame_9` < `frame_10`), the rest by
+/// character; between equal values, fewer leading zeros first.
+#[must_use]
+pub fn natural_cmp(a: &str, b: &str) -> Ordering {
+    let (mut a, mut b) = (a, b);
+    loop {
+        match (a.chars().next(), b.chars().next()) {
+            (None, None) => return Ordering::Equal,
+            (None, Some(_)) => return Ordering::Less,
+            (Some(_), None) => return Ordering::Greater,
+            (Some(x), Some(y)) if x.is_ascii_digit() && y.is_ascii_digit() => {
+                let (da, ra) = split_digits(a);
+                let (db, rb) = split_digits(b);
+                let (va, vb) = (da.trim_start_matches('0'), db.trim_start_matches('0'));
+                let by_value = va.len().cmp(&vb.len()).then_with(|| va.cmp(vb));
+                let order = by_value.then_with(|| da.len().cmp(&db.len()));
+                if order != Ordering::Equal {
+                    return order;
+                }
+                (a, b) = (ra, rb);
+            }
+            (Some(x), Some(y)) => {
+                if x != y {
+                    return x.cmp(&y);
+                }
+                (a, b) = (&a[x.len_utf8()..], &b[y.len_utf8()..]);
+            }
+        }
+    }
+}
+
+fn split_digits(s: &str) -> (&str, &str) {
+    let end = s.find(|c: char| !c.is_ascii_digit()).unwrap_or(s.len());
+    s.split_at(end)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn natural_order_compares_numbers_by_value() {
+        let mut names = vec![
+            "frame_10",
+            "frame_9",
+            "frame_100",
+            "frame_09",
+            "frame_1",
+            "frame",
+            "frame_2b",
+            "frame_2a",
+            "other_1",
+        ];
+        names.sort_by(|a, b| natural_cmp(a, b));
+        assert_eq!(
+            names,
+            [
+                "frame",
+                "frame_1",
+                "frame_2a",
+                "frame_2b",
+                "frame_9",
+                "frame_09",
+                "frame_10",
+                "frame_100",
+                "other_1"
+            ]
+        );
+        // Longer than any integer type: compared as digit strings.
+        assert_eq!(
+            natural_cmp("f99999999999999999999999", "f100000000000000000000000"),
+            Ordering::Less
+        );
+    }
+
+    #[test]
+    fn folders_globs_and_their_refusals() {
+        let dir = tempfile::tempdir().unwrap();
+        for name in ["s_10.ply", "s_9.ply", "s_1.PLY", "notes.txt", "s_2.obj"] {
+            std::fs::write(dir.path().join(name), b"x").unwrap();
+        }
+        std::fs::create_dir(dir.path().join("sub.ply")).unwrap();
+        let names = |frames: Vec<Frame>| frames.into_iter().map(|f| f.name).collect::<Vec<_>>();
+        let folder = dir.path().to_str().unwrap();
+        assert_eq!(
+            names(list_frames(folder).unwrap()),
+            ["s_1", "s_2", "s_9", "s_10"]
+        );
+        let pattern = format!("{folder}/s_*.ply");
+        assert_eq!(names(list_frames(&pattern).unwrap()), ["s_9", "s_10"]);
+
+        let error = |input: &str| list_frames(input).unwrap_err().to_string();
+        assert!(error(&format!("{folder}/none_*.ply")).contains("matches no file"));
+        let empty = tempfile::tempdir().unwrap();
+        assert!(error(empty.path().to_str().unwrap()).contains("holds no frames"));
+        assert!(error(&format!("{folder}/s_9.ply")).contains("is a file"));
+        assert!(error(&format!("{folder}/missing")).contains("does not exist"));
+        std::fs::write(dir.path().join("s_9.obj"), b"x").unwrap();
+        let clash = error(folder);
+        assert!(clash.contains("share the name s_9"), "{clash}");
+    }
+}
