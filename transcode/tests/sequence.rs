@@ -1,0 +1,457 @@
+//! `transcode sequence`: a sequence killed with SIGKILL at random moments and re-run until it
+//! finishes writes the same models, byte for byte, as one never interrupted; what a kill leaves
+//! never looks finished; shards split the frames into contiguous blocks and the last one merges
+//! the manifests; bad frames are named, recorded as failed, and the others go on.
+#![allow(clippy::print_stderr)] // tests report what they measured
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+const BIN: &str = env!("CARGO_BIN_EXE_transcode");
+
+/// Small runs that keep every stage: 10 training and 2 held-out views at 48×48, 80 steps
+/// (20 for a warm start), a checkpoint every 20 ms.
+const CONFIG: &str = r#"
+[rig]
+cameras = 10
+width = 48
+height = 48
+heldout_cameras = 2
+
+[training]
+iterations = 80
+
+[eval]
+report_views = 1
+every = 40
+
+[output]
+checkpoint_interval_s = 0.02
+
+[sequence]
+warm_share = 0.25
+"#;
+
+fn spider() -> String {
+    format!(
+        "{}/../testdata/meshes/spider/spider.obj",
+        env!("CARGO_MANIFEST_DIR")
+    )
+}
+
+fn transcode(args: &[&str]) -> Command {
+    let mut c = Command::new(BIN);
+    c.args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        // A test must not pick up the shard of a Slurm job it happens to run in.
+        .env_remove("SLURM_ARRAY_TASK_ID")
+        .env_remove("SLURM_ARRAY_TASK_COUNT")
+        .env_remove("JOB_COMPLETION_INDEX");
+    c
+}
+
+fn check(out: &Output, what: &str) -> String {
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.success(), "{what} failed: {stderr}");
+    stderr
+}
+
+/// `n` frames of the spider turning and moving (`synth --frames`), `cameras` capture cameras.
+fn synth(dir: &Path, n: usize, cameras: usize, seed: u64) -> Vec<PathBuf> {
+    let out = transcode(&[
+        "synth",
+        "--mesh",
+        &spider(),
+        "--points",
+        "6000",
+        "--grid",
+        "60",
+        "--frames",
+        &n.to_string(),
+        "--cameras",
+        &cameras.to_string(),
+        "--seed",
+        &seed.to_string(),
+        "--out",
+        dir.to_str().unwrap(),
+    ])
+    .output()
+    .unwrap();
+    check(&out, "synth");
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    files.sort();
+    assert_eq!(files.len(), n);
+    files
+}
+
+fn json(path: &Path) -> serde_json::Value {
+    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    serde_json::from_slice(&bytes)
+        .unwrap_or_else(|e| panic!("{} is not whole: {e}", path.display()))
+}
+
+fn states(manifest: &serde_json::Value) -> Vec<(String, String)> {
+    manifest["frames"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| {
+            (
+                f["name"].as_str().unwrap().to_string(),
+                f["state"].as_str().unwrap().to_string(),
+            )
+        })
+        .collect()
+}
+
+/// A small, deterministic generator for the kill moments (fixed seed).
+struct SplitMix(u64);
+
+impl SplitMix {
+    fn next_unit(&mut self) -> f64 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^= z >> 31;
+        (z >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+#[test]
+fn a_sequence_killed_at_random_moments_resumes_to_the_same_models() {
+    let tmp = tempfile::tempdir().unwrap();
+    let frames = tmp.path().join("frames");
+    let names: Vec<String> = synth(&frames, 3, 13, 0)
+        .iter()
+        .map(|p| p.file_stem().unwrap().to_string_lossy().into_owned())
+        .collect();
+    let config = tmp.path().join("small.toml");
+    std::fs::write(&config, CONFIG).unwrap();
+    let (frames_s, config_s) = (frames.to_str().unwrap(), config.to_str().unwrap());
+    let args = |out: &Path| -> Vec<String> {
+        ["sequence", frames_s, "--out", out.to_str().unwrap()]
+            .into_iter()
+            .chain(["--config", config_s, "--quiet"])
+            .map(String::from)
+            .collect()
+    };
+    let run = |out: &Path| {
+        let a = args(out);
+        transcode(&a.iter().map(String::as_str).collect::<Vec<_>>())
+    };
+    let model = |out: &Path, name: &str| out.join("frames").join(name).join("model/splats.ply");
+
+    // The reference: one uninterrupted run. Frame 1 starts cold, frames 2 and 3 warm.
+    let whole = tmp.path().join("whole");
+    let t0 = Instant::now();
+    check(&run(&whole).output().unwrap(), "the uninterrupted sequence");
+    let full = t0.elapsed();
+    let reference: Vec<Vec<u8>> = names
+        .iter()
+        .map(|n| std::fs::read(model(&whole, n)).unwrap())
+        .collect();
+    let manifest = json(&whole.join("sequence.json"));
+    assert_eq!(
+        states(&manifest),
+        names
+            .iter()
+            .map(|n| (n.clone(), "finished".to_string()))
+            .collect::<Vec<_>>()
+    );
+    let warm: Vec<serde_json::Value> = manifest["frames"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f["warm_start"].clone())
+        .collect();
+    assert_eq!(
+        warm,
+        [
+            serde_json::Value::Null,
+            names[0].clone().into(),
+            names[1].clone().into()
+        ]
+    );
+    for (k, f) in manifest["frames"].as_array().unwrap().iter().enumerate() {
+        let r = &f["result"];
+        assert_eq!(r["iterations"], if k == 0 { 80 } else { 20 }, "frame {k}");
+        assert!(r["psnr_black"].as_f64().unwrap() > 15.0, "frame {k}: {r}");
+        assert_eq!(
+            r["model_bytes"].as_u64().unwrap(),
+            reference[k].len() as u64
+        );
+    }
+    assert!(whole.join("sequence.html").is_file());
+    assert_eq!(manifest["temporal"].as_array().unwrap().len(), 2);
+
+    // Kill moments after each (re)start, from a fixed seed, growing by 0.5 % a session from 2 % of the
+    // uninterrupted run's time: the short ones hit loading and views (every re-run loads the
+    // frames again), the longer ones move the sequence on, frame by frame, through training,
+    // export and the manifests, until a re-run finishes.
+    let killed = tmp.path().join("killed");
+    let mut rng = SplitMix(0x5e9_2026);
+    let mut interrupted = [0; 3];
+    for session in 0..200 {
+        let m = (0.02 + 0.005 * f64::from(session)) * (1.0 + 0.1 * rng.next_unit());
+        let mut child = run(&killed).spawn().unwrap();
+        let deadline = Instant::now() + full.mul_f64(m);
+        let mut finished = false;
+        while Instant::now() < deadline {
+            if child.try_wait().unwrap().is_some() {
+                finished = true;
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        if !finished {
+            child.kill().unwrap(); // SIGKILL
+        }
+        let status = child.wait().unwrap();
+        // The shard manifest, when there, is always whole; a frame it calls finished has its
+        // final model; no model file is ever a partial or different one.
+        let shard = killed.join("shards/shard-0-of-1.json");
+        let said = shard.exists().then(|| json(&shard));
+        for (k, name) in names.iter().enumerate() {
+            if let Ok(bytes) = std::fs::read(model(&killed, name)) {
+                assert!(
+                    bytes == reference[k],
+                    "{name}: a model that is not the final one"
+                );
+            }
+            if let Some(s) = &said
+                && s["frames"][k]["state"] == "finished"
+            {
+                assert!(
+                    model(&killed, name).is_file(),
+                    "{name} finished without a model"
+                );
+            }
+        }
+        eprintln!(
+            "at {:.0}% of {:.1} s: {} ({:?})",
+            100.0 * m,
+            full.as_secs_f64(),
+            if finished { "finished" } else { "killed" },
+            said.as_ref().map(states)
+        );
+        if finished {
+            assert!(status.success(), "a re-run failed");
+            break;
+        }
+        if let Some(k) = said
+            .as_ref()
+            .and_then(|s| states(s).iter().position(|(_, state)| state == "running"))
+        {
+            interrupted[k] += 1;
+        }
+    }
+    eprintln!("kills with frame 1, 2, 3 in flight: {interrupted:?}");
+    assert!(
+        interrupted.iter().all(|&n| n >= 1) && interrupted.iter().sum::<usize>() >= 8,
+        "kills did not hit every frame in flight: {interrupted:?}"
+    );
+
+    // Re-run until it finishes, then compare byte for byte.
+    check(&run(&killed).output().unwrap(), "the last re-run");
+    for (k, name) in names.iter().enumerate() {
+        assert!(
+            std::fs::read(model(&killed, name)).unwrap() == reference[k],
+            "{name} differs from the uninterrupted run's"
+        );
+    }
+    let again = json(&killed.join("sequence.json"));
+    assert_eq!(states(&again), states(&manifest));
+
+    // Re-running a finished sequence trains nothing.
+    let before = std::fs::metadata(model(&killed, &names[2]))
+        .unwrap()
+        .modified()
+        .unwrap();
+    let said = check(
+        &transcode(&[
+            "sequence",
+            frames_s,
+            "--out",
+            killed.to_str().unwrap(),
+            "--config",
+            config_s,
+        ])
+        .output()
+        .unwrap(),
+        "re-running a finished sequence",
+    );
+    assert!(said.contains("was finished already"), "{said}");
+    assert_eq!(
+        std::fs::metadata(model(&killed, &names[2]))
+            .unwrap()
+            .modified()
+            .unwrap(),
+        before
+    );
+}
+
+#[test]
+fn shards_take_contiguous_blocks_and_the_last_merges() {
+    let tmp = tempfile::tempdir().unwrap();
+    let frames = tmp.path().join("frames");
+    let names: Vec<String> = synth(&frames, 5, 13, 1)
+        .iter()
+        .map(|p| p.file_stem().unwrap().to_string_lossy().into_owned())
+        .collect();
+    let config = tmp.path().join("small.toml");
+    std::fs::write(&config, CONFIG).unwrap();
+    let out = tmp.path().join("out");
+    let shard = |index: &str, env: bool| {
+        let mut c = transcode(&[
+            "sequence",
+            frames.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--config",
+            config.to_str().unwrap(),
+        ]);
+        if env {
+            // As a Slurm job array task would see it.
+            c.env("SLURM_ARRAY_TASK_ID", index)
+                .env("SLURM_ARRAY_TASK_COUNT", "2");
+        } else {
+            c.args(["--shard", &format!("{index}/2")]);
+        }
+        c.output().unwrap()
+    };
+    // Shard 1 of 2 first (frames 3 to 5), from Slurm's variables: the others are not done.
+    let said = check(&shard("1", true), "shard 1/2");
+    assert!(said.contains("frames 3..5 (3 frames)"), "{said}");
+    assert!(!out.join("sequence.json").exists());
+    let s1 = json(&out.join("shards/shard-1-of-2.json"));
+    assert_eq!(
+        states(&s1),
+        names[2..]
+            .iter()
+            .map(|n| (n.clone(), "finished".to_string()))
+            .collect::<Vec<_>>()
+    );
+    // A block's first frame starts cold, the next ones warm from the frame before.
+    assert!(s1["frames"][0]["warm_start"].is_null());
+    assert_eq!(s1["frames"][1]["warm_start"], names[2].as_str());
+    assert_eq!(s1["frames"][2]["warm_start"], names[3].as_str());
+    // Shard 0 (frames 1 and 2) finishes last and merges.
+    let said = check(&shard("0", false), "shard 0/2");
+    assert!(said.contains("frames 1..2 (2 frames)"), "{said}");
+    let merged = json(&out.join("sequence.json"));
+    assert_eq!(
+        states(&merged),
+        names
+            .iter()
+            .map(|n| (n.clone(), "finished".to_string()))
+            .collect::<Vec<_>>()
+    );
+    assert!(out.join("sequence.html").is_file());
+    // --collect alone writes the same manifest again.
+    std::fs::remove_file(out.join("sequence.json")).unwrap();
+    let collected = transcode(&[
+        "sequence",
+        frames.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--collect",
+    ])
+    .output()
+    .unwrap();
+    check(&collected, "--collect");
+    assert_eq!(json(&out.join("sequence.json")), merged);
+
+    // A shard that does not exist is refused.
+    let bad = shard("2", false);
+    assert!(!bad.status.success());
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(err.contains("2/2"), "{err}");
+}
+
+#[test]
+fn bad_frames_are_named_recorded_and_the_others_go_on() {
+    let tmp = tempfile::tempdir().unwrap();
+    let config = tmp.path().join("small.toml");
+    std::fs::write(&config, CONFIG).unwrap();
+    let config = config.to_str().unwrap();
+    let sequence = |input: &str, out: &Path| {
+        transcode(&[
+            "sequence",
+            input,
+            "--out",
+            out.to_str().unwrap(),
+            "--config",
+            config,
+        ])
+        .output()
+        .unwrap()
+    };
+    let refused = |input: &str, expect: &[&str]| {
+        let out = sequence(input, &tmp.path().join("refused"));
+        assert!(!out.status.success(), "{input} was accepted");
+        let err = String::from_utf8_lossy(&out.stderr);
+        for e in expect {
+            assert!(err.contains(e), "{input}: {err:?} does not say {e:?}");
+        }
+    };
+
+    // An empty folder, a glob matching nothing, a missing folder.
+    let empty = tmp.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    let empty_s = empty.to_str().unwrap();
+    refused(empty_s, &[empty_s, "holds no frames"]);
+    let glob = format!("{}/*.ply", tmp.path().join("nowhere").display());
+    refused(&glob, &[&glob, "matches no"]);
+    let missing = tmp.path().join("missing").to_str().unwrap().to_string();
+    refused(&missing, &[&missing]);
+
+    // Four frames: the second unreadable, the fourth from a rig with another camera count.
+    let frames = tmp.path().join("frames");
+    let good = synth(&frames, 3, 13, 2);
+    let other = synth(&tmp.path().join("other"), 2, 12, 2);
+    let renamed = |k: usize| frames.join(format!("f_{k}.ply"));
+    std::fs::rename(&good[0], renamed(1)).unwrap();
+    std::fs::write(
+        renamed(2),
+        b"ply\nformat ascii 1.0\nelement vertex 3\nend_header\n1 2\n",
+    )
+    .unwrap();
+    std::fs::rename(&good[1], renamed(10)).unwrap(); // natural order: f_10 after f_2 and f_3
+    std::fs::rename(&good[2], renamed(3)).unwrap();
+    std::fs::rename(&other[0], renamed(11)).unwrap();
+    let out = tmp.path().join("out");
+    let run = sequence(frames.to_str().unwrap(), &out);
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        !run.status.success(),
+        "a sequence with failed frames exited 0"
+    );
+    let manifest = json(&out.join("sequence.json"));
+    assert_eq!(
+        states(&manifest),
+        [
+            ("f_1".to_string(), "finished".to_string()),
+            ("f_2".into(), "failed".into()),
+            ("f_3".into(), "finished".into()),
+            ("f_10".into(), "finished".into()),
+            ("f_11".into(), "failed".into()),
+        ]
+    );
+    let error = |k: usize| manifest["frames"][k]["error"].as_str().unwrap().to_string();
+    assert!(error(1).contains("f_2.ply"), "{}", error(1));
+    assert!(
+        error(4).contains("f_11.ply") && error(4).contains("12 capture cameras"),
+        "{}",
+        error(4)
+    );
+    // The frame after a failed one starts cold; the one after it warm again.
+    assert!(manifest["frames"][2]["warm_start"].is_null());
+    assert_eq!(manifest["frames"][3]["warm_start"], "f_3");
+    assert!(err.contains("f_2") && err.contains("f_11"), "{err}");
+}
