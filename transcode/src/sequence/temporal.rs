@@ -78,12 +78,13 @@ pub fn consecutive_psnr(
     if views == 0 {
         return Ok(None);
     }
-    let mse = sum / count as f64;
-    // Identical pictures: capped at 100 dB like an 8-bit difference far below one level.
+    // On colours in [0, 1], as every PSNR here; identical pictures are capped at 100 dB, far
+    // above any difference of one 8-bit level.
+    let mse = sum / count as f64 / (255.0 * 255.0);
     let psnr = if mse <= 0.0 {
         100.0
     } else {
-        10.0 * (255.0f64 * 255.0 / mse).log10()
+        splat_train::metrics::psnr_from_mse(mse)
     };
     Ok(Some((psnr, views)))
 }
