@@ -411,7 +411,9 @@ fn bad_frames_are_named_recorded_and_the_others_go_on() {
     let missing = tmp.path().join("missing").to_str().unwrap().to_string();
     refused(&missing, &[&missing]);
 
-    // Four frames: the second unreadable, the fourth from a rig with another camera count.
+    // Six frames: the second and the last unreadable, the fifth from a rig with another camera
+    // count. (The last is one of the frames the framing sphere is taken from: the frame before
+    // it stands in for it, and the bad frame fails alone.)
     let frames = tmp.path().join("frames");
     let good = synth(&frames, 3, 13, 2);
     let other = synth(&tmp.path().join("other"), 2, 12, 2);
@@ -425,6 +427,7 @@ fn bad_frames_are_named_recorded_and_the_others_go_on() {
     std::fs::rename(&good[1], renamed(10)).unwrap(); // natural order: f_10 after f_2 and f_3
     std::fs::rename(&good[2], renamed(3)).unwrap();
     std::fs::rename(&other[0], renamed(11)).unwrap();
+    std::fs::write(renamed(12), b"not a ply at all").unwrap();
     let out = tmp.path().join("out");
     let run = sequence(frames.to_str().unwrap(), &out);
     let err = String::from_utf8_lossy(&run.stderr);
@@ -433,25 +436,98 @@ fn bad_frames_are_named_recorded_and_the_others_go_on() {
         "a sequence with failed frames exited 0"
     );
     let manifest = json(&out.join("sequence.json"));
-    assert_eq!(
-        states(&manifest),
-        [
-            ("f_1".to_string(), "finished".to_string()),
-            ("f_2".into(), "failed".into()),
-            ("f_3".into(), "finished".into()),
-            ("f_10".into(), "finished".into()),
-            ("f_11".into(), "failed".into()),
-        ]
-    );
-    let error = |k: usize| manifest["frames"][k]["error"].as_str().unwrap().to_string();
-    assert!(error(1).contains("f_2.ply"), "{}", error(1));
+    let expected = [
+        ("f_1".to_string(), "finished".to_string()),
+        ("f_2".into(), "failed".into()),
+        ("f_3".into(), "finished".into()),
+        ("f_10".into(), "finished".into()),
+        ("f_11".into(), "failed".into()),
+        ("f_12".into(), "failed".into()),
+    ];
+    assert_eq!(states(&manifest), expected);
+    assert!(error(&manifest, 1).contains("f_2.ply"));
+    let e = error(&manifest, 4);
     assert!(
-        error(4).contains("f_11.ply") && error(4).contains("12 capture cameras"),
-        "{}",
-        error(4)
+        e.contains("f_11.ply") && e.contains("12 capture cameras"),
+        "{e}"
     );
+    assert!(error(&manifest, 5).contains("f_12.ply"));
     // The frame after a failed one starts cold; the one after it warm again.
     assert!(manifest["frames"][2]["warm_start"].is_null());
     assert_eq!(manifest["frames"][3]["warm_start"], "f_3");
-    assert!(err.contains("f_2") && err.contains("f_11"), "{err}");
+    assert!(
+        ["f_2", "f_11", "f_12"].iter().all(|f| err.contains(f)),
+        "{err}"
+    );
+
+    // In three shards (f_1 f_2 | f_3 f_10 | f_11 f_12) into the same folder (finished frames
+    // are skipped, failed ones tried again): a shard's exit status speaks for its own frames,
+    // so the all-good middle shard, finishing last and merging, exits 0; `--collect` then fails
+    // naming every failed frame.
+    let sharded = |shard: &str| {
+        transcode(&[
+            "sequence",
+            frames.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--config",
+            config,
+            "--shard",
+            shard,
+        ])
+        .output()
+        .unwrap()
+    };
+    for bad in ["0/3", "2/3"] {
+        let run = sharded(bad);
+        assert!(
+            !run.status.success(),
+            "shard {bad} with a failed frame exited 0"
+        );
+    }
+    std::fs::remove_file(out.join("sequence.json")).unwrap();
+    check(&sharded("1/3"), "the all-good shard that merges");
+    assert_eq!(states(&json(&out.join("sequence.json"))), expected);
+    let collect = |quiet: bool| {
+        let mut args = vec!["sequence", frames.to_str().unwrap(), "--out"];
+        args.extend([out.to_str().unwrap(), "--collect"]);
+        if quiet {
+            args.push("--quiet");
+        }
+        transcode(&args).output().unwrap()
+    };
+    let collected = collect(false);
+    let said = String::from_utf8_lossy(&collected.stderr);
+    assert!(!collected.status.success());
+    assert!(
+        said.contains("3 frame(s) failed: f_2, f_11, f_12"),
+        "{said}"
+    );
+    // --quiet prints nothing but the error.
+    let quiet = collect(true);
+    assert!(
+        quiet.stdout.is_empty(),
+        "{}",
+        String::from_utf8_lossy(&quiet.stdout)
+    );
+
+    // A lost shard (its manifest gone, as if its task never ran): --collect says the sequence
+    // is not finished and fails.
+    for m in std::fs::read_dir(out.join("shards")).unwrap() {
+        let m = m.unwrap().path();
+        if !m.ends_with("shard-0-of-3.json") {
+            std::fs::remove_file(m).unwrap();
+        }
+    }
+    let collected = collect(false);
+    let said = String::from_utf8_lossy(&collected.stderr);
+    assert!(!collected.status.success());
+    assert!(
+        said.contains("4 are pending, running or killed (f_3, f_10, f_11, f_12)"),
+        "{said}"
+    );
+}
+
+fn error(manifest: &serde_json::Value, k: usize) -> String {
+    manifest["frames"][k]["error"].as_str().unwrap().to_string()
 }

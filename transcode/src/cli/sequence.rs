@@ -46,10 +46,9 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let frames = sequence::list_frames(&args.input)?;
     if args.collect {
-        return summarise(
-            &sequence::collect(&args.input, &frames, &args.out)?,
-            &args.out,
-        );
+        let merged = sequence::collect(&args.input, &frames, &args.out)?;
+        summarise(&merged, &args.out, args.quiet);
+        return whole(&merged);
     }
     let mut config = args.overrides.resolve(Config::default())?;
     if args.cold {
@@ -94,29 +93,87 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .filter(|r| r.state == FrameState::Failed)
         .map(|r| r.name.as_str())
         .collect();
-    println!(
-        "shard {shard}: {} of {} frames finished; manifest {}",
-        manifest.frames.len() - failed.len(),
-        manifest.frames.len(),
-        sequence::ShardManifest::path(&args.out, shard).display()
-    );
-    // The shard that finds every frame done is the last: it merges the manifests.
+    if !args.quiet {
+        println!(
+            "shard {shard}: {} of {} frames finished; manifest {}",
+            manifest.frames.len() - failed.len(),
+            manifest.frames.len(),
+            sequence::ShardManifest::path(&args.out, shard).display()
+        );
+    }
+    // The shard that finds every frame done is the last: it merges the manifests. Its exit
+    // status still speaks for its own frames only, so that a cluster engine marks (and retries)
+    // the task whose frame failed, not the one that happened to finish last.
     if sequence::all_frames_done(&frames, &args.out)? {
-        summarise(
-            &sequence::collect(&args.input, &frames, &args.out)?,
-            &args.out,
-        )?;
-    } else if shard.count > 1 {
+        let merged = sequence::collect(&args.input, &frames, &args.out)?;
+        summarise(&merged, &args.out, args.quiet);
+    } else if shard.count > 1 && !args.quiet {
         println!("other shards are still running; the last one to finish writes sequence.json");
     }
     if !failed.is_empty() {
-        bail!("{} frame(s) failed: {}", failed.len(), failed.join(", "));
+        bail!(
+            "{} frame(s) of shard {shard} failed: {} (their errors are in {})",
+            failed.len(),
+            failed.join(", "),
+            sequence::ShardManifest::path(&args.out, shard).display()
+        );
     }
     Ok(())
 }
 
-/// Prints where the merged manifest and report are; an error when frames failed or are missing.
-fn summarise(m: &sequence::SequenceManifest, out: &std::path::Path) -> anyhow::Result<()> {
+/// `--collect`'s verdict on the whole sequence: an error unless every frame finished, so that a
+/// collect job run after the shards (e.g. Slurm's `--dependency=afterany`) fails when a frame
+/// failed or a shard was lost.
+fn whole(m: &sequence::SequenceManifest) -> anyhow::Result<()> {
+    let named = |state: FrameState| -> Vec<&str> {
+        m.frames
+            .iter()
+            .filter(|r| r.state == state)
+            .map(|r| r.name.as_str())
+            .collect()
+    };
+    let failed = named(FrameState::Failed);
+    let unfinished: Vec<&str> = named(FrameState::Running)
+        .into_iter()
+        .chain(named(FrameState::Pending))
+        .collect();
+    match (failed.is_empty(), unfinished.is_empty()) {
+        (true, true) => Ok(()),
+        (false, true) => bail!("{} frame(s) failed: {}", failed.len(), failed.join(", ")),
+        (true, false) => bail!(
+            "the sequence is not finished: {} frame(s) pending, running or killed ({}); run \
+             their shards again",
+            unfinished.len(),
+            abbreviated(&unfinished)
+        ),
+        (false, false) => bail!(
+            "{} frame(s) failed ({}) and {} are pending, running or killed ({})",
+            failed.len(),
+            abbreviated(&failed),
+            unfinished.len(),
+            abbreviated(&unfinished)
+        ),
+    }
+}
+
+/// At most ten names, then how many more.
+fn abbreviated(names: &[&str]) -> String {
+    if names.len() <= 10 {
+        names.join(", ")
+    } else {
+        format!(
+            "{}, … and {} more",
+            names[..10].join(", "),
+            names.len() - 10
+        )
+    }
+}
+
+/// Prints the merged manifest's summary and where it and the report are (nothing when quiet).
+fn summarise(m: &sequence::SequenceManifest, out: &std::path::Path, quiet: bool) {
+    if quiet {
+        return;
+    }
     let s = &m.summary;
     println!(
         "sequence: {} frames, {} finished, {} failed, {} running or killed, {} pending",
@@ -133,14 +190,4 @@ fn summarise(m: &sequence::SequenceManifest, out: &std::path::Path) -> anyhow::R
         sequence::SequenceManifest::path(out).display()
     );
     println!("report:   {}", out.join("sequence.html").display());
-    if s.failed > 0 {
-        let failed: Vec<&str> = m
-            .frames
-            .iter()
-            .filter(|r| r.state == FrameState::Failed)
-            .map(|r| r.name.as_str())
-            .collect();
-        bail!("{} frame(s) failed: {}", failed.len(), failed.join(", "));
-    }
-    Ok(())
 }

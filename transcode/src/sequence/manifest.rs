@@ -205,9 +205,9 @@ impl SequenceManifest {
         out.join("sequence.json")
     }
 
-    /// Merges the shard manifests in `DIR/shards` over `frames` (the sequence's frames in
-    /// order, as listed now): each frame takes the record that got furthest, a frame no shard
-    /// reports is pending.
+    /// Merges shard manifests (oldest first, as [`read_shard_manifests`] gives them) over
+    /// `frames` (the sequence's frames in order, as listed now): each frame takes the record
+    /// that got furthest, between equal ones the latest; a frame no shard reports is pending.
     pub fn merge(
         input: &str,
         frames: &[super::Frame],
@@ -226,11 +226,15 @@ impl SequenceManifest {
                 error: None,
             })
             .collect();
+        // The furthest state wins; between equal states the later manifest (they come oldest
+        // first), so a frame shows the shard that last reported it.
+        let mut reported = vec![false; records.len()];
         for record in shards.iter().flat_map(|s| &s.frames) {
-            if let Some(slot) = records.iter_mut().find(|r| r.name == record.name)
-                && record.state.rank() > slot.state.rank()
+            if let Some(k) = records.iter().position(|r| r.name == record.name)
+                && (!reported[k] || record.state.rank() >= records[k].state.rank())
             {
-                *slot = record.clone();
+                records[k] = record.clone();
+                reported[k] = true;
             }
         }
         let mut shard_counts: Vec<usize> = shards.iter().map(|s| s.shard.count).collect();
@@ -296,7 +300,7 @@ pub fn read_shard_manifests(out: &Path) -> Result<Vec<ShardManifest>, SequenceEr
     let Ok(entries) = std::fs::read_dir(&dir) else {
         return Ok(Vec::new());
     };
-    let mut paths: Vec<PathBuf> = entries
+    let paths: Vec<PathBuf> = entries
         .filter_map(Result::ok)
         .map(|e| e.path())
         .filter(|p| {
@@ -305,9 +309,15 @@ pub fn read_shard_manifests(out: &Path) -> Result<Vec<ShardManifest>, SequenceEr
                 .is_some_and(|n| n.starts_with("shard-") && n.ends_with(".json"))
         })
         .collect();
-    paths.sort();
-    paths
+    // Oldest first (by modification time, then name), for `SequenceManifest::merge`.
+    let mut dated: Vec<(Option<std::time::SystemTime>, PathBuf)> = paths
+        .into_iter()
+        .map(|p| (std::fs::metadata(&p).and_then(|m| m.modified()).ok(), p))
+        .collect();
+    dated.sort();
+    dated
         .iter()
+        .map(|(_, p)| p)
         .map(|p| {
             let text = std::fs::read_to_string(p).map_err(|source| SequenceError::Io {
                 path: p.clone(),
@@ -395,12 +405,18 @@ mod tests {
                 record("b", Finished, Some(3.0), true),
                 record("c", Failed, None, true),
                 record("a", Pending, None, false),
+                FrameRecord {
+                    shard: Shard::parse("2/3").unwrap(),
+                    ..record("d", Pending, None, false)
+                },
             ]),
         ];
         let m = SequenceManifest::merge("x", &frames, &shards);
         let states: Vec<FrameState> = m.frames.iter().map(|r| r.state).collect();
         use FrameState::*;
         assert_eq!(states, [Finished, Finished, Failed, Pending]);
+        // A frame only reported pending shows the shard that reported it, not a default.
+        assert_eq!(m.frames[3].shard, Shard::parse("2/3").unwrap());
         assert_eq!(
             (m.summary.finished, m.summary.failed, m.summary.pending),
             (2, 1, 1)

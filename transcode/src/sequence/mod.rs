@@ -142,55 +142,88 @@ impl CaptureRig {
     }
 }
 
+/// The frame every other frame's capture rig is compared with: the first that loads.
+struct RigReference {
+    /// Its index in the sequence.
+    index: usize,
+    rig: CaptureRig,
+}
+
 /// The sphere every frame's cameras frame: the configured `rig.sphere`, else the smallest sphere
 /// holding the bounding spheres of the sequence's first, middle and last frames (the same for
-/// every shard, since every shard lists the same frames). Also returns the first frame's rig.
+/// every shard, since every shard lists the same frames). A frame there that does not load is
+/// replaced by the nearest one that does (forwards from the first and middle, backwards from the
+/// last), so one bad frame fails alone, in its own shard, instead of stopping every shard. Also
+/// returns the rig reference: the first frame that loads.
 fn sequence_sphere(
     frames: &[Frame],
     cfg: &Config,
     observer: Observer<'_>,
-) -> Result<(FramingSphere, CaptureRig), SequenceError> {
-    let load = |f: &Frame| {
-        pipeline::load(&f.path, &crate::progress::ignore).map_err(|e| SequenceError::Load {
-            frame: f.path.clone(),
-            source: Box::new(e),
-        })
+) -> Result<(FramingSphere, RigReference), SequenceError> {
+    let n = frames.len();
+    // The first frame at or after `from` (or at or before it, going back) that loads.
+    let loadable = |from: usize, forwards: bool| -> Option<(usize, pipeline::Loaded)> {
+        let order: Box<dyn Iterator<Item = usize>> = if forwards {
+            Box::new(from..n)
+        } else {
+            Box::new((0..=from).rev())
+        };
+        order
+            .filter_map(|k| {
+                pipeline::load(&frames[k].path, &crate::progress::ignore)
+                    .ok()
+                    .map(|l| (k, l))
+            })
+            .next()
     };
-    let first = load(&frames[0])?;
-    let rig = CaptureRig::of(&first.model);
+    let Some((first_index, first)) = loadable(0, true) else {
+        // Every frame fails to load: name the first frame and why.
+        let error = pipeline::load(&frames[0].path, &crate::progress::ignore)
+            .err()
+            .map_or_else(|| "cannot be loaded".to_string(), |e| e.to_string());
+        return Err(SequenceError::NoFrames(format!(
+            "no frame of the sequence loads; the first, {}: {error}",
+            frames[0].path.display()
+        )));
+    };
+    let reference = RigReference {
+        index: first_index,
+        rig: CaptureRig::of(&first.model),
+    };
     if let Some(sphere) = cfg.rig.sphere {
-        return Ok((sphere, rig));
+        return Ok((sphere, reference));
     }
-    let bounds = |model: &Model, frame: &Frame| {
+    let bounds = |model: &Model, k: usize| {
         plenoptic_render::bounding_sphere(model)
             .map(|(c, r)| FramingSphere {
                 center: c.to_array(),
                 radius: r,
             })
             .map_err(|e| SequenceError::Load {
-                frame: frame.path.clone(),
+                frame: frames[k].path.clone(),
                 source: Box::new(PipelineError::from(e)),
             })
     };
-    let mut sphere = bounds(&first.model, &frames[0])?;
-    let n = frames.len();
-    let mut others = vec![n / 2, n - 1];
-    others.dedup();
-    for k in others.into_iter().filter(|&k| k != 0) {
-        let loaded = load(&frames[k])?;
-        sphere = sphere.union(bounds(&loaded.model, &frames[k])?);
+    let mut sphere = bounds(&first.model, first_index)?;
+    let mut used = vec![first_index];
+    for (from, forwards) in [(n / 2, true), (n - 1, false)] {
+        if let Some((k, loaded)) = loadable(from, forwards)
+            && !used.contains(&k)
+        {
+            sphere = sphere.union(bounds(&loaded.model, k)?);
+            used.push(k);
+        }
     }
+    let names: Vec<&str> = used.iter().map(|&k| frames[k].name.as_str()).collect();
     observer(Event::Note(format!(
-        "cameras frame the sphere at ({:.3}, {:.3}, {:.3}), radius {:.3} (frames {}, {} and {})",
+        "cameras frame the sphere at ({:.3}, {:.3}, {:.3}), radius {:.3} (frames {})",
         sphere.center[0],
         sphere.center[1],
         sphere.center[2],
         sphere.radius,
-        frames[0].name,
-        frames[n / 2].name,
-        frames[n - 1].name
+        names.join(", ")
     )));
-    Ok((sphere, rig))
+    Ok((sphere, reference))
 }
 
 /// Whether frames warm-start: asked for, and possible (surface init whose splats keep their
@@ -233,7 +266,7 @@ pub fn run_shard(
         return Err(SequenceError::NoFrames(format!("{input} names no frames")));
     }
     let block = shard.block(frames.len());
-    let (sphere, first_rig) = sequence_sphere(frames, cfg, observer)?;
+    let (sphere, reference) = sequence_sphere(frames, cfg, observer)?;
     let mut manifest = ShardManifest {
         version: manifest::MANIFEST_VERSION,
         input: input.to_string(),
@@ -284,7 +317,7 @@ pub fn run_shard(
                 None => "cold start".into(),
             },
         });
-        let outcome = check_rig(frame, &frames[0], &first_rig).and_then(|()| {
+        let outcome = check_rig(frame, &frames[reference.index], &reference.rig).and_then(|()| {
             let opts = RunOptions {
                 resume: true,
                 warm_start: warm.map(|(_, start)| start),
