@@ -1,5 +1,5 @@
-//! Inline SVG line plots for the reports: axes with five ticks, solid or dashed lines with a
-//! legend, and labelled markers. Written by hand because the reports are single self-contained
+//! Inline SVG line plots for the reports: axes with round ticks (1, 2, 2.5 or 5 times a power
+//! of ten, about five to an axis), solid or dashed lines with a legend, and labelled markers. Written by hand because the reports are single self-contained
 //! HTML files and the plots are a few dozen lines of SVG; a plotting crate would bring fonts and
 //! raster backends for nothing.
 
@@ -33,8 +33,38 @@ pub struct Axes {
     pub x_label: String,
     /// y-axis label.
     pub y_label: String,
-    /// Round the y range out to whole units (dB plots) rather than keep it as it is.
+    /// Fit the y range to the data (dB plots) rather than start it at zero.
     pub round_y: bool,
+    /// Whole-number x ticks only (frame numbers), and the x range fitted to the data rather than
+    /// started at zero.
+    pub integer_x: bool,
+}
+
+/// Round ticks covering `lo..=hi`: a step of 1, 2, 2.5 or 5 times a power of ten giving about
+/// five intervals (at least `min_step`), the range rounded out to whole steps.
+#[must_use]
+pub fn ticks(lo: f64, hi: f64, min_step: f64) -> Vec<f64> {
+    // A flat line gets a range of one unit around it.
+    let (lo, hi) = if hi - lo < 1e-9 * hi.abs().max(1.0) {
+        (lo - 0.5, hi + 0.5)
+    } else {
+        (lo, hi)
+    };
+    let raw = (hi - lo) / 5.0;
+    let power = 10f64.powf(raw.log10().floor());
+    let step = [1.0, 2.0, 2.5, 5.0, 10.0]
+        .iter()
+        .map(|m| m * power)
+        .find(|&s| s >= raw)
+        .unwrap_or(10.0 * power)
+        .max(min_step);
+    // (A bound within rounding error of a tick is that tick.)
+    let first = (lo / step + 1e-9).floor();
+    let last = (hi / step - 1e-9).ceil();
+    // At most a few dozen ticks: `step` is at least a fifth of the span.
+    (first as i64..=last as i64)
+        .map(|k| k as f64 * step)
+        .collect()
 }
 
 /// The plot as an `<svg>` element; a note when there is nothing to plot.
@@ -50,16 +80,29 @@ pub fn svg(axes: &Axes, series: &[Series], markers: &[Marker]) -> String {
     if points.is_empty() {
         return "<p>(nothing to plot)</p>\n".into();
     }
-    let x_max = points.iter().map(|p| p.0).fold(0.0, f64::max).max(1e-3);
-    let y_lo = points.iter().map(|p| p.1).fold(f64::INFINITY, f64::min);
-    let y_hi = points.iter().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max);
-    let (y_min, y_max) = if axes.round_y {
-        (y_lo.floor(), y_hi.ceil())
-    } else {
-        (y_lo.min(0.0), y_hi)
+    let fold = |f: fn(&(f64, f64)) -> f64| {
+        points
+            .iter()
+            .map(f)
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                (a.min(v), b.max(v))
+            })
     };
-    let y_max = if y_max <= y_min { y_min + 1.0 } else { y_max };
-    let x = |v: f64| left + (w - left - right) * v / x_max;
+    let (x_lo, x_hi) = fold(|p| p.0);
+    let (y_lo, y_hi) = fold(|p| p.1);
+    let x_ticks = if axes.integer_x {
+        ticks(x_lo, x_hi, 1.0)
+    } else {
+        ticks(x_lo.min(0.0), x_hi, 0.0)
+    };
+    let y_ticks = if axes.round_y {
+        ticks(y_lo, y_hi, 0.0)
+    } else {
+        ticks(y_lo.min(0.0), y_hi, 0.0)
+    };
+    let (x_min, x_max) = (x_ticks[0], x_ticks[x_ticks.len() - 1]);
+    let (y_min, y_max) = (y_ticks[0], y_ticks[y_ticks.len() - 1]);
+    let x = |v: f64| left + (w - left - right) * (v - x_min) / (x_max - x_min);
     let y = |v: f64| top + (h - top - bottom) * (1.0 - (v - y_min) / (y_max - y_min));
     let mut s = format!(
         "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" viewBox=\"0 0 {w} {h}\" \
@@ -69,23 +112,23 @@ pub fn svg(axes: &Axes, series: &[Series], markers: &[Marker]) -> String {
         yb = h - bottom,
         xr = w - right
     );
-    let y_decimals = if y_max - y_min < 10.0 { 1 } else { 0 };
-    for k in 0..=5 {
-        let t = x_max * f64::from(k) / 5.0;
+    for &t in &x_ticks {
         let _ = write!(
             s,
             "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{}</text>",
             x(t),
             h - bottom + 16.0,
-            tick(t)
+            tick(t, x_ticks[1] - x_ticks[0])
         );
-        let p = y_min + (y_max - y_min) * f64::from(k) / 5.0;
+    }
+    for &p in &y_ticks {
         let _ = write!(
             s,
-            "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"end\">{p:.y_decimals$}</text>\
+            "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"end\">{}</text>\
              <line x1=\"{left}\" y1=\"{yy:.1}\" x2=\"{xr}\" y2=\"{yy:.1}\" stroke=\"#eee\"/>",
             left - 6.0,
             y(p) + 4.0,
+            tick(p, y_ticks[1] - y_ticks[0]),
             yy = y(p),
             xr = w - right
         );
@@ -125,7 +168,7 @@ pub fn svg(axes: &Axes, series: &[Series], markers: &[Marker]) -> String {
         if !line.label.is_empty() {
             let _ = write!(
                 s,
-                "<text x=\"{:.1}\" y=\"{:.1}\" fill=\"{}\">{}</text>",
+                "<text x=\"{:.1}\" y=\"{:.1}\" fill=\"{}\" stroke=\"white\" stroke-width=\"3\" paint-order=\"stroke\">{}</text>",
                 left + 10.0,
                 top + 14.0 + 16.0 * f64::from(legend),
                 line.colour,
@@ -152,13 +195,21 @@ pub fn svg(axes: &Axes, series: &[Series], markers: &[Marker]) -> String {
     s
 }
 
-/// An x-axis tick: whole numbers as such, small values with two significant decimals.
-fn tick(v: f64) -> String {
-    if v >= 10.0 || v == v.round() {
-        format!("{v:.0}")
+/// A tick's label, with as many decimals as the step between ticks needs (none for whole steps,
+/// thousands separated by nothing: the reports' step counts are short).
+fn tick(v: f64, step: f64) -> String {
+    let decimals = if step >= 1.0 && step.fract() == 0.0 {
+        0
     } else {
-        format!("{v:.2}")
-    }
+        // 0.5 → 1, 0.25 → 2, 0.2 → 1, 0.05 → 2.
+        (1..=6)
+            .find(|&d| {
+                let scaled = step * 10f64.powi(d);
+                (scaled - scaled.round()).abs() < 1e-6
+            })
+            .unwrap_or(6) as usize
+    };
+    format!("{v:.decimals$}")
 }
 
 /// Escapes text for HTML and SVG.
@@ -180,6 +231,7 @@ mod tests {
             x_label: "x <s>".into(),
             y_label: "y".into(),
             round_y: true,
+            integer_x: false,
         };
         let line = Series {
             label: "a & b".into(),
@@ -209,8 +261,34 @@ mod tests {
         assert_eq!(coords.len(), 2);
         assert_eq!(coords[0].0, 60.0);
         assert_eq!(coords[1].0, 700.0);
-        let expected = 15.0 + 305.0 * (1.0 - 0.2 / 11.0);
+        // y ticks every 2.5 dB from 30 to 42.5.
+        let expected = 15.0 + 305.0 * (1.0 - 0.2 / 12.5);
         assert!((coords[0].1 - expected).abs() < 0.06);
+        assert!(out.contains(">42.5<") && out.contains(">30.0<"));
         assert_eq!(svg(&axes, &[], &[]), "<p>(nothing to plot)</p>\n");
+    }
+
+    #[test]
+    fn ticks_are_round_and_cover_the_range() {
+        let close = |a: Vec<f64>, b: &[f64]| {
+            a.len() == b.len() && a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-9)
+        };
+        // Frame numbers: whole steps from the first frame.
+        assert!(close(ticks(1.0, 6.0, 1.0), &[1., 2., 3., 4., 5., 6.]));
+        assert!(close(ticks(1.0, 300.0, 1.0), &[0., 100., 200., 300.]));
+        assert!(close(ticks(1.0, 2.0, 1.0), &[1., 2.]));
+        // dB: steps of 1, 2, 2.5 or 5 times a power of ten.
+        assert!(close(ticks(27.5, 43.7, 0.0), &[25., 30., 35., 40., 45.]));
+        assert!(close(
+            ticks(32.35, 33.98, 0.0),
+            &[32.0, 32.5, 33.0, 33.5, 34.0]
+        ));
+        assert!(close(ticks(0.0, 3000.0, 0.0), &[0., 1000., 2000., 3000.]));
+        // A flat line: one unit around it.
+        let flat = ticks(8082.0, 8082.0, 0.0);
+        assert!(flat.len() >= 3 && flat[0] < 8082.0 && flat[flat.len() - 1] > 8082.0);
+        assert_eq!(tick(2.5, 2.5), "2.5");
+        assert_eq!(tick(30.0, 0.25), "30.00");
+        assert_eq!(tick(3000.0, 1000.0), "3000");
     }
 }

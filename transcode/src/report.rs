@@ -526,6 +526,7 @@ fn curve_svg(report: &Report, names: &[String]) -> String {
             x_label: "wall time of training (s)".into(),
             y_label: "PSNR (dB)".into(),
             round_y: true,
+            integer_x: false,
         },
         &series,
         &markers,

@@ -40,6 +40,7 @@ fn axes(y: &str, round_y: bool) -> plot::Axes {
         x_label: "frame".into(),
         y_label: y.into(),
         round_y,
+        integer_x: true,
     }
 }
 
