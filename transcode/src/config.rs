@@ -194,8 +194,9 @@ impl Default for OutputConfig {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SequenceConfig {
-    /// Start each frame after the first of a shard's block from the previous frame's trained
-    /// splats (their colour and opacity carried onto the new surface) instead of from scratch.
+    /// Start each frame after the first of a shard's block from what training learnt on the
+    /// previous frame (its training corrections carried onto this frame's own surface init,
+    /// `splat_init::carry_training`) instead of from scratch.
     pub warm_start: bool,
     /// Training steps of a warm-started frame, as a share of `training.iterations` (and of
     /// `training.time_budget_s` when one is set).
@@ -206,7 +207,7 @@ impl Default for SequenceConfig {
     fn default() -> Self {
         Self {
             warm_start: true,
-            warm_share: 0.25,
+            warm_share: 0.3,
         }
     }
 }

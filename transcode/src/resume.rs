@@ -237,6 +237,10 @@ impl RunState {
                 problem,
             })?;
         saved.output.checkpoint_interval_s = config.output.checkpoint_interval_s;
+        // `[sequence]` only chooses each frame's settings (a warm frame's shorter schedule is
+        // in `training`), so a sequence re-run with another warm share still finds its
+        // finished and interrupted frames.
+        saved.sequence = config.sequence.clone();
         if saved != *config {
             let keys = config_differences(&saved, config);
             return Err(mismatch(format!(

@@ -34,7 +34,7 @@ pub struct Args {
     #[arg(long)]
     cold: bool,
     /// Training steps of a warm-started frame as a share of `--iterations` (and of any time
-    /// budget) (`sequence.warm_share`, default 0.25).
+    /// budget) (`sequence.warm_share`, default 0.3).
     #[arg(long, value_name = "SHARE")]
     warm_share: Option<f64>,
     /// Print nothing but errors.

@@ -364,7 +364,9 @@ fn choose_start(
         .ok()
         .flatten()
         .and_then(|state| Config::from_toml(&state.config).ok());
-    if let Some(saved) = saved {
+    if let Some(mut saved) = saved {
+        saved.sequence = cfg.sequence.clone(); // as the resume check does
+        saved.output.checkpoint_interval_s = cfg.output.checkpoint_interval_s;
         if config_differences(&saved, &cold).is_empty() {
             return Ok((cold, None));
         }
