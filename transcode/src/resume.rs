@@ -316,9 +316,12 @@ mod tests {
         let back = RunState::load(dir.path()).unwrap().unwrap();
         assert!(back.dataset_written && back.status == Status::Running);
 
-        // The same settings pass, whatever the checkpoint interval; floats survive exactly.
+        // The same settings pass, whatever the checkpoint interval and the sequence settings
+        // (they only choose a frame's settings); floats survive exactly.
         let mut same = cfg.clone();
         same.output.checkpoint_interval_s = 1.0;
+        same.sequence.warm_share = 0.5;
+        same.sequence.warm_start = false;
         back.check_same_run(dir.path(), &stamp, &same).unwrap();
 
         let mut other = cfg.clone();
