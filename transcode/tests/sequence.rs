@@ -418,16 +418,16 @@ fn bad_frames_are_named_recorded_and_the_others_go_on() {
     let good = synth(&frames, 3, 13, 2);
     let other = synth(&tmp.path().join("other"), 2, 12, 2);
     let renamed = |k: usize| frames.join(format!("f_{k}.ply"));
-    std::fs::rename(&good[0], renamed(1)).unwrap();
+    std::fs::rename(&good[0], renamed(8)).unwrap();
     std::fs::write(
-        renamed(2),
+        renamed(9),
         b"ply\nformat ascii 1.0\nelement vertex 3\nend_header\n1 2\n",
     )
     .unwrap();
-    std::fs::rename(&good[1], renamed(10)).unwrap(); // natural order: f_10 after f_2 and f_3
-    std::fs::rename(&good[2], renamed(3)).unwrap();
-    std::fs::rename(&other[0], renamed(11)).unwrap();
-    std::fs::write(renamed(12), b"not a ply at all").unwrap();
+    std::fs::rename(&good[1], renamed(10)).unwrap(); // natural order: f_10 after f_9
+    std::fs::rename(&good[2], renamed(11)).unwrap();
+    std::fs::rename(&other[0], renamed(12)).unwrap();
+    std::fs::write(renamed(13), b"not a ply at all").unwrap();
     let out = tmp.path().join("out");
     let run = sequence(frames.to_str().unwrap(), &out);
     let err = String::from_utf8_lossy(&run.stderr);
@@ -437,30 +437,30 @@ fn bad_frames_are_named_recorded_and_the_others_go_on() {
     );
     let manifest = json(&out.join("sequence.json"));
     let expected = [
-        ("f_1".to_string(), "finished".to_string()),
-        ("f_2".into(), "failed".into()),
-        ("f_3".into(), "finished".into()),
+        ("f_8".to_string(), "finished".to_string()),
+        ("f_9".into(), "failed".into()),
         ("f_10".into(), "finished".into()),
-        ("f_11".into(), "failed".into()),
+        ("f_11".into(), "finished".into()),
         ("f_12".into(), "failed".into()),
+        ("f_13".into(), "failed".into()),
     ];
     assert_eq!(states(&manifest), expected);
-    assert!(error(&manifest, 1).contains("f_2.ply"));
+    assert!(error(&manifest, 1).contains("f_9.ply"));
     let e = error(&manifest, 4);
     assert!(
-        e.contains("f_11.ply") && e.contains("12 capture cameras"),
+        e.contains("f_12.ply") && e.contains("12 capture cameras"),
         "{e}"
     );
-    assert!(error(&manifest, 5).contains("f_12.ply"));
+    assert!(error(&manifest, 5).contains("f_13.ply"));
     // The frame after a failed one starts cold; the one after it warm again.
     assert!(manifest["frames"][2]["warm_start"].is_null());
-    assert_eq!(manifest["frames"][3]["warm_start"], "f_3");
+    assert_eq!(manifest["frames"][3]["warm_start"], "f_10");
     assert!(
-        ["f_2", "f_11", "f_12"].iter().all(|f| err.contains(f)),
+        ["f_9", "f_12", "f_13"].iter().all(|f| err.contains(f)),
         "{err}"
     );
 
-    // In three shards (f_1 f_2 | f_3 f_10 | f_11 f_12) into the same folder (finished frames
+    // In three shards (f_8 f_9 | f_10 f_11 | f_12 f_13) into the same folder (finished frames
     // are skipped, failed ones tried again): a shard's exit status speaks for its own frames,
     // so the all-good middle shard, finishing last and merging, exits 0; `--collect` then fails
     // naming every failed frame.
@@ -500,7 +500,7 @@ fn bad_frames_are_named_recorded_and_the_others_go_on() {
     let said = String::from_utf8_lossy(&collected.stderr);
     assert!(!collected.status.success());
     assert!(
-        said.contains("3 frame(s) failed: f_2, f_11, f_12"),
+        said.contains("3 frame(s) failed: f_9, f_12, f_13"),
         "{said}"
     );
     // --quiet prints nothing but the error.
@@ -523,9 +523,38 @@ fn bad_frames_are_named_recorded_and_the_others_go_on() {
     let said = String::from_utf8_lossy(&collected.stderr);
     assert!(!collected.status.success());
     assert!(
-        said.contains("4 are pending, running or killed (f_3, f_10, f_11, f_12)"),
+        said.contains("4 are pending, running or killed (f_10, f_11, f_12, f_13)"),
         "{said}"
     );
+
+    // A hole in the numbering (s_3 of s_1, s_2, s_4): a failed frame named as missing, the
+    // others go on, exit non-zero.
+    let holed = tmp.path().join("holed");
+    let files = synth(&holed, 3, 13, 3);
+    for (file, n) in files.iter().zip([1, 2, 4]) {
+        std::fs::rename(file, holed.join(format!("s_{n}.ply"))).unwrap();
+    }
+    let out = tmp.path().join("holed-out");
+    let run = sequence(holed.to_str().unwrap(), &out);
+    assert!(!run.status.success());
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        err.contains("1 frame(s) missing from the numbering") && err.contains("s_3"),
+        "{err}"
+    );
+    let manifest = json(&out.join("sequence.json"));
+    assert_eq!(
+        states(&manifest),
+        [
+            ("s_1".to_string(), "finished".to_string()),
+            ("s_2".into(), "finished".into()),
+            ("s_3".into(), "failed".into()),
+            ("s_4".into(), "finished".into()),
+        ]
+    );
+    let e = error(&manifest, 2);
+    assert!(e.contains("s_3.ply") && e.contains("is missing"), "{e}");
+    assert!(manifest["frames"][3]["warm_start"].is_null());
 }
 
 fn error(manifest: &serde_json::Value, k: usize) -> String {

@@ -66,6 +66,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let block = shard.block(frames.len());
     let reporter = Reporter::new(args.quiet);
+    let missing: Vec<&str> = frames
+        .iter()
+        .filter(|f| !f.path.exists())
+        .map(|f| f.name.as_str())
+        .collect();
+    if !missing.is_empty() && !args.quiet {
+        eprintln!(
+            "warning: {} frame(s) missing from the numbering, reported as failed: {}",
+            missing.len(),
+            abbreviated(&missing)
+        );
+    }
     if !args.quiet {
         eprintln!(
             "sequence of {} frames; shard {shard}: frames {}..{} ({} frames){}",

@@ -18,8 +18,9 @@ pub struct Frame {
 }
 
 /// The frames named by `input`: every model file of a folder, or the files a glob pattern
-/// (`*`, `?`, `[…]`) matches, in natural order (`frame_9` before `frame_10`). Refuses an
-/// empty folder, a glob matching nothing, a path that is neither, and two frames with one stem.
+/// (`*`, `?`, `[…]`) matches, in natural order (`frame_9` before `frame_10`), with the holes of
+/// a numbered sequence as frames whose files do not exist. Refuses an empty
+/// folder, a glob matching nothing, a path that is neither, and two frames with one stem.
 pub fn list_frames(input: &str) -> Result<Vec<Frame>, SequenceError> {
     let as_path = Path::new(input);
     let paths: Vec<PathBuf> = if as_path.is_dir() {
@@ -96,7 +97,91 @@ pub fn list_frames(input: &str) -> Result<Vec<Frame>, SequenceError> {
             )));
         }
     }
-    Ok(frames)
+    Ok(with_gaps(frames))
+}
+
+/// Adds the frames missing from a numbered sequence. When every frame is one folder, one prefix,
+/// one number and one extension (`longdress_vox10_1051.ply`, …) and the numbers step by a common
+/// stride with holes, each hole becomes a frame whose file does not exist, so that the sequence
+/// reports it (as a failed frame) instead of silently joining the frames on either side. Left
+/// as they are: names that do not fit that pattern, and numbers with more holes than frames
+/// (timestamps, a deliberate selection).
+fn with_gaps(frames: Vec<Frame>) -> Vec<Frame> {
+    struct Numbered<'a> {
+        prefix: &'a str,
+        digits: &'a str,
+        number: u64,
+    }
+    let numbered: Option<Vec<Numbered<'_>>> = frames
+        .iter()
+        .map(|f| {
+            let start = f.name.trim_end_matches(|c: char| c.is_ascii_digit()).len();
+            let (prefix, digits) = f.name.split_at(start);
+            let number = (!digits.is_empty() && digits.len() <= 18)
+                .then(|| digits.parse().ok())
+                .flatten()?;
+            Some(Numbered {
+                prefix,
+                digits,
+                number,
+            })
+        })
+        .collect();
+    let Some(numbered) = numbered else {
+        return frames;
+    };
+    let first = &frames[0];
+    let same = |f: &Frame, n: &Numbered<'_>| {
+        n.prefix == numbered[0].prefix
+            && f.path.parent() == first.path.parent()
+            && f.path.extension() == first.path.extension()
+    };
+    if frames.len() < 2 || !frames.iter().zip(&numbered).all(|(f, n)| same(f, n)) {
+        return frames;
+    }
+    // Zero-padded numbers must all have one width, which the holes then get too.
+    let padded = numbered.iter().any(|n| n.digits.starts_with('0'));
+    let width = numbered[0].digits.len();
+    if padded && numbered.iter().any(|n| n.digits.len() != width) {
+        return frames;
+    }
+    let steps: Vec<u64> = numbered
+        .windows(2)
+        .map(|w| w[1].number.saturating_sub(w[0].number))
+        .collect();
+    let Some(stride) = steps.iter().copied().min().filter(|&d| d > 0) else {
+        return frames;
+    };
+    let holes: u64 = steps.iter().map(|d| d / stride - 1).sum();
+    if steps.iter().any(|d| d % stride != 0) || holes == 0 || holes > frames.len() as u64 {
+        return frames;
+    }
+    let extension = first
+        .path
+        .extension()
+        .map(|e| format!(".{}", e.to_string_lossy()))
+        .unwrap_or_default();
+    let folder = first.path.parent().unwrap_or(Path::new(""));
+    let mut out = Vec::with_capacity(frames.len() + holes as usize);
+    for (k, frame) in frames.iter().enumerate() {
+        if k > 0 {
+            let mut n = numbered[k - 1].number + stride;
+            while n < numbered[k].number {
+                let name = if padded {
+                    format!("{}{n:0width$}", numbered[0].prefix)
+                } else {
+                    format!("{}{n}", numbered[0].prefix)
+                };
+                out.push(Frame {
+                    path: folder.join(format!("{name}{extension}")),
+                    name,
+                });
+                n += stride;
+            }
+        }
+        out.push(frame.clone());
+    }
+    out
 }
 
 fn has_frame_extension(path: &Path) -> bool {
@@ -195,6 +280,51 @@ mod tests {
         );
         let pattern = format!("{folder}/s_*.ply");
         assert_eq!(names(list_frames(&pattern).unwrap()), ["s_9", "s_10"]);
+
+        // Holes in a numbered sequence become frames whose files do not exist.
+        let numbered = dir.path().join("numbered");
+        std::fs::create_dir(&numbered).unwrap();
+        for n in [1051, 1052, 1054, 1057] {
+            std::fs::write(numbered.join(format!("longdress_vox10_{n}.ply")), b"x").unwrap();
+        }
+        let listed = list_frames(numbered.to_str().unwrap()).unwrap();
+        let missing: Vec<&str> = listed
+            .iter()
+            .filter(|f| !f.path.exists())
+            .map(|f| f.name.as_str())
+            .collect();
+        assert_eq!(listed.len(), 7);
+        assert_eq!(
+            missing,
+            [
+                "longdress_vox10_1053",
+                "longdress_vox10_1055",
+                "longdress_vox10_1056"
+            ]
+        );
+        assert_eq!(listed[2].path, numbered.join("longdress_vox10_1053.ply"));
+        // Zero padding is kept; a stride of 2 is a stride, not holes.
+        let holes = |names: &[&str]| -> Vec<String> {
+            let frames: Vec<Frame> = names
+                .iter()
+                .map(|n| Frame {
+                    path: PathBuf::from(format!("d/{n}.ply")),
+                    name: (*n).into(),
+                })
+                .collect();
+            let known: Vec<&str> = names.to_vec();
+            with_gaps(frames)
+                .into_iter()
+                .map(|f| f.name)
+                .filter(|n| !known.contains(&n.as_str()))
+                .collect()
+        };
+        assert_eq!(holes(&["f_0008", "f_0010", "f_0014"]), ["f_0012"]);
+        assert!(holes(&["f_0", "f_2", "f_4"]).is_empty());
+        // More holes than frames (a selection, timestamps), mixed prefixes: left alone.
+        assert!(holes(&["t_100", "t_101", "t_200"]).is_empty());
+        assert!(holes(&["a_1", "b_3"]).is_empty());
+        assert!(holes(&["f_1", "f_3", "g"]).is_empty());
 
         let error = |input: &str| list_frames(input).unwrap_err().to_string();
         assert!(error(&format!("{folder}/none_*.ply")).contains("matches no file"));

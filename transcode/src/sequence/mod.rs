@@ -386,6 +386,15 @@ fn check_rig(frame: &Frame, first: &Frame, first_rig: &CaptureRig) -> Result<(),
     if frame.path == first.path {
         return Ok(());
     }
+    if !frame.path.exists() {
+        return Err(SequenceError::Frame {
+            frame: frame.path.clone(),
+            problem: "is missing: the sequence's numbering has a hole here (the frames on \
+                      either side exist)"
+                .into(),
+        }
+        .to_string());
+    }
     let loaded =
         pipeline::load(&frame.path, &crate::progress::ignore).map_err(|e| e.to_string())?;
     match CaptureRig::of(&loaded.model).difference(first_rig, &first.name) {
