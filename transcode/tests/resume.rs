@@ -10,6 +10,9 @@ use std::time::{Duration, Instant};
 
 use plenoptic_scenes::{DemoConfig, demo_scene};
 
+mod support;
+use support::SplitMix;
+
 const BIN: &str = env!("CARGO_BIN_EXE_transcode");
 
 /// A small run that still has every stage: 12 training and 2 held-out views at 64×64, surface
@@ -58,20 +61,6 @@ fn check(out: Output, what: &str) -> String {
         String::from_utf8_lossy(&out.stderr)
     );
     stdout
-}
-
-/// A small, deterministic generator for the kill moments (fixed seed).
-struct SplitMix(u64);
-
-impl SplitMix {
-    fn next_unit(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^= z >> 31;
-        (z >> 11) as f64 / (1u64 << 53) as f64
-    }
 }
 
 /// What `state.json` says, if it is there; it must always parse (it is written atomically).

@@ -8,6 +8,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
+mod support;
+use support::SplitMix;
+
 const BIN: &str = env!("CARGO_BIN_EXE_transcode");
 
 /// Small runs that keep every stage: 10 training and 2 held-out views at 48×48, 80 steps
@@ -107,20 +110,6 @@ fn states(manifest: &serde_json::Value) -> Vec<(String, String)> {
             )
         })
         .collect()
-}
-
-/// A small, deterministic generator for the kill moments (fixed seed).
-struct SplitMix(u64);
-
-impl SplitMix {
-    fn next_unit(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^= z >> 31;
-        (z >> 11) as f64 / (1u64 << 53) as f64
-    }
 }
 
 #[test]

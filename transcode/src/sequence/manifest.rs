@@ -127,6 +127,23 @@ pub struct FrameRecord {
     pub error: Option<String>,
 }
 
+impl FrameRecord {
+    /// A frame not yet begun, in `shard`'s block; its output folder is `frames/NAME`.
+    #[must_use]
+    pub fn pending(frame: &super::Frame, shard: Shard) -> Self {
+        Self {
+            name: frame.name.clone(),
+            input: frame.path.clone(),
+            dir: Path::new("frames").join(&frame.name),
+            state: FrameState::Pending,
+            shard,
+            warm_start: None,
+            result: None,
+            error: None,
+        }
+    }
+}
+
 /// `shards/shard-I-of-N.json`: the frames of one shard.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ShardManifest {
@@ -215,16 +232,7 @@ impl SequenceManifest {
     ) -> SequenceManifest {
         let mut records: Vec<FrameRecord> = frames
             .iter()
-            .map(|f| FrameRecord {
-                name: f.name.clone(),
-                input: f.path.clone(),
-                dir: Path::new("frames").join(&f.name),
-                state: FrameState::Pending,
-                shard: Shard::default(),
-                warm_start: None,
-                result: None,
-                error: None,
-            })
+            .map(|f| FrameRecord::pending(f, Shard::default()))
             .collect();
         // The furthest state wins; between equal states the later manifest (they come oldest
         // first), so a frame shows the shard that last reported it.

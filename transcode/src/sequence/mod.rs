@@ -275,16 +275,7 @@ pub fn run_shard(
         sphere,
         frames: frames[block.clone()]
             .iter()
-            .map(|f| FrameRecord {
-                name: f.name.clone(),
-                input: f.path.clone(),
-                dir: Path::new("frames").join(&f.name),
-                state: FrameState::Pending,
-                shard,
-                warm_start: None,
-                result: None,
-                error: None,
-            })
+            .map(|f| FrameRecord::pending(f, shard))
             .collect(),
     };
     manifest.save(out)?;
