@@ -650,7 +650,7 @@ fn init_modes(cfg: &Config) -> Vec<InitMode> {
 }
 
 /// Which model of the run: its init mode, its index among the run's modes, its file, and the
-/// previous frame's model a warm start takes its appearance from.
+/// previous frame's model a warm start takes its training corrections from.
 #[derive(Debug, Clone)]
 struct RunOf<'a> {
     mode: InitMode,
