@@ -241,9 +241,13 @@ fn a_sequence_killed_at_random_moments_resumes_to_the_same_models() {
         }
     }
     eprintln!("kills with frame 1, 2, 3 in flight: {interrupted:?}");
+    // The cold first frame and a warm frame must both be hit in flight. The last frame, short
+    // (a warm start's few steps) and reached when the kill moments are longest, usually is too
+    // (1 to 3 kills in our runs), but how often depends on the machine's load, so it is not
+    // required.
     assert!(
-        interrupted.iter().all(|&n| n >= 1) && interrupted.iter().sum::<usize>() >= 8,
-        "kills did not hit every frame in flight: {interrupted:?}"
+        interrupted[0] >= 1 && interrupted[1] >= 1 && interrupted.iter().sum::<usize>() >= 8,
+        "kills did not hit the cold and the warm frame in flight: {interrupted:?}"
     );
 
     // Re-run until it finishes, then compare byte for byte.
