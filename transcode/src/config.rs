@@ -161,6 +161,10 @@ impl From<&EvalConfig> for splat_train::eval::EvalOptions {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct OutputConfig {
+    /// Write the training views as a COLMAP dataset (`dataset/`: images, masks, cameras and
+    /// poses) for other trainers. Off, the views are rendered in memory only: the model is the
+    /// same, and a sequence's frame takes about a fifth of the disk.
+    pub dataset: bool,
     /// Write the dataset's PNGs with 16 bits per channel instead of 8.
     pub png16: bool,
     /// Also write the model as an antimatter15 `.splat` file.
@@ -180,6 +184,7 @@ pub struct OutputConfig {
 impl Default for OutputConfig {
     fn default() -> Self {
         Self {
+            dataset: true,
             png16: false,
             splat_file: false,
             spz: true,

@@ -289,7 +289,7 @@ fn execute(
 
     let loaded = load(input, observer)?;
     clock.lap("load");
-    layout.create()?;
+    layout.create(cfg.output.dataset)?;
     let mut state = open_state(input, cfg, &layout, saved, observer)?;
     let rig = views::build_rig(&loaded.model, &cfg.rig)?;
     clock.lap("rig");
@@ -397,15 +397,13 @@ impl Layout {
         Ok(())
     }
 
-    /// Creates the run's folders.
-    fn create(&self) -> Result<(), PipelineError> {
-        for d in [
-            &self.model_dir,
-            &self.report_dir,
-            &self.dataset_dir,
-            &self.checkpoints,
-        ] {
+    /// Creates the run's folders (`dataset/` only when it is written).
+    fn create(&self, dataset: bool) -> Result<(), PipelineError> {
+        for d in [&self.model_dir, &self.report_dir, &self.checkpoints] {
             std::fs::create_dir_all(d).map_err(io_err(d))?;
+        }
+        if dataset {
+            std::fs::create_dir_all(&self.dataset_dir).map_err(io_err(&self.dataset_dir))?;
         }
         Ok(())
     }
@@ -519,8 +517,13 @@ fn reference_views(
         index: 2,
         of: STAGES,
         what: format!(
-            "rendering {} training views (and the COLMAP dataset) and {} held-out views at {}×{}",
+            "rendering {} training views{} and {} held-out views at {}×{}",
             rig.train.len(),
+            if cfg.output.dataset {
+                " (and the COLMAP dataset)"
+            } else {
+                ""
+            },
             rig.heldout.len(),
             cfg.rig.width,
             cfg.rig.height
@@ -537,12 +540,14 @@ fn reference_views(
         masks: true,
         depth: false,
     };
-    let train_images = if state.dataset_written {
+    let train_images = if state.dataset_written || !cfg.output.dataset {
         // The dataset's PNGs are quantised: training needs the renders themselves, which are
         // deterministic, so they are made again in memory.
-        observer(Event::Note(
-            "the dataset is already written: rendering the training views in memory".into(),
-        ));
+        if state.dataset_written {
+            observer(Event::Note(
+                "the dataset is already written: rendering the training views in memory".into(),
+            ));
+        }
         let images = views::render_views(model, &rig.train, &opts)?;
         clock.lap("render training views");
         images
@@ -581,10 +586,12 @@ fn reference_views(
         heldout_name,
     )?;
     clock.lap("render held-out views");
-    observer(Event::Note(format!(
-        "dataset written to {}",
-        layout.dataset_dir.display()
-    )));
+    if cfg.output.dataset {
+        observer(Event::Note(format!(
+            "dataset written to {}",
+            layout.dataset_dir.display()
+        )));
+    }
     let train = rig
         .train
         .iter()

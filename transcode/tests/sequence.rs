@@ -553,3 +553,36 @@ fn bad_frames_are_named_recorded_and_the_others_go_on() {
 fn error(manifest: &serde_json::Value, k: usize) -> String {
     manifest["frames"][k]["error"].as_str().unwrap().to_string()
 }
+
+#[test]
+fn without_the_dataset_a_frame_trains_the_same_model() {
+    let tmp = tempfile::tempdir().unwrap();
+    let frames = tmp.path().join("frames");
+    let files = synth(&frames, 2, 13, 4);
+    let config = tmp.path().join("small.toml");
+    std::fs::write(&config, CONFIG).unwrap();
+    let run = |out: &Path, extra: &[&str]| {
+        let mut args = vec![
+            "run",
+            files[0].to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        args.extend(["--config", config.to_str().unwrap(), "--quiet"]);
+        args.extend(extra);
+        check(&transcode(&args).output().unwrap(), "run");
+    };
+    let (with, without) = (tmp.path().join("with"), tmp.path().join("without"));
+    run(&with, &[]);
+    run(&without, &["--no-dataset"]);
+    assert!(with.join("dataset/sparse/0/cameras.bin").is_file());
+    assert!(!without.join("dataset").exists());
+    assert!(
+        std::fs::read(with.join("model/splats.ply")).unwrap()
+            == std::fs::read(without.join("model/splats.ply")).unwrap(),
+        "the model depends on whether the dataset is written"
+    );
+    // Resumed, a run without the dataset renders the views again and is finished as before.
+    run(&without, &["--no-dataset", "--resume"]);
+    assert!(!without.join("dataset").exists());
+}

@@ -86,6 +86,10 @@ pub struct Overrides {
     /// Do not write the models as SPZ (written by default beside each PLY).
     #[arg(long)]
     pub no_spz: bool,
+    /// Do not write the COLMAP dataset of the training views (rendered in memory only; the
+    /// model is the same). Saves most of a frame's disk in long sequences.
+    #[arg(long)]
+    pub no_dataset: bool,
     /// Also write the models as binary glTF with KHR_gaussian_splatting (.glb).
     #[arg(long)]
     pub glb: bool,
@@ -146,6 +150,7 @@ impl Overrides {
         c.init.densify_surface |= o.densify;
         c.output.splat_file |= o.splat_file;
         c.output.spz &= !o.no_spz;
+        c.output.dataset &= !o.no_dataset;
         c.output.glb |= o.glb;
         c.output.compare_init |= o.compare_init;
         c.validate()
