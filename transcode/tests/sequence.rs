@@ -92,6 +92,14 @@ fn synth(dir: &Path, n: usize, cameras: usize, seed: u64) -> Vec<PathBuf> {
     files
 }
 
+/// The frames' names: their file stems.
+fn stems(files: &[PathBuf]) -> Vec<String> {
+    files
+        .iter()
+        .map(|p| p.file_stem().unwrap().to_string_lossy().into_owned())
+        .collect()
+}
+
 fn json(path: &Path) -> serde_json::Value {
     let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     serde_json::from_slice(&bytes)
@@ -116,10 +124,7 @@ fn states(manifest: &serde_json::Value) -> Vec<(String, String)> {
 fn a_sequence_killed_at_random_moments_resumes_to_the_same_models() {
     let tmp = tempfile::tempdir().unwrap();
     let frames = tmp.path().join("frames");
-    let names: Vec<String> = synth(&frames, 3, 13, 0)
-        .iter()
-        .map(|p| p.file_stem().unwrap().to_string_lossy().into_owned())
-        .collect();
+    let names = stems(&synth(&frames, 3, 13, 0));
     let config = tmp.path().join("small.toml");
     std::fs::write(&config, CONFIG).unwrap();
     let (frames_s, config_s) = (frames.to_str().unwrap(), config.to_str().unwrap());
@@ -293,10 +298,7 @@ fn a_sequence_killed_at_random_moments_resumes_to_the_same_models() {
 fn shards_take_contiguous_blocks_and_the_last_merges() {
     let tmp = tempfile::tempdir().unwrap();
     let frames = tmp.path().join("frames");
-    let names: Vec<String> = synth(&frames, 5, 13, 1)
-        .iter()
-        .map(|p| p.file_stem().unwrap().to_string_lossy().into_owned())
-        .collect();
+    let names = stems(&synth(&frames, 5, 13, 1));
     let config = tmp.path().join("small.toml");
     std::fs::write(&config, CONFIG).unwrap();
     let out = tmp.path().join("out");
