@@ -8,7 +8,8 @@
 //!   [`composite`]: colour over a background, the one place it is written.
 //! - [`ssim`], [`metrics`], [`eval`]: image quality and held-out evaluation; [`init`]: kNN scale
 //!   initialisation and the nearest-neighbour index.
-//! - [`checkpoint`]: save and resume a run exactly.
+//! - [`checkpoint`]: save and resume a run exactly; [`budget`]: the automatic splat budget
+//!   (contribution scores, pruning rounds judged on held-out views).
 //! - [`Error`], [`DatasetError`]: what a run or a dataset refuses.
 //!
 //! ```
@@ -33,6 +34,7 @@
 //! ```
 
 pub mod adam;
+pub mod budget;
 pub mod checkpoint;
 pub mod config;
 pub mod dataset;
@@ -48,6 +50,7 @@ pub mod strategy;
 mod trainer;
 mod view;
 
+pub use budget::{BudgetConfig, BudgetPlan, BudgetRound, BudgetSearch, RoundError};
 pub use config::{Background, DensifyConfig, Frozen, LearningRates, TrainConfig, Warmup};
 pub use dataset::{Dataset, DatasetError, read_dataset};
 pub use error::Error;
@@ -56,5 +59,7 @@ pub use eval::{
     SurfaceDistance, ViewMetrics, ViewScore, evaluate, evaluate_views, evaluate_with,
 };
 pub use strategy::{DensifyStrategy, InriaDensify, RefineContext, RefineReport};
-pub use trainer::{HistoryEntry, NonFinite, Progress, StepStats, Timings, TrainReport, Trainer};
+pub use trainer::{
+    HistoryEntry, NonFinite, Progress, Snapshot, StepStats, Timings, TrainReport, Trainer,
+};
 pub use view::{View, composite, composite_in_place, composite_into, over, scale_intrinsics};

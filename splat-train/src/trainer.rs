@@ -121,6 +121,22 @@ pub struct TrainReport {
     pub timings: Timings,
 }
 
+/// The in-memory state a [`Trainer`] can return to ([`Trainer::snapshot`]).
+#[derive(Debug, Clone)]
+pub struct Snapshot {
+    state: ParamState,
+    run: RunState,
+    strategy: Vec<f32>,
+}
+
+impl Snapshot {
+    /// The splats as they were.
+    #[must_use]
+    pub fn splats(&self) -> &Splats {
+        &self.state.splats
+    }
+}
+
 /// Everything about a run that a checkpoint restores besides the parameters.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub(crate) struct RunState {
@@ -681,6 +697,93 @@ impl Trainer {
             refine: self.run.refine,
             timings: self.timings,
         }
+    }
+
+    /// The whole training state in memory (parameters, moments, run state, strategy
+    /// statistics), to come back to with [`Trainer::restore_snapshot`]: a budget search tries a
+    /// pruned branch and a kept branch from the same point.
+    #[must_use]
+    pub fn snapshot(&self) -> Snapshot {
+        Snapshot {
+            state: self.state.clone(),
+            run: self.run.clone(),
+            strategy: self
+                .strategy
+                .as_ref()
+                .map(|s| s.export_state())
+                .unwrap_or_default(),
+        }
+    }
+
+    /// Returns to `snapshot`, keeping the training time spent since it (the time of a branch
+    /// that is thrown away still counts against the time budget: the budget is wall time).
+    ///
+    /// # Errors
+    /// A message when the snapshot's strategy statistics do not fit this trainer's strategy
+    /// (a snapshot of another trainer).
+    pub fn restore_snapshot(&mut self, snapshot: Snapshot) -> Result<(), String> {
+        let spent = self.run.elapsed_s;
+        self.restore(snapshot.state, snapshot.run, &snapshot.strategy)?;
+        self.run.elapsed_s = self.run.elapsed_s.max(spent);
+        Ok(())
+    }
+
+    /// The splats and their moments, to edit in place between steps.
+    pub(crate) fn state_mut(&mut self) -> &mut ParamState {
+        &mut self.state
+    }
+
+    /// Removes the splats whose `keep` flag is false, with their moments and strategy
+    /// statistics; the removals count as pruned in the run's refinement totals.
+    ///
+    /// # Errors
+    /// [`Error::Splats`] when `keep` does not have one flag per splat or would keep none.
+    pub fn prune(&mut self, keep: &[bool]) -> Result<usize, Error> {
+        if keep.len() != self.state.len() {
+            return Err(Error::Splats(format!(
+                "{} keep flags for {} splats",
+                keep.len(),
+                self.state.len()
+            )));
+        }
+        let removed = keep.iter().filter(|&&k| !k).count();
+        if removed == keep.len() {
+            return Err(Error::Splats("pruning would remove every splat".into()));
+        }
+        self.state.retain(keep);
+        if let Some(s) = self.strategy.as_mut() {
+            s.retain(keep);
+        }
+        self.grads = SplatGrads::zeros_like(&self.state.splats);
+        self.run.refine.pruned += removed;
+        Ok(removed)
+    }
+
+    /// Each splat's summed blending weight over the full-resolution training views, rendered on
+    /// black at the current SH degree ([`Rasterizer::accumulate_contributions`]): how much of
+    /// the training images it carries.
+    #[must_use]
+    pub fn contributions(&mut self) -> Vec<f64> {
+        let opts = RenderOptions {
+            background: Vec3::ZERO,
+            active_sh_degree: sh_degree_at(
+                self.run.iteration,
+                self.config.sh_degree_interval,
+                self.max_sh_degree,
+            ),
+            antialiased: self.config.antialiased,
+            linear_colour: false,
+        };
+        let mut sums = vec![0.0; self.state.len()];
+        for cam in &self.levels[0].cameras {
+            if let Err(e) =
+                self.rasterizer
+                    .accumulate_contributions(&self.state.splats, cam, &opts, &mut sums)
+            {
+                unreachable!("the trainer's splats and views were checked: {e}");
+            }
+        }
+        sums
     }
 
     /// Replaces the parameters, optimiser and run state (used when resuming).

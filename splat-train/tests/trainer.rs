@@ -9,8 +9,8 @@ use rand::{RngExt, SeedableRng};
 use rand_pcg::Pcg64;
 use splat_core::{Rasterizer, RenderCamera, RenderOptions, Splats, logit, rgb_to_sh_dc};
 use splat_train::{
-    Background, DensifyConfig, DensifyStrategy, InriaDensify, RefineContext, RefineReport,
-    TrainConfig, Trainer, View, evaluate,
+    Background, BudgetConfig, BudgetPlan, BudgetSearch, DensifyConfig, DensifyStrategy,
+    InriaDensify, RefineContext, RefineReport, TrainConfig, Trainer, View, evaluate,
 };
 
 /// A random model of `n` splats in a ball of radius 1 with SH degree 1.
@@ -472,4 +472,109 @@ fn results_do_not_depend_on_thread_count() {
     let one = run(1);
     assert!(run(2) == one, "2 threads differ from 1");
     assert!(run(5) == one, "5 threads differ from 1");
+}
+
+/// The held-out PSNR on black of `splats` over `views`.
+fn heldout_psnr(splats: &Splats, views: &[View]) -> Result<f64, splat_train::RoundError> {
+    Ok(evaluate(splats, views, Vec3::ZERO).unwrap().psnr)
+}
+
+/// A budget round whose pruned branch is refused leaves no trace: training goes on from the
+/// control branch, which is the run that never branched, bit for bit.
+#[test]
+fn a_refused_budget_round_changes_nothing() {
+    let truth = random_model(300, 11);
+    let train = render_views(&truth, &cameras(12, 48, 40, 0.0), "train");
+    let held = render_views(&truth, &cameras(3, 48, 40, 0.5), "held");
+    let init = initial_model(&truth, 0.02, 12);
+    let mut straight = Trainer::new(init.clone(), train.clone(), base_config(60)).unwrap();
+    straight.run(|_| {});
+    let mut branched = Trainer::new(init, train, base_config(60)).unwrap();
+    let mut search = BudgetSearch {
+        plan: Some(BudgetPlan {
+            first: 20,
+            trial: 15,
+            rounds: 2,
+        }),
+        rounds: Vec::new(),
+    };
+    // A negative tolerance refuses every prune.
+    let cfg = BudgetConfig {
+        tolerance_db: -1.0,
+        min_splats: 10,
+        ..BudgetConfig::default()
+    };
+    branched.run_until(20, |_| {});
+    assert!(search.due(branched.iteration()));
+    let round = search
+        .run_round(
+            &mut branched,
+            &cfg,
+            &mut |s: &Splats| heldout_psnr(s, &held),
+            &mut |_| {},
+        )
+        .unwrap();
+    assert!(!round.accepted && !round.out_of_time);
+    assert_eq!((round.iteration, round.splats), (20, 300));
+    assert!(round.candidate < 300 && round.pruned_psnr.is_finite());
+    assert!(search.finished() && !search.due(branched.iteration()));
+    assert_eq!(branched.iteration(), 35);
+    branched.run(|_| {});
+    assert_eq!(branched.splats(), straight.splats());
+}
+
+/// Accepted rounds merge the model down by `keep` each time, count the removed splats as
+/// pruned, and record what each cost; the held-out PSNR is taken on both branches.
+#[test]
+fn accepted_budget_rounds_shrink_the_model() {
+    let truth = random_model(400, 21);
+    let train = render_views(&truth, &cameras(12, 48, 40, 0.0), "train");
+    let held = render_views(&truth, &cameras(3, 48, 40, 0.5), "held");
+    let init = initial_model(&truth, 0.02, 22);
+    let mut t = Trainer::new(init, train, base_config(80)).unwrap();
+    let cfg = BudgetConfig {
+        tolerance_db: 1e9,
+        min_splats: 10,
+        ..BudgetConfig::default()
+    };
+    let mut search = BudgetSearch {
+        plan: Some(BudgetPlan {
+            first: 10,
+            trial: 10,
+            rounds: 3,
+        }),
+        rounds: Vec::new(),
+    };
+    let mut scored = 0;
+    while t.iteration() < 80 {
+        while search.due(t.iteration()) {
+            search
+                .run_round(
+                    &mut t,
+                    &cfg,
+                    &mut |s: &Splats| {
+                        scored += 1;
+                        heldout_psnr(s, &held)
+                    },
+                    &mut |_| {},
+                )
+                .unwrap();
+        }
+        t.run_until(t.iteration() + 1, |_| {});
+    }
+    assert_eq!(scored, 6, "both branches of three rounds");
+    assert_eq!(search.rounds.len(), 3);
+    let mut n = 400;
+    for r in &search.rounds {
+        assert!(r.accepted, "{r:?}");
+        assert_eq!(r.splats, n);
+        // About half, as close as whole merge groups allow.
+        assert!(r.candidate <= n / 2 + 1 && r.candidate > n / 4, "{r:?}");
+        assert!(r.kept_psnr.is_finite() && r.pruned_psnr.is_finite());
+        n = r.candidate;
+    }
+    assert_eq!(t.splats().len(), n);
+    let report = t.report(false);
+    assert_eq!(report.refine.pruned, 400 - n);
+    assert_eq!(report.iterations, 80);
 }

@@ -12,6 +12,7 @@ use serde::{Deserialize, Serialize};
 // The settings of each stage are defined by the crate that runs it; the configuration composes them.
 pub use plenoptic_render::{RigConfig, ViewOptions};
 pub use splat_init::{InitConfig, InitMode, MeshPoints, Sampling, ShDegree};
+pub use splat_train::BudgetConfig;
 
 /// Errors from loading or checking a configuration.
 #[derive(Debug, thiserror::Error)]
@@ -61,6 +62,8 @@ pub struct Config {
     pub renderer: ViewOptions,
     /// Initial splats.
     pub init: InitConfig,
+    /// The automatic splat budget (`--splats auto`): pruning rounds judged on held-out views.
+    pub budget: BudgetConfig,
     /// The trainer.
     pub training: TrainingConfig,
     /// Evaluation on the held-out views.
@@ -357,6 +360,9 @@ impl Config {
         }
         if let Err(e) = self.renderer.validate() {
             return bad("renderer", e.to_string());
+        }
+        if let Err((key, problem)) = self.budget.validate() {
+            return bad(&key, problem);
         }
         let i = &self.init;
         if i.splats == Some(0) {

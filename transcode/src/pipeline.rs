@@ -19,7 +19,7 @@ use glam::Vec3;
 use plenoptic_io::Model;
 use splat_core::Splats;
 use splat_train::eval::{EvalOptions, Metrics, RenderedView, evaluate_views};
-use splat_train::{TrainConfig, Trainer, View};
+use splat_train::{BudgetConfig, BudgetSearch, TrainConfig, Trainer, View};
 
 use crate::config::{Config, InitMode};
 use crate::progress::{Event, Observer};
@@ -101,6 +101,9 @@ pub enum PipelineError {
     /// The saved run cannot be resumed, or its state cannot be saved.
     #[error(transparent)]
     Resume(#[from] ResumeError),
+    /// A round of the automatic splat budget failed.
+    #[error(transparent)]
+    Budget(#[from] splat_train::RoundError),
     /// The viewer beside the report could not be written.
     #[error("cannot write the viewer: {0}")]
     Viewer(Box<crate::viewer::ViewerError>),
@@ -700,7 +703,7 @@ fn init_train_eval(
     let mut clock = StageClock::default();
     let init = initialise(run, surfaces, refs, cfg, layout, state, observer)?;
     clock.lap("init");
-    let (splats, train_report, heldout_curve) = train(
+    let (splats, train_report, heldout_curve, budget) = train(
         run,
         init.fresh,
         &init.schedule,
@@ -731,6 +734,7 @@ fn init_train_eval(
             })
             .collect(),
         heldout_curve,
+        budget,
         metrics,
         model_path: run.model_path.clone(),
         // Filled in when the model is written, after every run is done.
@@ -801,6 +805,20 @@ fn initialise(
     });
     let mut init_cfg = cfg.init.clone();
     init_cfg.mode = mode;
+    let budget = budget_applies(cfg, mode).then_some(&cfg.budget);
+    if let Some(b) = budget
+        && init_cfg.splats.is_none()
+    {
+        let points = surfaces.init.len();
+        let start = b.start_splats(points, mean_covered_pixels(&refs.train));
+        if start < points {
+            observer(Event::Note(format!(
+                "splat budget: {points} points merged to about {start} (two per covered pixel \
+                 of the mean training view) before training"
+            )));
+            init_cfg.splats = Some(start);
+        }
+    }
     let (mut splats, mut summary) = init::initialise(
         &surfaces.init,
         &init_cfg,
@@ -828,13 +846,20 @@ fn initialise(
         Some(m) => m.schedule,
         None => {
             let base = cfg.train_config(mode, summary.sh_degree);
-            let schedule = plan(&splats, &refs.train, &base, cfg.training.scale_densify)?;
+            let schedule = plan(
+                &splats,
+                &refs.train,
+                &base,
+                cfg.training.scale_densify,
+                budget,
+            )?;
             state.modes.push(ModeState {
                 mode,
                 init: summary.clone(),
                 schedule,
                 step_zero: Some(step_zero.clone()),
                 heldout_curve: Vec::new(),
+                budget: BudgetSearch::default(),
                 trained: None,
             });
             state.save(out)?;
@@ -886,6 +911,24 @@ fn warm_start(
         )));
     }
     Ok(())
+}
+
+/// Whether the automatic splat budget runs for `mode`: surface init that does not densify (a
+/// densifying run grows and prunes by its own rules).
+fn budget_applies(cfg: &Config, mode: InitMode) -> bool {
+    cfg.budget.auto && mode == InitMode::Surface && !cfg.init.densify_surface
+}
+
+/// The pixels the input covers in the mean training view (reference alpha above ½).
+fn mean_covered_pixels(views: &[View]) -> f64 {
+    let covered: usize = views
+        .iter()
+        .map(|v| match &v.mask {
+            Some(m) => m.iter().filter(|&&a| a > 0.5).count(),
+            None => v.image.len() / 3,
+        })
+        .sum();
+    covered as f64 / views.len().max(1) as f64
 }
 
 /// Stage 3 (end): scores the initial splats on the held-out views and, for surface init with
@@ -955,7 +998,7 @@ fn train(
     layout: &Layout,
     state: &mut RunState,
     observer: Observer<'_>,
-) -> Result<(Splats, splat_train::TrainReport, Vec<HeldoutPoint>), PipelineError> {
+) -> Result<Trained, PipelineError> {
     let (mode, k, out) = (run.mode, run.index, &layout.out);
     let ckpt = resume::checkpoint_path(out, mode);
     observer(Event::Stage {
@@ -998,7 +1041,16 @@ fn train(
             .unwrap_or_default(),
     };
     probe.curve.retain(|p| p.iteration <= trainer.iteration());
+    let mut search = state
+        .modes
+        .get(k)
+        .map(|m| m.budget.clone())
+        .unwrap_or_default();
+    search.plan = schedule.budget;
     let already = state.modes.get(k).and_then(|m| m.trained);
+    if already.is_none() {
+        search.rewind(trainer.iteration());
+    }
     let report = match already {
         Some(t) => {
             observer(Event::Note(format!(
@@ -1022,7 +1074,11 @@ fn train(
                 mode_index: k,
                 out,
             };
-            let report = train_to_end(&mut trainer, saving, &mut probe, observer)?;
+            let budget = Budgeting {
+                search: &mut search,
+                config: &cfg.budget,
+            };
+            let report = train_to_end(&mut trainer, saving, &mut probe, budget, observer)?;
             if let Some(m) = state.modes.get_mut(k) {
                 m.trained = Some(TrainedState {
                     stopped_by_budget: report.stopped_by_budget,
@@ -1032,7 +1088,22 @@ fn train(
             report
         }
     };
-    Ok((trainer.splats().clone(), report, probe.curve))
+    Ok((trainer.splats().clone(), report, probe.curve, search))
+}
+
+/// What stage 4 returns: the splats, the trainer's report, the held-out curve and the splat
+/// budget's rounds.
+type Trained = (
+    Splats,
+    splat_train::TrainReport,
+    Vec<HeldoutPoint>,
+    BudgetSearch,
+);
+
+/// The automatic splat budget's search while a model trains, and its settings.
+struct Budgeting<'a> {
+    search: &'a mut BudgetSearch,
+    config: &'a BudgetConfig,
 }
 
 /// Scores the model on the held-out views every `every` steps while it trains.
@@ -1219,19 +1290,20 @@ fn plan(
     views: &[View],
     tc: &TrainConfig,
     scale_schedule: bool,
+    budget: Option<&BudgetConfig>,
 ) -> Result<Schedule, PipelineError> {
-    if scale_schedule && tc.densify.is_some() {
-        let (steps, left) = step_budget(splats, views, tc)?;
-        Ok(Schedule {
-            densify_steps: Some(steps),
-            time_budget: left,
-        })
+    let scaled = scale_schedule && tc.densify.is_some();
+    // Rounds are placed at shares of the run's steps: under a time budget, the probe's estimate.
+    let (steps, time_budget) = if scaled || budget.is_some() {
+        step_budget(splats, views, tc)?
     } else {
-        Ok(Schedule {
-            densify_steps: None,
-            time_budget: tc.time_budget,
-        })
-    }
+        (tc.iterations, tc.time_budget)
+    };
+    Ok(Schedule {
+        densify_steps: scaled.then_some(steps),
+        time_budget: time_budget.or(tc.time_budget),
+        budget: budget.and_then(|b| b.plan(steps)),
+    })
 }
 
 /// `tc` on `schedule`: the densification scaled to its steps, its time budget.
@@ -1262,9 +1334,15 @@ struct Saving<'a> {
 impl Saving<'_> {
     /// Saves the held-out curve so far in the run state, then the trainer's checkpoint. The
     /// state goes first: a point newer than the checkpoint is dropped and taken again on resume.
-    fn save(&mut self, trainer: &Trainer, curve: &[HeldoutPoint]) -> Result<(), PipelineError> {
+    fn save(
+        &mut self,
+        trainer: &Trainer,
+        curve: &[HeldoutPoint],
+        search: &BudgetSearch,
+    ) -> Result<(), PipelineError> {
         if let Some(m) = self.state.modes.get_mut(self.mode_index) {
             m.heldout_curve = curve.to_vec();
+            m.budget = search.clone();
         }
         self.state.save(self.out)?;
         trainer.save_checkpoint(self.checkpoint)?;
@@ -1282,6 +1360,7 @@ fn train_to_end(
     trainer: &mut Trainer,
     mut saving: Saving<'_>,
     probe: &mut HeldoutProbe<'_>,
+    mut budget: Budgeting<'_>,
     observer: Observer<'_>,
 ) -> Result<splat_train::TrainReport, PipelineError> {
     let total = trainer.config().iterations;
@@ -1293,29 +1372,67 @@ fn train_to_end(
     if trainer.iteration() == 0 {
         probe.take(trainer, 0.0, false)?;
     }
+    let mut advance = |p: &splat_train::Progress| {
+        let message = (p.step.iteration % 25 == 0)
+            .then(|| format!("PSNR {:.2} dB, {} splats", p.step.psnr, p.step.splats));
+        observer(Event::Advance {
+            done: u64::from(p.step.iteration),
+            message,
+        });
+    };
     let mut saved_at = Instant::now();
     let report = loop {
-        let r = trainer.run_until(trainer.iteration() + 1, |p| {
-            let message = (p.step.iteration % 25 == 0)
-                .then(|| format!("PSNR {:.2} dB, {} splats", p.step.psnr, p.step.splats));
-            observer(Event::Advance {
-                done: u64::from(p.step.iteration),
-                message,
-            });
-        });
+        while budget.search.due(trainer.iteration()) {
+            budget_round(trainer, &mut budget, probe, &mut advance, observer)?;
+        }
+        let r = trainer.run_until(trainer.iteration() + 1, &mut advance);
         let last = r.iterations >= total || r.stopped_by_budget;
         probe.take(trainer, r.elapsed_s, last)?;
         if last {
             break r;
         }
         if saved_at.elapsed() >= saving.every {
-            saving.save(trainer, &probe.curve)?;
+            saving.save(trainer, &probe.curve, budget.search)?;
             saved_at = Instant::now();
         }
     };
-    saving.save(trainer, &probe.curve)?;
+    saving.save(trainer, &probe.curve, budget.search)?;
     observer(Event::End);
     Ok(report)
+}
+
+/// Runs the splat budget's due round: both branches, scored on the held-out views on black.
+fn budget_round(
+    trainer: &mut Trainer,
+    budget: &mut Budgeting<'_>,
+    probe: &HeldoutProbe<'_>,
+    advance: &mut dyn FnMut(&splat_train::Progress),
+    observer: Observer<'_>,
+) -> Result<(), PipelineError> {
+    let mut heldout_psnr = |s: &Splats| -> Result<f64, PipelineError> {
+        let (metrics, _) = evaluate_views(s, probe.views, None, &probe.options)?;
+        Ok(metrics.psnr_black)
+    };
+    let round = budget
+        .search
+        .run_round(trainer, budget.config, &mut heldout_psnr, advance)?;
+    observer(Event::Note(format!(
+        "splat budget, step {}: {} → {} splats costs {:+.3} dB held-out ({:.2} against {:.2}); {}",
+        round.iteration,
+        round.splats,
+        round.candidate,
+        round.drop_db(),
+        round.pruned_psnr,
+        round.kept_psnr,
+        if round.out_of_time {
+            "out of time, kept the whole model"
+        } else if round.accepted {
+            "pruned"
+        } else {
+            "over the tolerance, kept the whole model"
+        }
+    )));
+    Ok(())
 }
 
 /// Removes `path` (a file) unless it is not there.

@@ -148,6 +148,8 @@ pub struct RunReport {
     pub curve: Vec<CurvePoint>,
     /// Held-out scores during training, every `eval.every` steps (empty when 0).
     pub heldout_curve: Vec<HeldoutPoint>,
+    /// The automatic splat budget's plan and rounds (no plan: it did not run).
+    pub budget: splat_train::BudgetSearch,
     /// Held-out metrics.
     pub metrics: Metrics,
     /// The model file written.

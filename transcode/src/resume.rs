@@ -74,6 +74,9 @@ pub struct Schedule {
     pub densify_steps: Option<u32>,
     /// The training time budget left after the probe, when there is a budget.
     pub time_budget: Option<Duration>,
+    /// When the automatic splat budget's rounds run; `None`: no search.
+    #[serde(default)]
+    pub budget: Option<splat_train::BudgetPlan>,
 }
 
 /// What one init mode has done.
@@ -91,6 +94,9 @@ pub struct ModeState {
     /// Held-out curve up to the last checkpoint (`eval.every`).
     #[serde(default)]
     pub heldout_curve: Vec<crate::report::HeldoutPoint>,
+    /// The automatic splat budget's rounds up to the last checkpoint.
+    #[serde(default)]
+    pub budget: splat_train::BudgetSearch,
     /// `Some` once training is over (its last state is in the checkpoint): whether the time
     /// budget stopped it.
     pub trained: Option<TrainedState>,

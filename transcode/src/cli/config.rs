@@ -50,9 +50,19 @@ pub struct Overrides {
     /// Initialisation: surface or sparse.
     #[arg(long, value_parser = parse_init)]
     pub init: Option<InitMode>,
-    /// Number of splats K (a subset of the input points).
-    #[arg(long, value_name = "K")]
-    pub splats: Option<usize>,
+    /// Splats: `auto` (the default: start from the input's points, merged to about one per
+    /// covered pixel, and prune by contribution while held-out PSNR stays within
+    /// `--budget-tolerance` of the whole model), `all` (one per input point, no pruning), or a
+    /// number K: start from about K points and let the automatic budget prune below them (a
+    /// hard cap; add `--no-prune` for exactly K).
+    #[arg(long, value_name = "auto|all|K")]
+    pub splats: Option<SplatCount>,
+    /// The held-out PSNR (dB) the automatic splat budget may give up against the whole model.
+    #[arg(long, value_name = "DB")]
+    pub budget_tolerance: Option<f64>,
+    /// Keep every initial splat (no automatic pruning).
+    #[arg(long)]
+    pub no_prune: bool,
     /// How the K points are chosen: voxel or farthest.
     #[arg(long, value_parser = parse_sampling)]
     pub sampling: Option<Sampling>,
@@ -122,8 +132,23 @@ impl Overrides {
         if let Some(v) = o.init {
             c.init.mode = v;
         }
-        if o.splats.is_some() {
-            c.init.splats = o.splats;
+        match o.splats {
+            Some(SplatCount::Auto) => {
+                c.init.splats = None;
+                c.budget.auto = true;
+            }
+            Some(SplatCount::All) => {
+                c.init.splats = None;
+                c.budget.auto = false;
+            }
+            Some(SplatCount::Count(k)) => c.init.splats = Some(k),
+            None => {}
+        }
+        if let Some(v) = o.budget_tolerance {
+            c.budget.tolerance_db = v;
+        }
+        if o.no_prune {
+            c.budget.auto = false;
         }
         if let Some(v) = o.sampling {
             c.init.sampling = v;
@@ -201,5 +226,32 @@ fn parse_sampling(s: &str) -> Result<Sampling, String> {
         "voxel" => Ok(Sampling::Voxel),
         "farthest" => Ok(Sampling::Farthest),
         _ => Err(format!("sampling must be voxel or farthest, got {s:?}")),
+    }
+}
+
+/// The value of `--splats`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SplatCount {
+    /// The automatic budget.
+    Auto,
+    /// One splat per input point, no pruning.
+    All,
+    /// About K initial splats, pruned below that by the automatic budget unless `--no-prune`.
+    Count(usize),
+}
+
+impl std::str::FromStr for SplatCount {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.to_ascii_lowercase().as_str() {
+            "auto" => Ok(Self::Auto),
+            "all" => Ok(Self::All),
+            _ => match s.parse::<usize>() {
+                Ok(k) if k > 0 => Ok(Self::Count(k)),
+                _ => Err(format!(
+                    "expected auto, all or a positive number of splats, got {s:?}"
+                )),
+            },
+        }
     }
 }
