@@ -65,6 +65,12 @@ pub struct BudgetConfig {
     pub max_rounds: u32,
     /// No round prunes below this many splats.
     pub min_splats: usize,
+    /// After training: the held-out PSNR (dB) dropping SH bands may cost, within what the rounds
+    /// left of `tolerance_db` ([`crate::sh_bands::choose_bands`]).
+    pub bands_tolerance_db: f64,
+    /// After training: splats whose bands above 0 add less than this RMS colour (0–1 units) over
+    /// all view directions lose them.
+    pub static_sh_rms: f32,
     /// Initial splats per covered pixel of the mean training view: a cloud denser than that is
     /// voxel-merged to it before training (a splat smaller than a pixel in every view cannot be
     /// told from its neighbours).
@@ -85,6 +91,8 @@ impl Default for BudgetConfig {
             max_rounds: 4,
             min_splats: 256,
             splats_per_pixel: 2.0,
+            bands_tolerance_db: 0.05,
+            static_sh_rms: 0.002,
         }
     }
 }
@@ -116,6 +124,12 @@ impl BudgetConfig {
                 "end_share",
                 "must leave room for one round after start_share (start_share + trial_share ≤ end_share)",
             );
+        }
+        if !(self.bands_tolerance_db.is_finite() && self.bands_tolerance_db >= 0.0) {
+            return bad("bands_tolerance_db", "must be a finite number ≥ 0");
+        }
+        if !(self.static_sh_rms.is_finite() && self.static_sh_rms >= 0.0) {
+            return bad("static_sh_rms", "must be a finite number ≥ 0");
         }
         if !(self.splats_per_pixel.is_finite() && self.splats_per_pixel > 0.0) {
             return bad("splats_per_pixel", "must be a finite number > 0");
@@ -184,8 +198,9 @@ pub struct BudgetRound {
     pub candidate: usize,
     /// Held-out PSNR (dB) of the whole model after the trial steps.
     pub kept_psnr: f64,
-    /// Held-out PSNR (dB) of the pruned model after the same steps.
-    pub pruned_psnr: f64,
+    /// Held-out PSNR (dB) of the pruned model after the same steps (`None`: the control ran out
+    /// of time and the pruned branch did not run).
+    pub pruned_psnr: Option<f64>,
     /// Whether the pruned branch was kept.
     pub accepted: bool,
     /// Whether a branch was cut short by the time budget (the round then decides nothing).
@@ -197,10 +212,11 @@ pub struct BudgetRound {
 }
 
 impl BudgetRound {
-    /// What the pruning cost (dB); negative when the pruned branch scored higher.
+    /// What the pruning cost (dB); negative when the pruned branch scored higher; `None` when
+    /// it did not run.
     #[must_use]
-    pub fn drop_db(&self) -> f64 {
-        self.kept_psnr - self.pruned_psnr
+    pub fn drop_db(&self) -> Option<f64> {
+        self.pruned_psnr.map(|p| self.kept_psnr - p)
     }
 }
 
@@ -211,6 +227,9 @@ pub struct BudgetSearch {
     pub plan: Option<BudgetPlan>,
     /// The rounds done, in order.
     pub rounds: Vec<BudgetRound>,
+    /// Whether a round found nothing left to merge (the search is then over).
+    #[serde(default)]
+    pub exhausted: bool,
 }
 
 impl BudgetSearch {
@@ -220,7 +239,8 @@ impl BudgetSearch {
         self.rounds
             .iter()
             .filter(|r| r.accepted)
-            .map(|r| r.drop_db().max(0.0))
+            .filter_map(|r| r.drop_db())
+            .map(|d| d.max(0.0))
             .sum()
     }
 
@@ -229,7 +249,8 @@ impl BudgetSearch {
     #[must_use]
     pub fn finished(&self) -> bool {
         let Some(plan) = self.plan else { return true };
-        self.rounds.len() as u32 >= plan.rounds
+        self.exhausted
+            || self.rounds.len() as u32 >= plan.rounds
             || self
                 .rounds
                 .last()
@@ -250,12 +271,15 @@ impl BudgetSearch {
     /// before them: they are run again, identically).
     pub fn rewind(&mut self, iteration: u32) {
         self.rounds.retain(|r| r.iteration < iteration);
+        // Where the search found nothing to merge is found again.
+        self.exhausted = false;
     }
 
     /// Runs the due round on `trainer`: scores its splats, trains both branches
     /// `plan.trial` steps, scores them with `heldout_psnr` and keeps the pruned branch when the
     /// search's total stays within `cfg.tolerance_db`. `on_step` sees every step of both
-    /// branches. Returns the round (also recorded).
+    /// branches. Returns the round (also recorded), or `None` when nothing is left to merge (the
+    /// search is then over and no step was trained).
     ///
     /// # Errors
     /// What `heldout_psnr` returns; a [`RoundError`] when no round is planned or the trainer
@@ -266,7 +290,7 @@ impl BudgetSearch {
         cfg: &BudgetConfig,
         heldout_psnr: &mut dyn FnMut(&Splats) -> Result<f64, E>,
         on_step: &mut dyn FnMut(&crate::Progress),
-    ) -> Result<BudgetRound, E> {
+    ) -> Result<Option<BudgetRound>, E> {
         let iteration = trainer.iteration();
         let fail = |problem: String| E::from(RoundError { iteration, problem });
         let Some(plan) = self.plan else {
@@ -277,6 +301,11 @@ impl BudgetSearch {
         let target_count = ((n as f64 * cfg.keep).round() as usize).max(cfg.min_splats.min(n));
         let merges = plan_merges(trainer.splats(), &contributions, target_count);
         let candidate = n - merges.removed();
+        if merges.removed() == 0 {
+            // Nothing left to merge (at `min_splats`, or no cell holds two splats): done.
+            self.exhausted = true;
+            return Ok(None);
+        }
         let target = iteration + plan.trial;
         let start = trainer.snapshot();
         let started_s = trainer.report(false).elapsed_s;
@@ -288,14 +317,14 @@ impl BudgetSearch {
             splats: n,
             candidate,
             kept_psnr,
-            pruned_psnr: f64::NAN,
+            pruned_psnr: None,
             accepted: false,
             out_of_time: control.iterations < target,
             steps_pruned: 0,
         };
-        if candidate >= n || round.out_of_time {
+        if round.out_of_time {
             self.rounds.push(round);
-            return Ok(round);
+            return Ok(Some(round));
         }
         let kept = trainer.snapshot();
         trainer.restore_snapshot(start).map_err(fail)?;
@@ -321,14 +350,15 @@ impl BudgetSearch {
         };
         round.steps_pruned = pruned.iterations - iteration;
         round.out_of_time = pruned.stopped_by_budget || (!equal_time && pruned.iterations < target);
-        round.pruned_psnr = heldout_psnr(trainer.splats())?;
-        round.accepted =
-            !round.out_of_time && self.spent_db() + round.drop_db().max(0.0) <= cfg.tolerance_db;
+        let pruned_psnr = heldout_psnr(trainer.splats())?;
+        round.pruned_psnr = Some(pruned_psnr);
+        round.accepted = !round.out_of_time
+            && self.spent_db() + (kept_psnr - pruned_psnr).max(0.0) <= cfg.tolerance_db;
         if !round.accepted {
             trainer.restore_snapshot(kept).map_err(fail)?;
         }
         self.rounds.push(round);
-        Ok(round)
+        Ok(Some(round))
     }
 }
 
@@ -511,9 +541,9 @@ pub fn merge_group(splats: &mut Splats, group: &[usize], weights: &[f64]) {
     let k = splats.coeffs_per_splat();
     let mut sh = vec![[0.0_f32; 3]; k];
     for (&j, &wj) in group.iter().zip(&w) {
-        for (c, acc) in sh.iter_mut().enumerate() {
-            for ch in 0..3 {
-                acc[ch] += wj * splats.sh[j * k + c][ch];
+        for (acc, member) in sh.iter_mut().zip(&splats.sh[j * k..(j + 1) * k]) {
+            for (a, m) in acc.iter_mut().zip(member) {
+                *a += wj * m;
             }
         }
     }
@@ -563,10 +593,10 @@ fn symmetric_eigen(m: Mat3) -> (Quat, Vec3) {
                 row[p] = c * x - s * y;
                 row[q] = s * x + c * y;
             }
+            let (row_p, row_q) = (a[p], a[q]);
             for col in 0..3 {
-                let (x, y) = (a[p][col], a[q][col]);
-                a[p][col] = c * x - s * y;
-                a[q][col] = s * x + c * y;
+                a[p][col] = c * row_p[col] - s * row_q[col];
+                a[q][col] = s * row_p[col] + c * row_q[col];
             }
             for row in &mut v {
                 let (x, y) = (row[p], row[q]);

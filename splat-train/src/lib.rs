@@ -9,7 +9,8 @@
 //! - [`ssim`], [`metrics`], [`eval`]: image quality and held-out evaluation; [`init`]: kNN scale
 //!   initialisation and the nearest-neighbour index.
 //! - [`checkpoint`]: save and resume a run exactly; [`budget`]: the automatic splat budget
-//!   (contribution scores, pruning rounds judged on held-out views).
+//!   (contribution scores, pruning rounds judged on held-out views); [`sh_bands`]: the SH
+//!   degree and per-splat bands a model's held-out score needs.
 //! - [`Error`], [`DatasetError`]: what a run or a dataset refuses.
 //!
 //! ```
@@ -44,6 +45,7 @@ pub mod init;
 pub mod loss;
 pub mod metrics;
 pub mod schedule;
+pub mod sh_bands;
 pub mod ssim;
 pub mod state;
 pub mod strategy;

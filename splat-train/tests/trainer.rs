@@ -497,6 +497,7 @@ fn a_refused_budget_round_changes_nothing() {
             rounds: 2,
         }),
         rounds: Vec::new(),
+        exhausted: false,
     };
     // A negative tolerance refuses every prune.
     let cfg = BudgetConfig {
@@ -513,10 +514,11 @@ fn a_refused_budget_round_changes_nothing() {
             &mut |s: &Splats| heldout_psnr(s, &held),
             &mut |_| {},
         )
+        .unwrap()
         .unwrap();
     assert!(!round.accepted && !round.out_of_time);
     assert_eq!((round.iteration, round.splats), (20, 300));
-    assert!(round.candidate < 300 && round.pruned_psnr.is_finite());
+    assert!(round.candidate < 300 && round.pruned_psnr.is_some());
     assert!(search.finished() && !search.due(branched.iteration()));
     assert_eq!(branched.iteration(), 35);
     branched.run(|_| {});
@@ -544,6 +546,7 @@ fn accepted_budget_rounds_shrink_the_model() {
             rounds: 3,
         }),
         rounds: Vec::new(),
+        exhausted: false,
     };
     let mut scored = 0;
     while t.iteration() < 80 {
@@ -570,7 +573,7 @@ fn accepted_budget_rounds_shrink_the_model() {
         assert_eq!(r.splats, n);
         // About half, as close as whole merge groups allow.
         assert!(r.candidate <= n / 2 + 1 && r.candidate > n / 4, "{r:?}");
-        assert!(r.kept_psnr.is_finite() && r.pruned_psnr.is_finite());
+        assert!(r.kept_psnr.is_finite() && r.pruned_psnr.is_some_and(f64::is_finite));
         n = r.candidate;
     }
     assert_eq!(t.splats().len(), n);

@@ -715,6 +715,12 @@ fn init_train_eval(
         observer,
     )?;
     clock.lap("train");
+    let (splats, sh_bands) = if budget.plan.is_some() {
+        let (s, choice) = choose_bands(splats, &budget, refs, cfg, observer)?;
+        (s, Some(choice))
+    } else {
+        (splats, None)
+    };
     let (metrics, renders) = evaluate(run.mode, &splats, refs, surfaces, cfg, observer)?;
     clock.lap("evaluate");
     let report = RunReport {
@@ -735,6 +741,8 @@ fn init_train_eval(
             .collect(),
         heldout_curve,
         budget,
+        budget_tolerance_db: cfg.budget.tolerance_db,
+        sh_bands,
         metrics,
         model_path: run.model_path.clone(),
         // Filled in when the model is written, after every run is done.
@@ -1129,6 +1137,44 @@ impl HeldoutProbe<'_> {
     }
 }
 
+/// Stage 4 (end), with the splat budget: the SH degree and per-splat bands the held-out views
+/// need ([`splat_train::sh_bands::choose_bands`]), within what the budget's rounds left of its
+/// tolerance.
+fn choose_bands(
+    splats: Splats,
+    search: &BudgetSearch,
+    refs: &References,
+    cfg: &Config,
+    observer: Observer<'_>,
+) -> Result<(Splats, splat_train::sh_bands::BandChoice), PipelineError> {
+    let b = &cfg.budget;
+    let tolerance = b
+        .bands_tolerance_db
+        .min((b.tolerance_db - search.spent_db()).max(0.0));
+    let options = EvalOptions::from(&cfg.eval);
+    let mut psnr = |s: &Splats| -> Result<f64, PipelineError> {
+        Ok(evaluate_views(s, &refs.heldout, None, &options)?
+            .0
+            .psnr_black)
+    };
+    let (splats, choice) =
+        splat_train::sh_bands::choose_bands(&splats, tolerance, b.static_sh_rms, &mut psnr)?;
+    observer(Event::Note(format!(
+        "SH bands: degree {} kept of {} (held-out PSNR by degree: {}); {} splats without view \
+         dependence lost their higher bands",
+        choice.degree,
+        choice.trained_degree,
+        choice
+            .psnr_by_degree
+            .iter()
+            .map(|p| format!("{p:.2}"))
+            .collect::<Vec<_>>()
+            .join(", "),
+        choice.flattened
+    )));
+    Ok((splats, choice))
+}
+
 /// Stage 5: scores a trained model on the held-out views.
 fn evaluate(
     mode: InitMode,
@@ -1373,7 +1419,10 @@ fn train_to_end(
         probe.take(trainer, 0.0, false)?;
     }
     let mut advance = |p: &splat_train::Progress| {
-        let message = (p.step.iteration % 25 == 0)
+        let message = p
+            .step
+            .iteration
+            .is_multiple_of(25)
             .then(|| format!("PSNR {:.2} dB, {} splats", p.step.psnr, p.step.splats));
         observer(Event::Advance {
             done: u64::from(p.step.iteration),
@@ -1416,18 +1465,30 @@ fn budget_round(
     let round = budget
         .search
         .run_round(trainer, budget.config, &mut heldout_psnr, advance)?;
+    let Some(round) = round else {
+        observer(Event::Note(format!(
+            "splat budget, step {}: nothing left to merge at {} splats",
+            trainer.iteration(),
+            trainer.splats().len()
+        )));
+        return Ok(());
+    };
+    let cost = match (round.pruned_psnr, round.drop_db()) {
+        (Some(p), Some(d)) => format!(
+            "costs {d:+.3} dB held-out ({p:.2} against {:.2})",
+            round.kept_psnr
+        ),
+        _ => "not measured".into(),
+    };
     observer(Event::Note(format!(
-        "splat budget, step {}: {} → {} splats costs {:+.3} dB held-out ({:.2} against {:.2}); {}",
+        "splat budget, step {}: {} → {} splats {cost}; {}",
         round.iteration,
         round.splats,
         round.candidate,
-        round.drop_db(),
-        round.pruned_psnr,
-        round.kept_psnr,
         if round.out_of_time {
             "out of time, kept the whole model"
         } else if round.accepted {
-            "pruned"
+            "merged"
         } else {
             "over the tolerance, kept the whole model"
         }

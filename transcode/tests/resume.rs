@@ -16,7 +16,8 @@ use support::SplitMix;
 const BIN: &str = env!("CARGO_BIN_EXE_transcode");
 
 /// A small run that still has every stage: 12 training and 2 held-out views at 64×64, surface
-/// init and (with `compare_init`) sparse init with densification, a checkpoint every 20 ms.
+/// init with the automatic splat budget's rounds (a generous tolerance, so they merge) and
+/// (with `compare_init`) sparse init with densification, a checkpoint every 20 ms.
 const CONFIG: &str = r#"
 [rig]
 cameras = 12
@@ -29,6 +30,11 @@ random_points = 1500
 
 [training]
 iterations = 160
+
+[budget]
+min_run_steps = 100
+min_trial_steps = 10
+tolerance_db = 10.0
 
 [eval]
 report_views = 1
@@ -221,10 +227,37 @@ fn a_run_killed_at_random_moments_resumes_to_the_same_model() {
     let report: serde_json::Value =
         serde_json::from_slice(&std::fs::read(killed.join("report/report.json")).unwrap()).unwrap();
     assert_eq!(report["runs"][0]["iterations"], 160);
+    // The budget's rounds ran, merged, and were redone identically after kills mid-round.
+    let rounds = |r: &serde_json::Value| -> Vec<(u64, u64, bool)> {
+        r["runs"][0]["budget"]["rounds"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| {
+                (
+                    x["iteration"].as_u64().unwrap(),
+                    x["candidate"].as_u64().unwrap(),
+                    x["accepted"].as_bool().unwrap(),
+                )
+            })
+            .collect()
+    };
+    let merged = rounds(&report);
+    assert!(
+        merged.len() >= 2 && merged.iter().all(|r| r.2),
+        "{merged:?}"
+    );
+    assert_eq!(
+        report["runs"][0]["metrics"]["splats"].as_u64(),
+        merged.last().map(|r| r.1)
+    );
+    let html = std::fs::read_to_string(killed.join("report/report.html")).unwrap();
+    assert!(html.contains("Splat budget: held-out PSNR against splats and size"));
     // The held-out curves too: the same steps and scores (points after a checkpoint were taken
     // again from the same splats), only the training times differ.
     let whole_report: serde_json::Value =
         serde_json::from_slice(&std::fs::read(whole.join("report/report.json")).unwrap()).unwrap();
+    assert_eq!(rounds(&whole_report), merged);
     let scores = |r: &serde_json::Value, k: usize| -> Vec<(u64, f64, f64)> {
         r["runs"][k]["heldout_curve"]
             .as_array()

@@ -7,6 +7,8 @@
 //! one script is the interactive viewer, in the `viewer/` folder the pipeline writes beside it
 //! ([`crate::viewer`]).
 
+mod budget;
+
 use std::fmt::Write as _;
 use std::io;
 use std::path::{Path, PathBuf};
@@ -150,6 +152,10 @@ pub struct RunReport {
     pub heldout_curve: Vec<HeldoutPoint>,
     /// The automatic splat budget's plan and rounds (no plan: it did not run).
     pub budget: splat_train::BudgetSearch,
+    /// The tolerance the budget worked to (dB).
+    pub budget_tolerance_db: f64,
+    /// The SH degree and bands the budget kept after training (`None`: no budget).
+    pub sh_bands: Option<splat_train::sh_bands::BandChoice>,
     /// Held-out metrics.
     pub metrics: Metrics,
     /// The model file written.
@@ -253,6 +259,7 @@ pub fn render_html(report: &Report, pictures: &[ViewPictures]) -> io::Result<Str
     h.push_str(&splat_viewer::report_section(VIEWER_DIR));
     metrics_table(&mut h, report, &names);
     breakdown_table(&mut h, report, &names);
+    budget::section(&mut h, &report.runs, &names);
     timings_table(&mut h, report, &names);
     h.push_str(&format!(
         "<h2>Training PSNR against wall time</h2>\n<p>PSNR of the training view of each logged \

@@ -1,0 +1,168 @@
+//! The report's splat-budget section: what each round of the automatic budget measured, as a
+//! rate–distortion plot (held-out PSNR against splat count and file size) with the chosen model
+//! marked, and a table.
+
+use std::fmt::Write as _;
+
+use super::{RunReport, human_bytes};
+use crate::plot::{self, esc};
+
+/// Bytes a model of `splats` splats would take at `run`'s measured bytes per splat of `file`
+/// (`bytes` for `splats_then` splats): files of one SH degree grow linearly with the count.
+fn scaled(bytes: u64, splats_then: usize, splats: usize) -> u64 {
+    if splats_then == 0 {
+        return 0;
+    }
+    (bytes as f64 * splats as f64 / splats_then as f64).round() as u64
+}
+
+/// The SPZ file of `run`, if it wrote one: its size in bytes.
+fn spz_bytes(run: &RunReport) -> Option<u64> {
+    run.compact_files
+        .iter()
+        .find(|(p, _)| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("spz")))
+        .map(|&(_, b)| b)
+}
+
+/// Appends the section for the runs that searched a budget; nothing when none did.
+pub(super) fn section(h: &mut String, runs: &[RunReport], names: &[String]) {
+    let searched: Vec<(&RunReport, &String)> = runs
+        .iter()
+        .zip(names)
+        .filter(|(r, _)| r.budget.plan.is_some())
+        .collect();
+    if searched.is_empty() {
+        return;
+    }
+    h.push_str(
+        "<h2>Splat budget: held-out PSNR against splats and size</h2>\n<p>Each round trains \
+         the model two ways from the same step: whole (the control) and with its cheapest cells \
+         merged, and scores both on the held-out views on black after the same number of steps \
+         (the same time under a time budget). A pruned branch is kept while the rounds' costs add \
+         up to no more than the tolerance (<code>budget.tolerance_db</code>, \
+         <code>--budget-tolerance</code>). Lines join each round's two branches (solid: kept, \
+         dashed: refused); the circle is the chosen model after all its training. Sizes of the \
+         branches are the final model's files scaled by splat count.</p>\n",
+    );
+    let mut series = Vec::new();
+    let mut markers = Vec::new();
+    for (i, (run, name)) in searched.iter().enumerate() {
+        let colour = plot::COLOURS[i % plot::COLOURS.len()];
+        for r in &run.budget.rounds {
+            let (Some(pruned), Some(cost)) = (r.pruned_psnr, r.drop_db()) else {
+                continue;
+            };
+            series.push(plot::Series {
+                label: String::new(),
+                title: format!(
+                    "{name}: step {}, {} → {} splats, {:+.3} dB",
+                    r.iteration, r.splats, r.candidate, -cost
+                ),
+                colour,
+                dashed: !r.accepted,
+                points: vec![(r.splats as f64, r.kept_psnr), (r.candidate as f64, pruned)],
+            });
+        }
+        let n = run.metrics.splats;
+        let size = spz_bytes(run).map_or_else(
+            || format!("PLY {}", human_bytes(run.model_bytes)),
+            |b| format!("SPZ {}", human_bytes(b)),
+        );
+        markers.push((
+            n as f64,
+            run.metrics.psnr_black,
+            format!("{name}: {n} splats, {size}"),
+            colour,
+        ));
+    }
+    h.push_str(&plot::svg(
+        &plot::Axes {
+            x_label: "splats".into(),
+            y_label: "held-out PSNR on black (dB)".into(),
+            round_y: true,
+            integer_x: false,
+        },
+        &series,
+        &markers,
+    ));
+    for (run, name) in searched {
+        table(h, run, name);
+    }
+}
+
+fn table(h: &mut String, run: &RunReport, name: &str) {
+    let spz = spz_bytes(run);
+    let n = run.metrics.splats;
+    let _ = write!(
+        h,
+        "<h3>{}</h3>\n<p>Initial splats: {}; chosen: {} ({:.1} % of them), costing {:.3} dB of \
+         the {:.2} dB tolerance in the rounds.</p>\n",
+        esc(name),
+        run.init.splats,
+        n,
+        100.0 * n as f64 / run.init.splats.max(1) as f64,
+        run.budget.spent_db(),
+        run.budget_tolerance_db,
+    );
+    if let Some(b) = &run.sh_bands {
+        let _ = writeln!(
+            h,
+            "<p>SH bands after training: degree {} kept of {} (held-out PSNR on black by degree: \
+             {} dB); {} splats without view dependence lost their higher bands ({:.2} dB with \
+             them dropped).</p>",
+            b.degree,
+            b.trained_degree,
+            b.psnr_by_degree
+                .iter()
+                .map(|p| format!("{p:.2}"))
+                .collect::<Vec<_>>()
+                .join(" / "),
+            b.flattened,
+            b.psnr_flattened,
+        );
+    }
+    h.push_str(
+        "<table><tr><th>step</th><th>splats</th><th>merged to</th><th>control PSNR (dB)</th><th>merged PSNR (dB)</th><th>cost (dB)</th>\
+         <th>steps of the merged branch</th><th>PLY / SPZ of the merged size</th>\
+         <th>decision</th></tr>\n",
+    );
+    for r in &run.budget.rounds {
+        let sizes = format!(
+            "{} / {}",
+            human_bytes(scaled(run.model_bytes, n, r.candidate)),
+            spz.map_or("–".into(), |b| human_bytes(scaled(b, n, r.candidate)))
+        );
+        let decision = if r.out_of_time {
+            "out of time"
+        } else if r.accepted {
+            "merged"
+        } else {
+            "refused: over the tolerance"
+        };
+        let _ = writeln!(
+            h,
+            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{:.2}</td><td>{}</td><td>{}</td>\
+             <td>{}</td><td>{sizes}</td><td>{decision}</td></tr>",
+            r.iteration,
+            r.splats,
+            r.candidate,
+            r.kept_psnr,
+            r.pruned_psnr.map_or("–".into(), |p| format!("{p:.2}")),
+            r.drop_db().map_or("–".into(), |d| format!("{d:+.3}")),
+            r.steps_pruned,
+        );
+    }
+    let m = &run.metrics;
+    let _ = writeln!(
+        h,
+        "<tr><th>chosen, trained to the end</th><td>{n}</td><td></td><td colspan=\"2\">black \
+         {:.2}, white {:.2}, masked {:.2} / {:.2}</td><td></td><td></td><td>{} / {}</td><td></td>\
+         </tr></table>",
+        m.psnr_black,
+        m.psnr_white,
+        m.masked_psnr_black,
+        m.masked_psnr_white,
+        human_bytes(run.model_bytes),
+        spz.map_or("–".into(), human_bytes),
+    );
+}
