@@ -265,6 +265,20 @@ pub fn run_shard(
     if frames.is_empty() {
         return Err(SequenceError::NoFrames(format!("{input} names no frames")));
     }
+    let mut own = cfg.clone();
+    if own.sequence.warm_start && own.budget.auto {
+        // A warm start takes each splat's training corrections from the previous frame's splat
+        // that began at the same point, so a frame's trained splats must match its initial ones
+        // one to one: the automatic budget, which merges splats, is off in warm sequences (the
+        // splat count is `--splats K`, or every point).
+        own.budget.auto = false;
+        observer(Event::Note(
+            "warm starts need each frame's splats to match its initial points one to one: the \
+             automatic splat budget is off (choose the count with --splats K)"
+                .into(),
+        ));
+    }
+    let cfg = &own;
     let block = shard.block(frames.len());
     let (sphere, reference) = sequence_sphere(frames, cfg, observer)?;
     let mut manifest = ShardManifest {
