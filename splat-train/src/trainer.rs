@@ -376,13 +376,10 @@ impl Trainer {
         v
     }
 
-    /// Runs one optimisation step.
-    pub fn step(&mut self) -> StepStats {
-        let iteration = self.run.iteration + 1;
-        let vi = self.next_view();
-        let bg = self.background();
-        let opts = RenderOptions {
-            background: bg,
+    /// How this step renders: over `background`, at the SH degree the schedule has reached.
+    fn render_options(&self, background: Vec3) -> RenderOptions {
+        RenderOptions {
+            background,
             active_sh_degree: sh_degree_at(
                 self.run.iteration,
                 self.config.sh_degree_interval,
@@ -390,7 +387,15 @@ impl Trainer {
             ),
             antialiased: self.config.antialiased,
             linear_colour: false,
-        };
+        }
+    }
+
+    /// Runs one optimisation step.
+    pub fn step(&mut self) -> StepStats {
+        let iteration = self.run.iteration + 1;
+        let vi = self.next_view();
+        let bg = self.background();
+        let opts = self.render_options(bg);
         let coarse = self.config.warmup.is_some_and(|w| iteration <= w.until);
         let li = usize::from(coarse && self.levels.len() > 1);
         let level = &mut self.levels[li];
@@ -764,16 +769,7 @@ impl Trainer {
     /// the training images it carries.
     #[must_use]
     pub fn contributions(&mut self) -> Vec<f64> {
-        let opts = RenderOptions {
-            background: Vec3::ZERO,
-            active_sh_degree: sh_degree_at(
-                self.run.iteration,
-                self.config.sh_degree_interval,
-                self.max_sh_degree,
-            ),
-            antialiased: self.config.antialiased,
-            linear_colour: false,
-        };
+        let opts = self.render_options(Vec3::ZERO);
         let mut sums = vec![0.0; self.state.len()];
         for cam in &self.levels[0].cameras {
             if let Err(e) =
