@@ -11,11 +11,10 @@
 //! on from the control) and ends the search. The thrown-away branch's time still counts against
 //! the run's time budget.
 //!
-//! A splat's score is its contribution (the blending weight it supplies, summed over the pixels
-//! of every training view: Mini-Splatting's importance) times how much it differs from the
-//! splats around it. A splat in a flat region has neighbours of its own colour that grow over
-//! the hole it leaves, so flat regions end with few large splats and detailed or glossy ones
-//! keep many.
+//! What a merge costs is its members' contributions (the blending weight each supplies, summed
+//! over the pixels of every training view: Mini-Splatting's importance) times how far their
+//! colours are from the merged one ([`plan_merges`]), so flat regions end with few large splats
+//! and detailed or glossy ones keep many.
 
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
@@ -23,9 +22,7 @@ use std::collections::HashMap;
 use glam::{Mat3, Quat, Vec3};
 use splat_core::{Splats, sigmoid};
 
-use rayon::prelude::*;
-
-use crate::init::PointIndex;
+use crate::init::point_spacing;
 use crate::state::ParamState;
 use crate::trainer::Trainer;
 
@@ -405,25 +402,13 @@ pub fn plan_merges(splats: &Splats, weights: &[f64], target: usize) -> Merges {
     if n <= target || n < 2 {
         return Merges::default();
     }
-    let Some(index) = PointIndex::new(&splats.means) else {
-        return Merges::default();
-    };
-    let mut spacing: Vec<f32> = (0..n)
-        .into_par_iter()
-        .map(|i| {
-            let near = index.nearest_n(splats.means[i], 2);
-            near.iter()
-                .find(|&&j| j != i)
-                .map_or(0.0, |&j| splats.means[i].distance(splats.means[j]))
-        })
-        .collect();
-    spacing.sort_by(f32::total_cmp);
+    let spacing = point_spacing(&splats.means);
     let sig = signatures(splats);
     // The smallest cells that hold enough merges: 1.5 spacings (about two splats a cell on a
     // surface) first, larger where the splats are too sparse for that.
     let mut groups = Vec::new();
     for factor in CELL_SPACINGS {
-        let cell = factor * spacing[n / 2];
+        let cell = factor * spacing;
         if !(cell.is_finite() && cell > 0.0) {
             return Merges::default();
         }

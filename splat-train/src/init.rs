@@ -96,6 +96,31 @@ impl PointIndex {
     }
 }
 
+/// Median distance from a point to its nearest other point, on up to 20,000 evenly strided points.
+#[must_use]
+pub fn point_spacing(points: &[glam::Vec3]) -> f32 {
+    let Some(index) = PointIndex::new(points) else {
+        return 0.0;
+    };
+    if points.len() < 2 {
+        return 0.0;
+    }
+    let stride = points.len().div_ceil(20_000).max(1);
+    let mut d: Vec<f32> = points
+        .par_iter()
+        .step_by(stride)
+        .map(|&p| {
+            let near = index.nearest_n(p, 2);
+            near.iter()
+                .map(|&j| points[j].distance(p))
+                .find(|&d| d > 0.0)
+                .unwrap_or(0.0)
+        })
+        .collect();
+    d.sort_by(f32::total_cmp);
+    d[d.len() / 2]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
