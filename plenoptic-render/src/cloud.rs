@@ -17,7 +17,8 @@ const CHUNK: usize = 16_384;
 
 /// Renders a (plenoptic) point cloud from `camera`.
 ///
-/// Each point is a cube of side `opts.point_size` centred on it, axis-aligned in the cloud's frame
+/// Each point is a cube of side `opts.point_size` (grown to close a sparse cloud's surface when
+/// `opts.close_surface` is set: [`crate::closing_point_size`]) centred on it, axis-aligned in the cloud's frame
 /// (PccAppRenderer `--type 0`), or a view-aligned disc (`--type 1`). A point is drawn only when
 /// its primitive lies wholly in front of the camera: the cube's camera-space bounding box, or the
 /// ball of the disc's radius. So a point at the camera centre, or within a point size of it, is
@@ -32,6 +33,7 @@ pub fn render_cloud(
 ) -> Result<ViewImage, Error> {
     check_cloud(cloud)?;
     let capture: Vec<Vec3> = cloud.camera_positions();
+    let opts = &opts.for_cloud(cloud);
     render_supersampled(camera, opts, |cam| render_once(cloud, &capture, cam, opts))
 }
 

@@ -16,6 +16,7 @@
 //!
 //! - [`render_cloud`], [`render_mesh`], [`render_model`], [`render_views`], [`render_each`]:
 //!   one view or many, into a [`ViewImage`], with [`ViewOptions`].
+//! - [`closing_point_size`]: how large a sparse cloud's points are drawn so its surface is closed.
 //! - [`rig`]: the bounding sphere and the Fibonacci-sphere rig of training and held-out cameras.
 //! - [`dataset`]: the reference views written as a COLMAP dataset (images, masks, depth, model).
 //! - [`output`]: PNG and EXR writers of one view.
@@ -40,6 +41,7 @@
 //! ```
 
 mod camera;
+mod closing;
 mod cloud;
 pub mod dataset;
 pub mod degenerate;
@@ -53,6 +55,7 @@ mod render;
 pub mod rig;
 mod zbuffer;
 
+pub use closing::{closing_point_size, surface_spacing};
 pub use cloud::render_cloud;
 pub use dataset::{DatasetOptions, dataset_image_name, write_dataset};
 pub use degenerate::DegenerateError;

@@ -38,6 +38,10 @@ pub struct ViewOptions {
     pub point_shape: PointShape,
     /// Point size in voxel (file) units: the cube side, or the disc's quad half-size.
     pub point_size: f32,
+    /// Grow the points of a cloud that samples its surface more sparsely than one point per
+    /// `point_size`-wide cell until the surface is closed ([`crate::closing_point_size`]); a
+    /// dense voxelised cloud is drawn at `point_size` either way.
+    pub close_surface: bool,
     /// Exponent n of the view interpolation weight max(0, cos)^n.
     pub exponent: i32,
     /// Background colour of pixels no primitive covers.
@@ -60,6 +64,7 @@ impl Default for ViewOptions {
         Self {
             point_shape: PointShape::Cube,
             point_size: 1.0,
+            close_surface: true,
             exponent: plenoptic_io::view_color::DEFAULT_EXPONENT,
             background: [0.0; 3],
             supersample: DEFAULT_SUPERSAMPLE,
@@ -69,14 +74,39 @@ impl Default for ViewOptions {
 }
 
 impl ViewOptions {
-    /// The defaults with one sample at each pixel centre (no supersampling): every pixel is
-    /// exactly one primitive or the background, as PccAppRenderer draws it. The geometry tests
-    /// and the synthetic frames' capture renders use it.
+    /// The defaults with one sample at each pixel centre (no supersampling) and points at their
+    /// configured size: every pixel is exactly one primitive or the background, as
+    /// PccAppRenderer draws it. The geometry tests and the synthetic frames' capture renders
+    /// use it.
     #[must_use]
     pub fn single_sample() -> Self {
         Self {
             supersample: 1,
+            close_surface: false,
             ..Self::default()
+        }
+    }
+
+    /// These options with the point size chosen for `cloud` ([`ViewOptions::close_surface`])
+    /// and the choice switched off, so the many views of one cloud measure its spacing once.
+    #[must_use]
+    pub fn for_cloud(&self, cloud: &plenoptic_io::PlenopticCloud) -> Self {
+        if !self.close_surface {
+            return self.clone();
+        }
+        Self {
+            point_size: crate::closing_point_size(&cloud.positions, self.point_size),
+            close_surface: false,
+            ..self.clone()
+        }
+    }
+
+    /// [`ViewOptions::for_cloud`] for a model; a mesh has no points and keeps the options.
+    #[must_use]
+    pub fn for_model(&self, model: &plenoptic_io::Model) -> Self {
+        match model {
+            plenoptic_io::Model::Cloud(cloud) => self.for_cloud(cloud),
+            plenoptic_io::Model::Mesh(_) => self.clone(),
         }
     }
 

@@ -29,6 +29,7 @@ pub fn render_each<F>(
 where
     F: Fn(usize, ViewImage) -> Result<(), Error> + Sync + Send,
 {
+    let opts = &opts.for_model(model);
     cameras
         .par_iter()
         .enumerate()
@@ -41,6 +42,7 @@ pub fn render_views(
     cameras: &[Camera],
     opts: &ViewOptions,
 ) -> Result<Vec<ViewImage>, Error> {
+    let opts = &opts.for_model(model);
     cameras
         .par_iter()
         .map(|camera| render_model(model, camera, opts))

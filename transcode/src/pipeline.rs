@@ -532,8 +532,16 @@ fn reference_views(
             cfg.rig.height
         ),
     });
-    let mut opts = cfg.renderer.clone();
+    let mut opts = cfg.renderer.for_model(model);
     opts.background = [0.0; 3];
+    if opts.point_size != cfg.renderer.point_size {
+        observer(Event::Note(format!(
+            "the cloud samples its surface more sparsely than one point per voxel: its points \
+             are drawn {:.2} voxels wide (not {}) so the surface is closed \
+             (renderer.close_surface)",
+            opts.point_size, cfg.renderer.point_size
+        )));
+    }
     let dataset_opts = views::DatasetOptions {
         bit_depth: if cfg.output.png16 {
             views::BitDepth::Sixteen

@@ -20,7 +20,8 @@ pub struct Args {
     out: PathBuf,
     #[command(flatten)]
     overrides: Overrides,
-    /// Point size in voxels (cube side, or the disc's half-size).
+    /// Point size in voxels (cube side, or the disc's half-size), used as given (without it a
+    /// sparse cloud's points grow until its surface is closed).
     #[arg(long)]
     point_size: Option<f32>,
     /// Draw points as view-aligned discs instead of voxel cubes.
@@ -47,6 +48,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut view = config.renderer.clone();
     if let Some(s) = args.point_size {
         view.point_size = s;
+        view.close_surface = false;
     }
     if args.disc {
         view.point_shape = PointShape::Disc;
@@ -71,6 +73,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let model = plenoptic_io::load(&args.input)
         .with_context(|| format!("cannot read {}", args.input.display()))?;
     plenoptic_render::degenerate::check_model(&args.input, &model)?;
+    let chosen = view.for_model(&model);
+    if chosen.point_size != view.point_size {
+        println!(
+            "the cloud samples its surface more sparsely than one point per voxel: its points \
+             are drawn {:.2} voxels wide so the surface is closed (renderer.close_surface = \
+             false draws them at {})",
+            chosen.point_size, view.point_size
+        );
+    }
+    let view = chosen;
     let (center, radius) = views::bounding_sphere(&model)?;
     let cameras = views::fibonacci_rig(center, radius, &config.rig)?;
 
