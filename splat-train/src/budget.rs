@@ -335,7 +335,7 @@ impl BudgetSearch {
             // are part of what the prune buys.
             let before = trainer.report(false).elapsed_s;
             let mut r = trainer.report(false);
-            while r.elapsed_s - before < control_s && r.iterations < trainer.config().iterations {
+            while r.elapsed_s - before < control_s && r.iterations < trainer.horizon() {
                 r = trainer.run_until(r.iterations + 1, &mut *on_step);
                 if r.stopped_by_budget {
                     break;

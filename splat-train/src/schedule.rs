@@ -1,5 +1,6 @@
 //! Schedules: Inria's learning-rate and SH-degree schedules, its densification schedule scaled
-//! to a run's length, the length of a time-budgeted run, and where a run pauses.
+//! to a run's length, the length of a time-budgeted run (estimated before it starts, then
+//! re-estimated at every step by its [`Pace`]), and where a run pauses.
 
 use std::time::Duration;
 
@@ -110,6 +111,64 @@ pub fn steps_in_budget(
     )
 }
 
+/// Weight of the newest step in [`Pace`]'s moving average: the estimate follows a change of
+/// speed (the machine getting busy, the model shrinking) within about ten steps, and one slow
+/// step moves it by a tenth.
+pub const PACE_SMOOTHING: f64 = 0.1;
+
+/// How fast a time-budgeted run is going, and so how many steps its schedule spans.
+///
+/// A run with a time budget lays its schedules (learning-rate decay, SH bands, the coarse
+/// warm-up) over the steps that fit in the budget rather than over its configured iteration
+/// count, so that it ends with the schedule complete rather than stopped half-way. Those steps
+/// are re-estimated after every step from the smoothed step time and the time left, so a run
+/// that slows down (a busy machine, a budget round's discarded branch) ends its schedule sooner
+/// and one that speeds up later; the run then ends within about a step of its budget.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Pace {
+    /// Exponential moving average of the seconds a step takes ([`PACE_SMOOTHING`]), once one
+    /// step has been timed.
+    pub step_s: Option<f64>,
+}
+
+impl Pace {
+    /// Takes one more step's time into the average.
+    pub fn observe(&mut self, step_s: f64) {
+        if !(step_s.is_finite() && step_s >= 0.0) {
+            return;
+        }
+        self.step_s = Some(match self.step_s {
+            Some(avg) => avg + PACE_SMOOTHING * (step_s - avg),
+            None => step_s,
+        });
+    }
+
+    /// The steps the run's schedule spans: `done` plus the steps that fit in what is left of
+    /// `budget_s` after `elapsed_s` at the average step time, at most `iterations`; `iterations`
+    /// until a step has been timed.
+    #[must_use]
+    pub fn horizon(&self, iterations: u32, done: u32, elapsed_s: f64, budget_s: f64) -> u32 {
+        let Some(step_s) = self.step_s else {
+            return iterations;
+        };
+        let left = (budget_s - elapsed_s).max(0.0);
+        let fit = (left / step_s.max(1e-9)).floor().min(f64::from(u32::MAX));
+        iterations
+            .min(done.saturating_add(fit as u32))
+            .max(done.min(iterations))
+    }
+}
+
+/// `steps` of a schedule written for `iterations` steps, stretched over `horizon` steps
+/// (rounded; a positive count stays at least 1, 0 stays 0).
+#[must_use]
+pub fn scale_steps(steps: u32, horizon: u32, iterations: u32) -> u32 {
+    if steps == 0 || horizon >= iterations || iterations == 0 {
+        return steps;
+    }
+    ((f64::from(steps) * f64::from(horizon) / f64::from(iterations)).round() as u32).max(1)
+}
+
 /// The next step count at which a run that has done `done` of `total` steps pauses: the next
 /// multiple of `every_a` or of `every_b` (0: never), or the end.
 #[must_use]
@@ -124,6 +183,70 @@ pub fn next_stop(done: u32, total: u32, every_a: u32, every_b: u32) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn pace_averages_step_times_and_ignores_nonsense() {
+        let mut p = Pace::default();
+        assert_eq!(
+            p.horizon(3000, 0, 0.0, 60.0),
+            3000,
+            "untimed: the configured count"
+        );
+        p.observe(0.05);
+        assert_eq!(p.step_s, Some(0.05));
+        p.observe(0.15);
+        assert!((p.step_s.unwrap() - 0.06).abs() < 1e-12);
+        p.observe(f64::NAN);
+        p.observe(-1.0);
+        assert!((p.step_s.unwrap() - 0.06).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_horizon_is_the_steps_that_fit_in_the_time_left() {
+        let p = Pace { step_s: Some(0.05) };
+        // 50 s left at 0.05 s a step: 1,000 more steps.
+        assert_eq!(p.horizon(3000, 200, 10.0, 60.0), 1200);
+        // Capped at the configured count.
+        assert_eq!(p.horizon(1000, 200, 10.0, 60.0), 1000);
+        // Out of time: the schedule ends where the run is.
+        assert_eq!(p.horizon(3000, 700, 61.0, 60.0), 700);
+        // A slower machine shortens it.
+        let slow = Pace { step_s: Some(0.1) };
+        assert_eq!(slow.horizon(3000, 200, 10.0, 60.0), 700);
+    }
+
+    #[test]
+    fn a_busy_machine_shrinks_the_horizon_and_the_run_ends_on_budget() {
+        // Simulated clock: 20 ms steps that become 60 ms at t = 10 s; the run takes a step
+        // while it is short of its horizon, which is re-estimated after each step.
+        let (budget, iterations) = (30.0, 100_000);
+        let mut pace = Pace::default();
+        let (mut t, mut done) = (0.0_f64, 0_u32);
+        while done < pace.horizon(iterations, done, t, budget) && t < budget {
+            let step = if t < 10.0 { 0.02 } else { 0.06 };
+            t += step;
+            done += 1;
+            pace.observe(step);
+        }
+        assert!(
+            (t - budget).abs() <= 0.06 + 1e-9,
+            "ended at {t} s of {budget}"
+        );
+        // 500 fast steps, then 20 s of slow ones.
+        assert!(
+            (done as f64 - (500.0 + 20.0 / 0.06)).abs() <= 2.0,
+            "{done} steps"
+        );
+    }
+
+    #[test]
+    fn schedules_stretch_with_the_horizon() {
+        assert_eq!(scale_steps(1000, 1500, 3000), 500);
+        assert_eq!(scale_steps(1000, 3000, 3000), 1000);
+        assert_eq!(scale_steps(1000, 4000, 3000), 1000);
+        assert_eq!(scale_steps(0, 10, 3000), 0);
+        assert_eq!(scale_steps(1, 10, 3000), 1);
+    }
 
     #[test]
     fn densify_schedule_scales_to_the_step_budget() {

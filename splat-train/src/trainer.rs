@@ -12,7 +12,7 @@ use crate::config::{Background, TrainConfig};
 use crate::error::Error;
 use crate::loss::{Loss, alpha_l1};
 use crate::metrics::psnr_from_mse;
-use crate::schedule::{camera_extent, exponential_lr, sh_degree_at};
+use crate::schedule::{Pace, camera_extent, exponential_lr, scale_steps, sh_degree_at};
 use crate::ssim::SsimTarget;
 use crate::state::ParamState;
 use crate::strategy::{DensifyStrategy, InriaDensify, RefineContext, RefineReport};
@@ -94,7 +94,8 @@ pub struct Timings {
 pub struct Progress {
     /// The step just done.
     pub step: StepStats,
-    /// Steps the run is configured for.
+    /// Steps the run's schedule spans: its iteration count, or under a time budget the steps
+    /// that fit ([`Trainer::horizon`], re-estimated at every step).
     pub total: u32,
     /// Training time so far.
     pub elapsed: Duration,
@@ -150,6 +151,13 @@ pub(crate) struct RunState {
     pub refine: RefineReport,
     /// Log-scale given to a reset splat: the median of the initial model's largest log-scales.
     pub reset_log_scale: f32,
+    /// Speed of a time-budgeted run, from which its schedule's length is re-estimated.
+    #[serde(default)]
+    pub pace: Pace,
+    /// Highest SH degree the schedule has reached: a re-estimated (longer) schedule never takes
+    /// a band away again.
+    #[serde(default)]
+    pub sh_reached: u32,
 }
 
 /// A CPU trainer of splats on posed images.
@@ -169,6 +177,9 @@ pub struct Trainer {
     extent: f32,
     max_sh_degree: u32,
     timings: Timings,
+    /// Whether a step has run in this process: the first allocates the loss buffers and is
+    /// left out of the [`Pace`].
+    warm: bool,
 }
 
 impl Trainer {
@@ -260,6 +271,8 @@ impl Trainer {
             non_finite: NonFinite::default(),
             refine: RefineReport::default(),
             reset_log_scale,
+            pace: Pace::default(),
+            sh_reached: 0,
         };
         let mut t = Self {
             grads: SplatGrads::zeros_like(&splats),
@@ -275,6 +288,7 @@ impl Trainer {
             extent,
             max_sh_degree,
             timings: Timings::default(),
+            warm: false,
         };
         t.composite_fixed_background();
         if let Some(w) = t.config.warmup {
@@ -376,15 +390,43 @@ impl Trainer {
         v
     }
 
+    /// The steps the run's schedules span: the configured iteration count, or under a time
+    /// budget the steps its [`Pace`] says will fit (at most the iteration count).
+    #[must_use]
+    pub fn horizon(&self) -> u32 {
+        let c = &self.config;
+        match c.time_budget {
+            Some(b) => self.run.pace.horizon(
+                c.iterations,
+                self.run.iteration,
+                self.run.elapsed_s,
+                b.as_secs_f64(),
+            ),
+            None => c.iterations,
+        }
+    }
+
+    /// `steps` of the configured schedule stretched over [`Trainer::horizon`].
+    fn scheduled(&self, steps: u32) -> u32 {
+        scale_steps(steps, self.horizon(), self.config.iterations)
+    }
+
+    /// The SH degree the schedule has reached at this step (never lower than at an earlier one).
+    #[must_use]
+    pub fn active_sh_degree(&self) -> u32 {
+        let scheduled = sh_degree_at(
+            self.run.iteration,
+            self.scheduled(self.config.sh_degree_interval),
+            self.max_sh_degree,
+        );
+        scheduled.max(self.run.sh_reached.min(self.max_sh_degree))
+    }
+
     /// How this step renders: over `background`, at the SH degree the schedule has reached.
     fn render_options(&self, background: Vec3) -> RenderOptions {
         RenderOptions {
             background,
-            active_sh_degree: sh_degree_at(
-                self.run.iteration,
-                self.config.sh_degree_interval,
-                self.max_sh_degree,
-            ),
+            active_sh_degree: self.active_sh_degree(),
             antialiased: self.config.antialiased,
             linear_colour: false,
         }
@@ -396,7 +438,11 @@ impl Trainer {
         let vi = self.next_view();
         let bg = self.background();
         let opts = self.render_options(bg);
-        let coarse = self.config.warmup.is_some_and(|w| iteration <= w.until);
+        self.run.sh_reached = opts.active_sh_degree;
+        let coarse = self
+            .config
+            .warmup
+            .is_some_and(|w| iteration <= self.scheduled(w.until));
         let li = usize::from(coarse && self.levels.len() > 1);
         let level = &mut self.levels[li];
         let cam = level.cameras[vi];
@@ -504,9 +550,7 @@ impl Trainer {
             splats: self.state.len(),
             refine,
         };
-        if iteration.is_multiple_of(self.config.history_every)
-            || iteration == self.config.iterations
-        {
+        if iteration.is_multiple_of(self.config.history_every) || iteration >= self.horizon() {
             // Elapsed time is filled in by `run`, which owns the clock.
             self.run.history.push(HistoryEntry {
                 iteration,
@@ -521,6 +565,7 @@ impl Trainer {
 
     /// Adam on every group that is not frozen, at this step's rates.
     fn adam_step(&mut self, iteration: u32) {
+        let horizon = self.horizon();
         let c = &self.config;
         let hp = c.adam;
         let t = u64::from(iteration);
@@ -528,7 +573,7 @@ impl Trainer {
         let g = &self.grads;
         let f = c.frozen;
         if !f.positions {
-            let max_steps = c.lr.position_max_steps.unwrap_or(c.iterations);
+            let max_steps = c.lr.position_max_steps.unwrap_or(horizon);
             let lr = exponential_lr(
                 c.lr.position_init,
                 c.lr.position_final,
@@ -664,8 +709,9 @@ impl Trainer {
         let mut stopped_by_budget = false;
         let until = until.min(self.config.iterations);
         while self.run.iteration < until {
+            // Out of time, or at the end of the schedule the time budget allows.
             if let Some(b) = self.config.time_budget
-                && self.run.elapsed_s >= b.as_secs_f64()
+                && (self.run.elapsed_s >= b.as_secs_f64() || self.run.iteration >= self.horizon())
             {
                 stopped_by_budget = true;
                 break;
@@ -673,7 +719,12 @@ impl Trainer {
             // Only the step is timed: the callback (progress display, evaluation) is not training.
             let start = Instant::now();
             let s = self.step();
-            self.run.elapsed_s += start.elapsed().as_secs_f64();
+            let took = start.elapsed().as_secs_f64();
+            self.run.elapsed_s += took;
+            if self.warm {
+                self.run.pace.observe(took);
+            }
+            self.warm = true;
             let elapsed = self.run.elapsed_s;
             if let Some(h) = self.run.history.last_mut()
                 && h.iteration == s.iteration
@@ -682,7 +733,7 @@ impl Trainer {
             }
             on_progress(&Progress {
                 step: s,
-                total: self.config.iterations,
+                total: self.horizon(),
                 elapsed: Duration::from_secs_f64(elapsed),
             });
         }

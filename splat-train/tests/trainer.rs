@@ -138,6 +138,44 @@ fn recovers_held_out_views_of_a_known_model() {
 }
 
 #[test]
+fn a_time_budget_ends_with_its_schedule_complete() {
+    // Configured for far more steps than fit: the SH bands and the position decay are laid out
+    // over the steps the budget allows (re-estimated every step), so the run ends with all
+    // bands on and the horizon where it stopped, close to the budget.
+    let truth = random_model(60, 3);
+    let train = render_views(&truth, &cameras(12, 48, 36, 0.0), "v");
+    let init = initial_model(&truth, 0.02, 4);
+    let budget = 1.5;
+    let mut cfg = base_config(10_000_000);
+    // The band comes at half the schedule.
+    cfg.sh_degree_interval = 5_000_000;
+    cfg.time_budget = Some(std::time::Duration::from_secs_f64(budget));
+    let mut t = Trainer::new(init, train, cfg).unwrap();
+    assert_eq!(t.active_sh_degree(), 0);
+    let report = t.run(|_| {});
+    assert!(report.stopped_by_budget);
+    assert!(report.iterations > 10 && report.iterations < 10_000_000);
+    assert_eq!(
+        t.horizon(),
+        report.iterations,
+        "the schedule ends where the run stopped"
+    );
+    assert_eq!(t.splats().sh_degree, 1);
+    assert_eq!(t.active_sh_degree(), 1, "every SH band was reached");
+    // It stops when less than an average step is left (not a timing figure: only that it
+    // neither quits early nor runs on).
+    assert!(
+        report.elapsed_s > 0.5 * budget && report.elapsed_s < budget + 1.0,
+        "trained {:.2} s of a {budget} s budget",
+        report.elapsed_s
+    );
+    assert_eq!(
+        report.history.last().map(|h| h.iteration),
+        Some(report.iterations)
+    );
+}
+
+#[test]
 fn frozen_positions_stay_bit_identical() {
     let truth = random_model(60, 3);
     let train = render_views(&truth, &cameras(12, 48, 36, 0.0), "v");

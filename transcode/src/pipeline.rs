@@ -142,14 +142,15 @@ const PROBE_STEPS: u32 = 4;
 /// The number of steps a run will take: its iteration count, or, with a time budget, the steps
 /// that fit in the budget at the speed of [`PROBE_STEPS`] steps timed on a throw-away trainer
 /// after a warm-up step (the probe's time is taken from the budget; the arithmetic is
-/// [`splat_train::schedule::steps_in_budget`]). Returns the steps and the remaining budget.
+/// [`splat_train::schedule::steps_in_budget`]). Returns the steps, the remaining budget and
+/// the probe's seconds a step.
 fn step_budget(
     splats: &Splats,
     views: &[View],
     tc: &TrainConfig,
-) -> Result<(u32, Option<Duration>), PipelineError> {
+) -> Result<(u32, Option<Duration>, Option<f64>), PipelineError> {
     let Some(budget) = tc.time_budget else {
-        return Ok((tc.iterations, None));
+        return Ok((tc.iterations, None, None));
     };
     let probe_cfg = TrainConfig {
         iterations: PROBE_STEPS + 1,
@@ -173,7 +174,8 @@ fn step_budget(
         timed,
         PROBE_STEPS,
     );
-    Ok((steps, Some(left)))
+    let step_s = timed.as_secs_f64() / f64::from(PROBE_STEPS);
+    Ok((steps, Some(left), Some(step_s)))
 }
 
 /// What a finished run produced.
@@ -736,6 +738,7 @@ fn init_train_eval(
         iterations: train_report.iterations,
         train_seconds: train_report.elapsed_s,
         stopped_by_budget: train_report.stopped_by_budget,
+        step_estimate_s: init.schedule.step_estimate_s,
         step_zero: init.step_zero,
         curve: train_report
             .history
@@ -1348,15 +1351,16 @@ fn plan(
 ) -> Result<Schedule, PipelineError> {
     let scaled = scale_schedule && tc.densify.is_some();
     // Rounds are placed at shares of the run's steps: under a time budget, the probe's estimate.
-    let (steps, time_budget) = if scaled || budget.is_some() {
+    let (steps, time_budget, step_estimate_s) = if scaled || budget.is_some() {
         step_budget(splats, views, tc)?
     } else {
-        (tc.iterations, tc.time_budget)
+        (tc.iterations, tc.time_budget, None)
     };
     Ok(Schedule {
         densify_steps: scaled.then_some(steps),
         time_budget: time_budget.or(tc.time_budget),
         budget: budget.and_then(|b| b.plan(steps)),
+        step_estimate_s,
     })
 }
 
@@ -1417,7 +1421,7 @@ fn train_to_end(
     mut budget: Budgeting<'_>,
     observer: Observer<'_>,
 ) -> Result<splat_train::TrainReport, PipelineError> {
-    let total = trainer.config().iterations;
+    let total = trainer.horizon();
     observer(Event::Begin {
         unit: "steps",
         total: u64::from(total),
@@ -1426,7 +1430,12 @@ fn train_to_end(
     if trainer.iteration() == 0 {
         probe.take(trainer, 0.0, false)?;
     }
+    let mut shown_total = total;
     let mut advance = |p: &splat_train::Progress| {
+        if p.total != shown_total {
+            shown_total = p.total;
+            observer(Event::Total(u64::from(p.total)));
+        }
         let message = p
             .step
             .iteration

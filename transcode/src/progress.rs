@@ -39,6 +39,8 @@ pub enum Event {
         /// How many were done before (a resumed run).
         done: u64,
     },
+    /// The counted task's total is now `0`: a time-budgeted run re-estimates how many steps fit.
+    Total(u64),
     /// The counted task has done `done`; `message` carries news (training PSNR, splats).
     Advance {
         /// How many are done.

@@ -77,6 +77,10 @@ pub struct Schedule {
     /// When the automatic splat budget's rounds run; `None`: no search.
     #[serde(default)]
     pub budget: Option<splat_train::BudgetPlan>,
+    /// Seconds a step took on the probe before training, when a probe ran (the run itself
+    /// re-estimates as it goes: `splat_train::schedule::Pace`).
+    #[serde(default)]
+    pub step_estimate_s: Option<f64>,
 }
 
 /// What one init mode has done.

@@ -47,6 +47,11 @@ impl Reporter {
                 b.set_position(done);
                 *bar = Some(b);
             }
+            Event::Total(total) => {
+                if let Some(b) = bar.as_ref() {
+                    b.set_length(total);
+                }
+            }
             Event::Advance { done, message } => {
                 if let Some(b) = bar.as_ref() {
                     b.set_position(done);

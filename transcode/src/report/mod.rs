@@ -143,6 +143,10 @@ pub struct RunReport {
     pub train_seconds: f64,
     /// True when the time budget stopped training.
     pub stopped_by_budget: bool,
+    /// Seconds a step took on the probe before training (under a time budget or a splat
+    /// budget); compare with `train_seconds / iterations`.
+    #[serde(default)]
+    pub step_estimate_s: Option<f64>,
     /// Held-out scores before training (absent when training continued from a checkpoint made
     /// by an older version).
     pub step_zero: Option<StepZero>,
@@ -319,7 +323,7 @@ fn metrics_table(h: &mut String, report: &Report, names: &[String]) {
     }
     h.push_str("</tr>\n");
     type Row = (&'static str, fn(&RunReport) -> String);
-    let rows: [Row; 22] = [
+    let rows: [Row; 23] = [
         ("PSNR, black background (dB)", |r| {
             format!("{:.2}", r.metrics.psnr_black)
         }),
@@ -380,6 +384,17 @@ fn metrics_table(h: &mut String, report: &Report, names: &[String]) {
         ("floater opacity share", |r| surface(r, |s| s.floater_share)),
         ("iterations", |r| r.iterations.to_string()),
         ("training time (s)", |r| format!("{:.1}", r.train_seconds)),
+        ("step time: probe estimate / run (ms)", |r| {
+            let run = r.train_seconds / f64::from(r.iterations.max(1));
+            r.step_estimate_s.map_or("–".into(), |e| {
+                format!(
+                    "{:.1} / {:.1} ({:+.0} %)",
+                    1e3 * e,
+                    1e3 * run,
+                    100.0 * (e / run - 1.0)
+                )
+            })
+        }),
         ("model file", |r| human_bytes(r.model_bytes)),
         ("compact files", |r| {
             if r.compact_files.is_empty() {
