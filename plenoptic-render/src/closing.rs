@@ -73,7 +73,7 @@ pub fn surface_spacing(positions: &[Vec3]) -> Option<f32> {
         |(lo, hi), &p| (lo.min(p), hi.max(p)),
     );
     let extent = (hi - lo).max_element();
-    if !(extent > 0.0) {
+    if extent.is_nan() || extent <= 0.0 {
         return None;
     }
     // A surface of area ≈ extent² sampled by n points has spacing ≈ extent / √n; a radius of

@@ -100,6 +100,13 @@ impl Rasterizer {
         !self.portable_only && has_avx2()
     }
 
+    /// Whether this rasteriser runs the AVX2 tile loops (detected on this CPU at run time) rather
+    /// than the portable ones.
+    #[must_use]
+    pub fn uses_avx2(&self) -> bool {
+        self.use_avx2()
+    }
+
     /// Returns the counts of the last forward pass.
     #[must_use]
     pub fn stats(&self) -> RenderStats {

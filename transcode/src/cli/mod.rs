@@ -2,6 +2,8 @@
 
 use clap::{Parser, Subcommand};
 
+#[cfg(feature = "scenes")]
+mod bench;
 mod colmap;
 mod config;
 mod convert;
@@ -53,6 +55,10 @@ enum Command {
     /// Generate a synthetic plenoptic cloud from a real mesh.
     #[cfg(feature = "scenes")]
     Synth(synth::Args),
+    /// Generate a frame of a given size and measure the pipeline's speed on it (reading,
+    /// reference views, rasteriser at several thread counts, a training step's phases).
+    #[cfg(feature = "scenes")]
+    Bench(bench::Args),
     /// Print or check the configuration shared by all subcommands.
     Config(config::Args),
     /// Serve the splat viewer on this machine: an output folder's report, or any PLY/SPZ model.
@@ -76,6 +82,8 @@ pub fn dispatch(cli: Cli) -> anyhow::Result<()> {
         Command::Demo(a) => demo::run(a),
         #[cfg(feature = "scenes")]
         Command::Synth(a) => synth::run(a),
+        #[cfg(feature = "scenes")]
+        Command::Bench(a) => bench::run(a),
         Command::Config(a) => config::run(a),
         Command::View(a) => view::run(a),
         Command::Convert(a) => convert::run(a),

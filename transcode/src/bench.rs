@@ -1,0 +1,373 @@
+//! `transcode bench`: the speed figures of a paper-scale frame, measured in one process so
+//! anyone can re-measure them on their own machine (issue 14's list).
+//!
+//! Given a plenoptic frame written to a file, it times, in order: reading the file; rendering
+//! the reference views of the rig (in memory); surface initialisation capped at a splat count;
+//! the rasteriser's forward and forward + backward passes on one training view (medians of
+//! repeats, at each thread count asked for, so the scaling and the serial fraction come out of
+//! the same run); and training steps with the trainer's own split of time per phase. Medians
+//! are quoted for repeated figures; everything else is one measurement. The peak resident
+//! memory is read from the operating system where it says (Linux).
+
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use serde::{Deserialize, Serialize};
+use splat_core::{Rasterizer, RenderCamera, SplatGrads, Splats};
+use splat_init::{InitConfig, InitMode, SurfacePoints};
+use splat_train::{Trainer, View};
+
+use crate::config::Config;
+use crate::pipeline::training_view;
+
+/// Floating-point operations the rasteriser spends on one evaluated (pixel, splat) pair in the
+/// forward pass, and in forward + backward together: counted by hand from the tile loops
+/// (docs/benchmarks/splat-core.md), so GFLOP/s figures are estimates of useful work.
+pub const FLOPS_PER_PAIR_FORWARD: f64 = 40.0;
+/// See [`FLOPS_PER_PAIR_FORWARD`]: forward (40) plus backward (70).
+pub const FLOPS_PER_PAIR_FORWARD_BACKWARD: f64 = 110.0;
+
+/// What to measure.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BenchOptions {
+    /// Reference and training views are `resolution` × `resolution`.
+    pub resolution: u32,
+    /// Splats the surface initialisation is capped at.
+    pub splats: usize,
+    /// Repeats of each rasteriser figure and of the read (medians quoted).
+    pub repeats: usize,
+    /// Training steps timed (after one warm-up step).
+    pub steps: u32,
+    /// Thread counts the rasteriser is timed at (the machine's own count when empty).
+    pub threads: Vec<usize>,
+}
+
+impl Default for BenchOptions {
+    fn default() -> Self {
+        Self {
+            resolution: 1024,
+            splats: 250_000,
+            repeats: 7,
+            steps: 30,
+            threads: Vec::new(),
+        }
+    }
+}
+
+/// The rasteriser at one thread count.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RasterFigure {
+    /// Threads of the pool it ran in.
+    pub threads: usize,
+    /// Median forward time, ms.
+    pub forward_ms: f64,
+    /// Median forward + backward time, ms.
+    pub forward_backward_ms: f64,
+    /// Estimated useful GFLOP/s of forward + backward ([`FLOPS_PER_PAIR_FORWARD_BACKWARD`]).
+    pub gflops: f64,
+}
+
+/// Mean milliseconds a training step spends in each phase.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StepPhases {
+    /// Steps averaged.
+    pub steps: u64,
+    /// Projection, binning and compositing.
+    pub forward_ms: f64,
+    /// L1 + D-SSIM and their image gradient.
+    pub loss_ms: f64,
+    /// Backward rasterisation.
+    pub backward_ms: f64,
+    /// Adam, clamps and the non-finite scan.
+    pub adam_ms: f64,
+    /// Densification bookkeeping.
+    pub refine_ms: f64,
+    /// Whole step, as the run timed it (the phases plus what lies between them).
+    pub step_ms: f64,
+}
+
+/// Everything `transcode bench` measured.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BenchReport {
+    /// Points in the frame.
+    pub points: usize,
+    /// Capture cameras of the frame.
+    pub capture_cameras: usize,
+    /// Bytes of the frame's file.
+    pub file_bytes: u64,
+    /// Median time to read the frame, s.
+    pub read_s: f64,
+    /// Reference views rendered (the rig's training views).
+    pub views: usize,
+    /// The cube side the reference renderer drew the points at (voxels).
+    pub point_size: f32,
+    /// Time to render them all, s.
+    pub views_s: f64,
+    /// Surface initialisation, s.
+    pub init_s: f64,
+    /// Splats after initialisation.
+    pub splats: usize,
+    /// Evaluated (pixel, splat) pairs of the timed view's forward pass.
+    pub pixel_evaluations: u64,
+    /// The rasteriser at each thread count.
+    pub raster: Vec<RasterFigure>,
+    /// Amdahl serial fraction of forward + backward from the fewest and most threads timed
+    /// (`None` with one thread count).
+    pub serial_fraction: Option<f64>,
+    /// A training step's phases at the machine's thread count.
+    pub step: StepPhases,
+    /// Peak resident memory of the process, bytes, where the OS reports it.
+    pub peak_rss_bytes: Option<u64>,
+    /// Threads of the machine's default pool.
+    pub machine_threads: usize,
+    /// Whether the rasteriser's AVX2 loops ran.
+    pub avx2: bool,
+}
+
+/// Errors of a bench run.
+#[derive(Debug, thiserror::Error)]
+pub enum BenchError {
+    /// The frame could not be read.
+    #[error("cannot read the frame {path}: {source}")]
+    Read {
+        /// The frame's file.
+        path: std::path::PathBuf,
+        /// The cause (boxed: reader errors are large).
+        source: Box<plenoptic_io::Error>,
+    },
+    /// A stage of the pipeline failed on the frame.
+    #[error("{0}")]
+    Stage(String),
+}
+
+/// Runs the measurements on the frame at `frame` (a plenoptic or coloured cloud, or a mesh),
+/// calling `progress` with a line before each stage.
+///
+/// # Errors
+/// [`BenchError`] when the frame cannot be read or a stage fails on it.
+pub fn run_bench(
+    frame: &Path,
+    opts: &BenchOptions,
+    progress: &mut dyn FnMut(&str),
+) -> Result<BenchReport, BenchError> {
+    let stage = |e: &dyn std::fmt::Display| BenchError::Stage(e.to_string());
+    let repeats = opts.repeats.max(1);
+    progress("reading the frame");
+    let file_bytes = std::fs::metadata(frame).map_or(0, |m| m.len());
+    let mut read_times = Vec::new();
+    let mut model = None;
+    for _ in 0..repeats.min(3) {
+        let t = Instant::now();
+        let m = plenoptic_io::load(frame).map_err(|source| BenchError::Read {
+            path: frame.to_path_buf(),
+            source: Box::new(source),
+        })?;
+        read_times.push(t.elapsed());
+        model = Some(m);
+    }
+    let Some(model) = model else {
+        unreachable!("the read loop runs at least once")
+    };
+    let (points, capture_cameras) = match &model {
+        plenoptic_io::Model::Cloud(c) => (c.len(), c.num_cameras),
+        plenoptic_io::Model::Mesh(m) => (m.positions.len(), 0),
+    };
+
+    let mut cfg = Config::default();
+    cfg.rig.width = opts.resolution;
+    cfg.rig.height = opts.resolution;
+    let rig = plenoptic_render::build_rig(&model, &cfg.rig).map_err(|e| stage(&e))?;
+    progress(&format!(
+        "rendering {} reference views at {}²",
+        rig.train.len(),
+        opts.resolution
+    ));
+    let t = Instant::now();
+    let view_opts = cfg.renderer.for_model(&model);
+    let images =
+        plenoptic_render::render_views(&model, &rig.train, &view_opts).map_err(|e| stage(&e))?;
+    let views_s = t.elapsed().as_secs_f64();
+    let views: Vec<View> = images
+        .iter()
+        .zip(&rig.train)
+        .enumerate()
+        .map(|(i, (img, cam))| training_view(format!("view_{i:03}"), *cam, img))
+        .collect();
+    drop(images);
+
+    progress(&format!("initialising at most {} splats", opts.splats));
+    let t = Instant::now();
+    let init_cfg = InitConfig {
+        mode: InitMode::Surface,
+        splats: Some(opts.splats),
+        ..cfg.init.clone()
+    };
+    let surface = SurfacePoints::from_model(&model, init_cfg.mesh_points, init_cfg.mesh_samples, 0);
+    drop(model);
+    let (splats, summary) = splat_init::initialise(&surface, &init_cfg, cfg.renderer.exponent, 0)
+        .map_err(|e| stage(&e))?;
+    drop(surface);
+    let init_s = t.elapsed().as_secs_f64();
+
+    let machine_threads = rayon::current_num_threads();
+    let mut thread_counts = if opts.threads.is_empty() {
+        vec![machine_threads]
+    } else {
+        opts.threads.clone()
+    };
+    thread_counts.sort_unstable();
+    thread_counts.dedup();
+    let camera = RenderCamera::try_from(&rig.train[0]).map_err(|e| stage(&e))?;
+    let mut raster = Vec::new();
+    let mut pixel_evaluations = 0;
+    let mut avx2 = false;
+    for &threads in &thread_counts {
+        progress(&format!(
+            "timing the rasteriser on {threads} thread(s), {repeats} repeats"
+        ));
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads.max(1))
+            .build()
+            .map_err(|e| stage(&e))?;
+        let (fwd, fwd_bwd, evals) = pool.install(|| time_raster(&splats, &camera, repeats));
+        pixel_evaluations = evals;
+        avx2 = Rasterizer::new().uses_avx2();
+        raster.push(RasterFigure {
+            threads,
+            forward_ms: ms(fwd),
+            forward_backward_ms: ms(fwd_bwd),
+            gflops: evals as f64 * FLOPS_PER_PAIR_FORWARD_BACKWARD / fwd_bwd.as_secs_f64() / 1e9,
+        });
+    }
+    let serial_fraction = match (raster.first(), raster.last()) {
+        (Some(a), Some(b)) if b.threads > a.threads => Some(amdahl_serial_fraction(
+            a.threads as f64,
+            b.threads as f64,
+            b.forward_backward_ms / a.forward_backward_ms,
+        )),
+        _ => None,
+    };
+
+    progress(&format!("timing {} training steps", opts.steps));
+    let tc = cfg.train_config(InitMode::Surface, summary.sh_degree);
+    let tc = splat_train::TrainConfig {
+        iterations: opts.steps + 1,
+        time_budget: None,
+        densify: None,
+        ..tc
+    };
+    let mut trainer = Trainer::new(splats, views, tc).map_err(|e| stage(&e))?;
+    trainer.run_until(1, |_| {});
+    let before = trainer.report(false).timings;
+    let started_s = trainer.report(false).elapsed_s;
+    let report = trainer.run_until(opts.steps + 1, |_| {});
+    let after = report.timings;
+    let steps = (after.steps - before.steps).max(1);
+    let per = |a: Duration, b: Duration| ms(a.saturating_sub(b)) / steps as f64;
+    let step = StepPhases {
+        steps,
+        forward_ms: per(after.forward, before.forward),
+        loss_ms: per(after.loss, before.loss),
+        backward_ms: per(after.backward, before.backward),
+        adam_ms: per(after.adam, before.adam),
+        refine_ms: per(after.refine, before.refine),
+        step_ms: 1e3 * (report.elapsed_s - started_s) / steps as f64,
+    };
+
+    Ok(BenchReport {
+        points,
+        capture_cameras,
+        file_bytes,
+        read_s: median(&mut read_times).as_secs_f64(),
+        views: rig.train.len(),
+        point_size: view_opts.point_size,
+        views_s,
+        init_s,
+        splats: trainer.splats().len(),
+        pixel_evaluations,
+        raster,
+        serial_fraction,
+        step,
+        peak_rss_bytes: peak_rss_bytes(),
+        machine_threads,
+        avx2,
+    })
+}
+
+/// The serial fraction f of Amdahl's law, T(n) = T(1)·(f + (1 − f)/n), from the ratio
+/// `r` = T(b)/T(a) of times measured at `a` and `b` threads (clamped to [0, 1]: noise can put
+/// a measured ratio outside the law's range).
+#[must_use]
+pub fn amdahl_serial_fraction(a: f64, b: f64, r: f64) -> f64 {
+    // r·(f + (1 − f)/a) = f + (1 − f)/b, solved for f.
+    let f = (1.0 / b - r / a) / (r - r / a - 1.0 + 1.0 / b);
+    if f.is_finite() {
+        f.clamp(0.0, 1.0)
+    } else {
+        0.0
+    }
+}
+
+/// Median forward, median forward + backward, and the pairs evaluated, over `repeats` each
+/// (after one untimed pass that sizes the buffers).
+fn time_raster(
+    splats: &Splats,
+    camera: &RenderCamera,
+    repeats: usize,
+) -> (Duration, Duration, u64) {
+    let opts = splat_core::RenderOptions::default();
+    let mut r = Rasterizer::new();
+    let mut grads = SplatGrads::zeros_like(splats);
+    let d_rgb = vec![1e-3_f32; 3 * (camera.width as usize) * (camera.height as usize)];
+    r.forward(splats, camera, &opts);
+    r.backward(splats, camera, &opts, &d_rgb, None, None, &mut grads);
+    let evaluations = r.stats().pixel_evaluations;
+    let mut fwd = Vec::with_capacity(repeats);
+    let mut both = Vec::with_capacity(repeats);
+    for _ in 0..repeats {
+        let t = Instant::now();
+        r.forward(splats, camera, &opts);
+        fwd.push(t.elapsed());
+        let t = Instant::now();
+        r.forward(splats, camera, &opts);
+        r.backward(splats, camera, &opts, &d_rgb, None, None, &mut grads);
+        both.push(t.elapsed());
+    }
+    (median(&mut fwd), median(&mut both), evaluations)
+}
+
+fn median(d: &mut [Duration]) -> Duration {
+    d.sort_unstable();
+    d.get(d.len() / 2).copied().unwrap_or_default()
+}
+
+fn ms(d: Duration) -> f64 {
+    d.as_secs_f64() * 1e3
+}
+
+/// The process's peak resident set (`VmHWM` in /proc/self/status), where there is one.
+#[must_use]
+pub fn peak_rss_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn amdahl_serial_fraction_inverts_its_own_law() {
+        for f in [0.0, 0.05, 0.3, 1.0] {
+            for (a, b) in [(1.0, 2.0), (2.0, 16.0), (1.0, 8.0)] {
+                let t = |n: f64| f + (1.0 - f) / n;
+                let got = amdahl_serial_fraction(a, b, t(b) / t(a));
+                assert!((got - f).abs() < 1e-12, "f {f} from {a}, {b}: {got}");
+            }
+        }
+        // Better than linear scaling (noise) reads as no serial part.
+        assert_eq!(amdahl_serial_fraction(1.0, 2.0, 0.4), 0.0);
+    }
+}

@@ -1,0 +1,174 @@
+//! `transcode bench`: generates a frame of a given size and measures the pipeline's speed
+//! figures on it ([`transcode::bench`]), so anyone can re-measure them on their machine.
+
+use std::path::PathBuf;
+
+use anyhow::Context as _;
+use plenoptic_scenes::{AUTO_GRID, DemoConfig, SynthConfig, demo_scene, synth_from_mesh};
+use transcode::bench::{BenchOptions, BenchReport, run_bench};
+
+use super::synth::Grid;
+
+/// Arguments of `transcode bench`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Synthesise the frame from this mesh (as `transcode synth`); without it, the built-in demo
+    /// scene voxelised finely enough for about `--points` points.
+    #[arg(long)]
+    mesh: Option<PathBuf>,
+    /// Points of the generated frame (surface samples with `--mesh`; samples sharing a voxel
+    /// merge, so the frame holds somewhat fewer).
+    #[arg(long, default_value_t = 3_000_000)]
+    points: usize,
+    /// Voxel grid of the synthesised frame (with `--mesh`), or `auto`.
+    #[arg(long, default_value = "auto")]
+    grid: Grid,
+    /// Capture cameras of the generated frame.
+    #[arg(long, default_value_t = 13)]
+    cameras: usize,
+    /// Views are N × N pixels.
+    #[arg(long, default_value_t = BenchOptions::default().resolution, value_name = "N")]
+    resolution: u32,
+    /// Splats the initialisation is capped at.
+    #[arg(long, default_value_t = BenchOptions::default().splats)]
+    splats: usize,
+    /// Repeats of each rasteriser figure (medians quoted).
+    #[arg(long, default_value_t = BenchOptions::default().repeats)]
+    repeats: usize,
+    /// Training steps timed.
+    #[arg(long, default_value_t = BenchOptions::default().steps)]
+    steps: u32,
+    /// Thread counts to time the rasteriser at, comma-separated (default: 1 and all of the
+    /// machine's, which gives the serial fraction).
+    #[arg(long, value_delimiter = ',')]
+    threads: Vec<usize>,
+    /// Keep the generated frame at this path (default: a temporary file, removed after).
+    #[arg(long)]
+    frame: Option<PathBuf>,
+    /// Also write the figures as JSON here.
+    #[arg(long)]
+    json: Option<PathBuf>,
+}
+
+/// Runs `transcode bench`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let cloud = match &args.mesh {
+        Some(path) => {
+            eprintln!(
+                "synthesising about {} points from {}",
+                args.points,
+                path.display()
+            );
+            let mesh = plenoptic_io::read_mesh(path)
+                .with_context(|| format!("cannot read the mesh {}", path.display()))?;
+            let config = SynthConfig {
+                points: args.points,
+                cameras: args.cameras,
+                grid: args.grid.0.unwrap_or(AUTO_GRID),
+                ..SynthConfig::default()
+            };
+            synth_from_mesh(&mesh, &config)
+                .with_context(|| format!("cannot synthesise from {}", path.display()))?
+        }
+        None => {
+            // The scene's point count grows with the square of its grid (128: about 35,000).
+            let base = DemoConfig::default();
+            let scale = (args.points as f64 / 35_000.0).sqrt();
+            let grid = ((f64::from(base.grid) * scale).round() as u32).clamp(16, 1 << 14);
+            eprintln!("generating the demo scene on a {grid}-voxel grid");
+            demo_scene(&DemoConfig {
+                grid,
+                cameras: args.cameras,
+                ..base
+            })
+            .context("generating the demo scene")?
+        }
+    };
+    let (frame, temporary) = match &args.frame {
+        Some(p) => (p.clone(), false),
+        None => (
+            std::env::temp_dir().join(format!("transcode-bench-{}.ply", std::process::id())),
+            true,
+        ),
+    };
+    plenoptic_io::write_cloud(&frame, &cloud)
+        .with_context(|| format!("cannot write the frame {}", frame.display()))?;
+    drop(cloud);
+    let machine = rayon::current_num_threads();
+    let threads = if args.threads.is_empty() {
+        vec![1, machine]
+    } else {
+        args.threads.clone()
+    };
+    let opts = BenchOptions {
+        resolution: args.resolution,
+        splats: args.splats,
+        repeats: args.repeats,
+        steps: args.steps,
+        threads,
+    };
+    let result = run_bench(&frame, &opts, &mut |what| eprintln!("  {what}"));
+    if temporary {
+        // Best effort: a leftover temporary file is not worth failing the measurement for.
+        let _ = std::fs::remove_file(&frame);
+    }
+    let report = result?;
+    print_report(&report, &opts);
+    if let Some(path) = &args.json {
+        let text = serde_json::to_string_pretty(&report)?;
+        atomic_output::write_atomic(path, text.as_bytes())
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        println!("figures written to {}", path.display());
+    }
+    Ok(())
+}
+
+fn print_report(r: &BenchReport, opts: &BenchOptions) {
+    println!(
+        "frame: {} points, {} capture cameras, {:.1} MB",
+        r.points,
+        r.capture_cameras,
+        r.file_bytes as f64 / 1e6
+    );
+    println!("read (median):                {:8.2} s", r.read_s);
+    println!(
+        "{} reference views at {}²:  {:8.2} s  (points drawn {:.2} voxels wide)",
+        r.views, opts.resolution, r.views_s, r.point_size
+    );
+    println!("surface init to {} splats: {:8.2} s", r.splats, r.init_s);
+    println!(
+        "rasteriser, {} splats at {}², {} evaluated pairs, {} loops:",
+        r.splats,
+        opts.resolution,
+        r.pixel_evaluations,
+        if r.avx2 { "AVX2" } else { "portable" }
+    );
+    for f in &r.raster {
+        println!(
+            "  {:3} thread(s): forward {:8.1} ms, forward + backward {:8.1} ms (≈ {:.1} GFLOP/s)",
+            f.threads, f.forward_ms, f.forward_backward_ms, f.gflops
+        );
+    }
+    if let Some(f) = r.serial_fraction {
+        println!(
+            "  serial fraction (Amdahl, fewest to most threads): {:.3}",
+            f
+        );
+    }
+    let s = &r.step;
+    println!(
+        "training step ({} steps, {} threads): {:.1} ms = forward {:.1} + loss {:.1} + backward {:.1} + Adam {:.1} + refine {:.1} + other {:.1}",
+        s.steps,
+        r.machine_threads,
+        s.step_ms,
+        s.forward_ms,
+        s.loss_ms,
+        s.backward_ms,
+        s.adam_ms,
+        s.refine_ms,
+        s.step_ms - (s.forward_ms + s.loss_ms + s.backward_ms + s.adam_ms + s.refine_ms)
+    );
+    if let Some(b) = r.peak_rss_bytes {
+        println!("peak resident memory: {:.2} GB", b as f64 / 1e9);
+    }
+}
