@@ -43,7 +43,8 @@ pub struct BudgetConfig {
     /// Search for the smallest model within `tolerance_db` of the full one (`--splats auto`);
     /// false keeps every initial splat.
     pub auto: bool,
-    /// The held-out PSNR (dB, on black) the pruning may cost in all, against the full model
+    /// The held-out PSNR (dB, as the round's scorer measures it: the pipeline's is
+    /// [`crate::Metrics::psnr_both`]) the pruning may cost in all, against the full model
     /// trained for the same steps.
     pub tolerance_db: f64,
     /// The first round starts after this share of the run's planned steps.

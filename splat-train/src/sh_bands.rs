@@ -12,7 +12,8 @@ pub struct BandChoice {
     pub trained_degree: u32,
     /// The degree kept.
     pub degree: u32,
-    /// Held-out PSNR (dB, on black) of the trained model rendered at degree 0, 1, … up to its
+    /// Held-out PSNR (dB, as the caller's scorer measures it: the pipeline's is
+    /// [`crate::Metrics::psnr_both`]) of the trained model rendered at degree 0, 1, … up to its
     /// trained degree.
     pub psnr_by_degree: Vec<f64>,
     /// Splats whose higher bands were set to zero (no view dependence).

@@ -1166,7 +1166,7 @@ fn choose_bands(
     let mut psnr = |s: &Splats| -> Result<f64, PipelineError> {
         Ok(evaluate_views(s, &refs.heldout, None, &options)?
             .0
-            .psnr_black)
+            .psnr_both())
     };
     let (splats, choice) =
         splat_train::sh_bands::choose_bands(&splats, tolerance, b.static_sh_rms, &mut psnr)?;
@@ -1467,7 +1467,8 @@ fn train_to_end(
     Ok(report)
 }
 
-/// Runs the splat budget's due round: both branches, scored on the held-out views on black.
+/// Runs the splat budget's due round: both branches, scored on the held-out views on black and
+/// white together ([`splat_train::Metrics::psnr_both`]).
 fn budget_round(
     trainer: &mut Trainer,
     budget: &mut Budgeting<'_>,
@@ -1477,7 +1478,7 @@ fn budget_round(
 ) -> Result<(), PipelineError> {
     let mut heldout_psnr = |s: &Splats| -> Result<f64, PipelineError> {
         let (metrics, _) = evaluate_views(s, probe.views, None, &probe.options)?;
-        Ok(metrics.psnr_black)
+        Ok(metrics.psnr_both())
     };
     let round = budget
         .search
@@ -1492,7 +1493,7 @@ fn budget_round(
     };
     let cost = match (round.pruned_psnr, round.drop_db()) {
         (Some(p), Some(d)) => format!(
-            "costs {d:+.3} dB held-out ({p:.2} against {:.2})",
+            "costs {d:+.3} dB held-out on black and white ({p:.2} against {:.2})",
             round.kept_psnr
         ),
         _ => "not measured".into(),

@@ -37,7 +37,8 @@ pub(super) fn section(h: &mut String, runs: &[RunReport], names: &[String]) {
     h.push_str(
         "<h2>Splat budget: held-out PSNR against splats and size</h2>\n<p>Each round trains \
          the model two ways from the same step: whole (the control) and with its cheapest cells \
-         merged, and scores both on the held-out views on black after the same number of steps \
+         merged, and scores both on the held-out views on black and white together (the PSNR of \
+         the two backgrounds' mean MSE) after the same number of steps \
          (the same time under a time budget). A pruned branch is kept while the rounds' costs add \
          up to no more than the tolerance (<code>budget.tolerance_db</code>, \
          <code>--budget-tolerance</code>). Lines join each round's two branches (solid: kept, \
@@ -70,7 +71,7 @@ pub(super) fn section(h: &mut String, runs: &[RunReport], names: &[String]) {
         );
         markers.push((
             n as f64,
-            run.metrics.psnr_black,
+            run.metrics.psnr_both(),
             format!("{name}: {n} splats, {size}"),
             colour,
         ));
@@ -78,7 +79,7 @@ pub(super) fn section(h: &mut String, runs: &[RunReport], names: &[String]) {
     h.push_str(&plot::svg(
         &plot::Axes {
             x_label: "splats".into(),
-            y_label: "held-out PSNR on black (dB)".into(),
+            y_label: "held-out PSNR, black and white (dB)".into(),
             round_y: true,
             integer_x: false,
         },
@@ -107,7 +108,7 @@ fn table(h: &mut String, run: &RunReport, name: &str) {
     if let Some(b) = &run.sh_bands {
         let _ = writeln!(
             h,
-            "<p>SH bands after training: degree {} kept of {} (held-out PSNR on black by degree: \
+            "<p>SH bands after training: degree {} kept of {} (held-out PSNR on black and white by degree: \
              {} dB); {} splats without view dependence lost their higher bands ({:.2} dB with \
              them dropped).</p>",
             b.degree,
