@@ -321,6 +321,7 @@ mod tests {
         let opts = EvalOptions {
             alpha_threshold: 0.5,
             floater_spacings: 2.0,
+            antialiased: false,
         };
         let s = splats();
         let (ma, _) = evaluate_views(&s, &a.views, None, &opts).unwrap();

@@ -88,6 +88,11 @@ pub struct TrainingConfig {
     pub ssim_weight: f32,
     /// Weight of the L1 loss of rendered alpha against the reference masks.
     pub alpha_loss: f32,
+    /// Train (and evaluate, and flag in the SPZ) with the antialiased opacity compensation of
+    /// Mip-Splatting's 2-D filter: each splat's opacity is scaled by √(det Σ / det(Σ + 0.3 I)),
+    /// so the dilation blurs without adding coverage. Viewers of plain 3DGS PLY files do not
+    /// compensate, so the default is off.
+    pub antialiased: bool,
     /// Sparse init: one more SH band every this many steps (0 = all bands from the start).
     /// Surface init, whose fit sets every band, trains them all from the start.
     pub sh_degree_interval: u32,
@@ -114,6 +119,7 @@ impl Default for TrainingConfig {
             seed: t.seed,
             ssim_weight: t.ssim_weight,
             alpha_loss: 0.1,
+            antialiased: false,
             sh_degree_interval: 250,
             random_background: true,
             history_every: 25,
@@ -156,6 +162,7 @@ impl From<&EvalConfig> for splat_train::eval::EvalOptions {
         Self {
             alpha_threshold: c.alpha_threshold,
             floater_spacings: c.floater_spacings,
+            antialiased: false,
         }
     }
 }
@@ -256,12 +263,23 @@ impl Config {
             },
             time_budget: t.time_budget_s.map(std::time::Duration::from_secs_f64),
             alpha_loss_weight: t.alpha_loss,
+            antialiased: t.antialiased,
             history_every: t.history_every,
             ..splat_train::TrainConfig::default()
         };
         // Surface splats sit on the input's points: keep them there unless asked (or densifying).
         tc.frozen.positions = surface && !cfg.init.free_positions && tc.densify.is_none();
         tc
+    }
+
+    /// The evaluator's options: `[eval]`, and the models rendered as they were trained
+    /// (`training.antialiased`).
+    #[must_use]
+    pub fn eval_options(&self) -> splat_train::eval::EvalOptions {
+        splat_train::eval::EvalOptions {
+            antialiased: self.training.antialiased,
+            ..splat_train::eval::EvalOptions::from(&self.eval)
+        }
     }
 
     /// Reads a TOML file; missing keys keep their defaults.

@@ -966,7 +966,7 @@ fn colour_solve(
             s,
             &refs.heldout,
             Some((&surfaces.distance, surfaces.spacing)),
-            &EvalOptions::from(&cfg.eval),
+            &cfg.eval_options(),
         )?;
         Ok(HeldoutScore::from(&m))
     };
@@ -1052,7 +1052,7 @@ fn train(
     let mut probe = HeldoutProbe {
         views: &refs.heldout,
         every: cfg.eval.every,
-        options: EvalOptions::from(&cfg.eval),
+        options: cfg.eval_options(),
         curve: state
             .modes
             .get(k)
@@ -1162,7 +1162,7 @@ fn choose_bands(
     let tolerance = b
         .bands_tolerance_db
         .min((b.tolerance_db - search.spent_db()).max(0.0));
-    let options = EvalOptions::from(&cfg.eval);
+    let options = cfg.eval_options();
     let mut psnr = |s: &Splats| -> Result<f64, PipelineError> {
         Ok(evaluate_views(s, &refs.heldout, None, &options)?
             .0
@@ -1204,7 +1204,7 @@ fn evaluate(
         splats,
         &refs.heldout,
         Some((&surfaces.distance, surfaces.spacing)),
-        &EvalOptions::from(&cfg.eval),
+        &cfg.eval_options(),
     )?)
 }
 
@@ -1223,6 +1223,7 @@ fn export(
         });
         let t = Instant::now();
         let formats = ModelFormats {
+            antialiased: cfg.training.antialiased,
             splat: k == 0 && cfg.output.splat_file,
             spz: cfg.output.spz,
             glb: cfg.output.glb,
@@ -1269,6 +1270,7 @@ fn report(
             &layout.report_dir,
             &title,
             &main.splats,
+            cfg.training.antialiased,
             &refs.heldout,
             &main.renders,
         )?;
@@ -1299,6 +1301,8 @@ const MODEL_EXTENSIONS: [&str; 4] = ["ply", "splat", "spz", "glb"];
 /// The files written beside a model's PLY.
 #[derive(Clone, Copy, Debug)]
 struct ModelFormats {
+    /// The model was trained antialiased (the SPZ header says so).
+    antialiased: bool,
     splat: bool,
     spz: bool,
     glb: bool,
@@ -1327,8 +1331,11 @@ fn write_model(
     }
     if formats.spz {
         let p = path.with_extension("spz");
-        splat_core::spz::write_spz(&p, splats, &splat_core::spz::SpzOptions::default())
-            .map_err(model_err(&p))?;
+        let opts = splat_core::spz::SpzOptions {
+            antialiased: formats.antialiased,
+            ..splat_core::spz::SpzOptions::default()
+        };
+        splat_core::spz::write_spz(&p, splats, &opts).map_err(model_err(&p))?;
         written.push(p);
     }
     if formats.glb {

@@ -62,8 +62,9 @@ pub fn view_camera(camera: &Camera) -> ViewCamera {
     }
 }
 
-/// Writes `report_dir/viewer/` for `splats` with the held-out `views` and the model's CPU
-/// `renders` of them (in the same order), replacing an earlier one.
+/// Writes `report_dir/viewer/` for `splats` (flagged antialiased when they were trained so)
+/// with the held-out `views` and the model's CPU `renders` of them (in the same order),
+/// replacing an earlier one.
 ///
 /// # Errors
 /// A [`ViewerError`] naming what could not be packed or written.
@@ -71,6 +72,7 @@ pub fn write_report_viewer(
     report_dir: &Path,
     title: &str,
     splats: &Splats,
+    antialiased: bool,
     views: &[View],
     renders: &[RenderedView],
 ) -> Result<PathBuf, ViewerError> {
@@ -82,8 +84,11 @@ pub fn write_report_viewer(
     if dir.exists() {
         std::fs::remove_dir_all(&dir).map_err(io(&dir))?;
     }
-    let model =
-        encode_spz(splats, &SpzOptions::default()).map_err(|e| ViewerError::Model(Box::new(e)))?;
+    let spz = SpzOptions {
+        antialiased,
+        ..SpzOptions::default()
+    };
+    let model = encode_spz(splats, &spz).map_err(|e| ViewerError::Model(Box::new(e)))?;
     let mut pictures = Vec::new();
     let mut scene_views = Vec::new();
     for (v, render) in views.iter().zip(renders) {
@@ -171,7 +176,7 @@ mod tests {
             rgb: vec![0.25; 8 * 6 * 3],
             alpha: vec![1.0; 8 * 6],
         };
-        let out = write_report_viewer(dir.path(), "t", &splats, &[view], &[render]).unwrap();
+        let out = write_report_viewer(dir.path(), "t", &splats, false, &[view], &[render]).unwrap();
         for f in [
             "index.html",
             "viewer.js",

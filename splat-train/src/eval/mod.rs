@@ -83,7 +83,7 @@ pub fn evaluate(
     views: &[View],
     background: Vec3,
 ) -> Result<Evaluation, EvalError> {
-    evaluate_with(splats, views, &render_options(splats, background))
+    evaluate_with(splats, views, &render_options(splats, background, false))
 }
 
 /// [`evaluate`] with explicit render options.
@@ -115,13 +115,13 @@ pub fn evaluate_with(
     })
 }
 
-/// Options for rendering `splats` over `background` for evaluation: full SH degree, no
-/// antialiasing.
-fn render_options(splats: &Splats, background: Vec3) -> RenderOptions {
+/// Options for rendering `splats` over `background` for evaluation: full SH degree, with the
+/// antialiased opacity compensation or without.
+fn render_options(splats: &Splats, background: Vec3, antialiased: bool) -> RenderOptions {
     RenderOptions {
         background,
         active_sh_degree: splats.sh_degree,
-        antialiased: false,
+        antialiased,
         linear_colour: false,
     }
 }
@@ -273,6 +273,9 @@ pub struct EvalOptions {
     pub alpha_threshold: f32,
     /// Floater threshold in point spacings.
     pub floater_spacings: f64,
+    /// Render with the antialiased (Mip-Splatting) opacity compensation, as a model trained
+    /// that way must be seen.
+    pub antialiased: bool,
 }
 
 /// Renders `splats` from every view on black and white and scores them; with the input's
@@ -310,8 +313,18 @@ pub fn evaluate_views(
     let mut per_view = Vec::with_capacity(views.len());
     let mut renders = Vec::with_capacity(views.len());
     for ((v, reference), &covered_pixels) in views.iter().zip(&coverage).zip(&covered) {
-        let black = score(&mut raster, splats, v, &render_options(splats, Vec3::ZERO))?;
-        let white = score(&mut raster, splats, v, &render_options(splats, Vec3::ONE))?;
+        let black = score(
+            &mut raster,
+            splats,
+            v,
+            &render_options(splats, Vec3::ZERO, opts.antialiased),
+        )?;
+        let white = score(
+            &mut raster,
+            splats,
+            v,
+            &render_options(splats, Vec3::ONE, opts.antialiased),
+        )?;
         let alpha_iou = iou(&black.alpha, reference, opts.alpha_threshold);
         let (hole_alpha, free_alpha) = coverage_errors(&black.alpha, reference);
         let (breakdown, [masked_psnr_black, masked_psnr_white]) =
@@ -543,6 +556,7 @@ mod tests {
         let opts = EvalOptions {
             alpha_threshold: 0.5,
             floater_spacings: 2.0,
+            antialiased: false,
         };
         // Nothing covered anywhere: an empty model would score PSNR ∞ and SSIM 1; refused.
         let empty = [strip("a", vec![0.0; 16]), strip("b", vec![0.0; 16])];
@@ -606,6 +620,7 @@ mod tests {
         let opts = EvalOptions {
             alpha_threshold: 0.5,
             floater_spacings: 2.0,
+            antialiased: false,
         };
         let (m, _) = evaluate_views(&splats, std::slice::from_ref(&view), None, &opts).unwrap();
         assert_eq!(m.views[0].covered_pixels, 16);

@@ -4,7 +4,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context as _;
 use splat_init::{self as init, SurfacePoints};
-use splat_train::eval::{EvalOptions, evaluate_views};
+use splat_train::eval::evaluate_views;
 use transcode::config::Config;
 
 use super::config::{Overrides, flat, require_file};
@@ -57,7 +57,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         &splats,
         &views,
         surface.as_ref().map(|(p, s)| (p.as_slice(), *s)),
-        &EvalOptions::from(&config.eval),
+        &config.eval_options(),
     )
     .with_context(|| format!("cannot evaluate against {}", args.reference.display()))?;
     println!("{} views, {} splats", views.len(), metrics.splats);
