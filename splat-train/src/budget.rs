@@ -185,6 +185,16 @@ impl BudgetPlan {
     }
 }
 
+/// A model's held-out PSNR (dB) on a black and on a white background: what a round scores its
+/// two branches by.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HeldoutPsnr {
+    /// On black.
+    pub black: f64,
+    /// On white.
+    pub white: f64,
+}
+
 /// What one round measured and decided.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct BudgetRound {
@@ -194,11 +204,17 @@ pub struct BudgetRound {
     pub splats: usize,
     /// Splats the pruned branch kept.
     pub candidate: usize,
-    /// Held-out PSNR (dB) of the whole model after the trial steps.
+    /// Held-out PSNR (dB, on black) of the whole model after the trial steps.
     pub kept_psnr: f64,
-    /// Held-out PSNR (dB) of the pruned model after the same steps (`None`: the control ran out
-    /// of time and the pruned branch did not run).
+    /// Held-out PSNR (dB, on black) of the pruned model after the same steps (`None`: the
+    /// control ran out of time and the pruned branch did not run).
     pub pruned_psnr: Option<f64>,
+    /// [`BudgetRound::kept_psnr`] on white (`None` in rounds saved before it was measured).
+    #[serde(default)]
+    pub kept_psnr_white: Option<f64>,
+    /// [`BudgetRound::pruned_psnr`] on white.
+    #[serde(default)]
+    pub pruned_psnr_white: Option<f64>,
     /// Whether the pruned branch was kept.
     pub accepted: bool,
     /// Whether a branch was cut short by the time budget (the round then decides nothing).
@@ -210,11 +226,17 @@ pub struct BudgetRound {
 }
 
 impl BudgetRound {
-    /// What the pruning cost (dB); negative when the pruned branch scored higher; `None` when
-    /// it did not run.
+    /// What the pruning cost (dB): the larger of its costs on black and on white, so that no
+    /// background loses more than the search allows (a merge can sharpen a dark object's
+    /// silhouettes, which only white shows, while blurring its texture, which black shows);
+    /// negative when the pruned branch scored higher on both; `None` when it did not run.
     #[must_use]
     pub fn drop_db(&self) -> Option<f64> {
-        self.pruned_psnr.map(|p| self.kept_psnr - p)
+        let black = self.pruned_psnr.map(|p| self.kept_psnr - p)?;
+        match (self.kept_psnr_white, self.pruned_psnr_white) {
+            (Some(k), Some(p)) => Some(black.max(k - p)),
+            _ => Some(black),
+        }
     }
 }
 
@@ -274,8 +296,9 @@ impl BudgetSearch {
     }
 
     /// Runs the due round on `trainer`: scores its splats, trains both branches
-    /// `plan.trial` steps, scores them with `heldout_psnr` and keeps the pruned branch when the
-    /// search's total stays within `cfg.tolerance_db`. `on_step` sees every step of both
+    /// `plan.trial` steps, scores them with `heldout_psnr` (black and white) and keeps the
+    /// pruned branch when the search's total ([`BudgetRound::drop_db`]: the worse background)
+    /// stays within `cfg.tolerance_db`. `on_step` sees every step of both
     /// branches. Returns the round (also recorded), or `None` when nothing is left to merge (the
     /// search is then over and no step was trained).
     ///
@@ -286,7 +309,7 @@ impl BudgetSearch {
         &mut self,
         trainer: &mut Trainer,
         cfg: &BudgetConfig,
-        heldout_psnr: &mut dyn FnMut(&Splats) -> Result<f64, E>,
+        heldout_psnr: &mut dyn FnMut(&Splats) -> Result<HeldoutPsnr, E>,
         on_step: &mut dyn FnMut(&crate::Progress),
     ) -> Result<Option<BudgetRound>, E> {
         let iteration = trainer.iteration();
@@ -309,13 +332,15 @@ impl BudgetSearch {
         let started_s = trainer.report(false).elapsed_s;
         let control = trainer.run_until(target, &mut *on_step);
         let control_s = control.elapsed_s - started_s;
-        let kept_psnr = heldout_psnr(trainer.splats())?;
+        let kept = heldout_psnr(trainer.splats())?;
         let mut round = BudgetRound {
             iteration,
             splats: n,
             candidate,
-            kept_psnr,
+            kept_psnr: kept.black,
             pruned_psnr: None,
+            kept_psnr_white: Some(kept.white),
+            pruned_psnr_white: None,
             accepted: false,
             out_of_time: control.iterations < target,
             steps_pruned: 0,
@@ -348,10 +373,12 @@ impl BudgetSearch {
         };
         round.steps_pruned = pruned.iterations - iteration;
         round.out_of_time = pruned.stopped_by_budget || (!equal_time && pruned.iterations < target);
-        let pruned_psnr = heldout_psnr(trainer.splats())?;
-        round.pruned_psnr = Some(pruned_psnr);
+        let pruned = heldout_psnr(trainer.splats())?;
+        round.pruned_psnr = Some(pruned.black);
+        round.pruned_psnr_white = Some(pruned.white);
         round.accepted = !round.out_of_time
-            && self.spent_db() + (kept_psnr - pruned_psnr).max(0.0) <= cfg.tolerance_db;
+            && self.spent_db() + round.drop_db().unwrap_or(f64::INFINITY).max(0.0)
+                <= cfg.tolerance_db;
         if !round.accepted {
             trainer.restore_snapshot(kept).map_err(fail)?;
         }
@@ -603,6 +630,46 @@ fn symmetric_eigen(m: Mat3) -> (Quat, Vec3) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_round_costs_what_the_worse_background_lost() {
+        let round = BudgetRound {
+            iteration: 10,
+            splats: 100,
+            candidate: 50,
+            kept_psnr: 40.0,
+            pruned_psnr: Some(39.9),
+            kept_psnr_white: Some(35.0),
+            pruned_psnr_white: Some(34.6),
+            accepted: false,
+            out_of_time: false,
+            steps_pruned: 5,
+        };
+        assert!((round.drop_db().unwrap() - 0.4).abs() < 1e-9);
+        let better_on_white = BudgetRound {
+            pruned_psnr_white: Some(35.5),
+            ..round
+        };
+        assert!((better_on_white.drop_db().unwrap() - 0.1).abs() < 1e-9);
+        let better_on_both = BudgetRound {
+            pruned_psnr: Some(40.2),
+            pruned_psnr_white: Some(35.3),
+            ..round
+        };
+        assert!((better_on_both.drop_db().unwrap() + 0.2).abs() < 1e-9);
+        // Rounds saved before white was measured cost their black drop.
+        let old = BudgetRound {
+            kept_psnr_white: None,
+            pruned_psnr_white: None,
+            ..round
+        };
+        assert!((old.drop_db().unwrap() - 0.1).abs() < 1e-9);
+        let unrun = BudgetRound {
+            pruned_psnr: None,
+            ..round
+        };
+        assert_eq!(unrun.drop_db(), None);
+    }
 
     fn approx(a: f32, b: f32, tol: f32) -> bool {
         (a - b).abs() <= tol * (1.0 + b.abs())

@@ -512,9 +512,15 @@ fn results_do_not_depend_on_thread_count() {
     assert!(run(5) == one, "5 threads differ from 1");
 }
 
-/// The held-out PSNR on black of `splats` over `views`.
-fn heldout_psnr(splats: &Splats, views: &[View]) -> Result<f64, splat_train::RoundError> {
-    Ok(evaluate(splats, views, Vec3::ZERO).unwrap().psnr)
+/// The held-out PSNR on black and on white of `splats` over `views`.
+fn heldout_psnr(
+    splats: &Splats,
+    views: &[View],
+) -> Result<splat_train::HeldoutPsnr, splat_train::RoundError> {
+    Ok(splat_train::HeldoutPsnr {
+        black: evaluate(splats, views, Vec3::ZERO).unwrap().psnr,
+        white: evaluate(splats, views, Vec3::ONE).unwrap().psnr,
+    })
 }
 
 /// A budget round whose pruned branch is refused leaves no trace: training goes on from the

@@ -1475,7 +1475,7 @@ fn train_to_end(
 }
 
 /// Runs the splat budget's due round: both branches, scored on the held-out views on black and
-/// white together ([`splat_train::Metrics::psnr_both`]).
+/// on white ([`splat_train::BudgetRound::drop_db`] takes the worse).
 fn budget_round(
     trainer: &mut Trainer,
     budget: &mut Budgeting<'_>,
@@ -1483,9 +1483,12 @@ fn budget_round(
     advance: &mut dyn FnMut(&splat_train::Progress),
     observer: Observer<'_>,
 ) -> Result<(), PipelineError> {
-    let mut heldout_psnr = |s: &Splats| -> Result<f64, PipelineError> {
+    let mut heldout_psnr = |s: &Splats| -> Result<splat_train::HeldoutPsnr, PipelineError> {
         let (metrics, _) = evaluate_views(s, probe.views, None, &probe.options)?;
-        Ok(metrics.psnr_both())
+        Ok(splat_train::HeldoutPsnr {
+            black: metrics.psnr_black,
+            white: metrics.psnr_white,
+        })
     };
     let round = budget
         .search
@@ -1500,8 +1503,11 @@ fn budget_round(
     };
     let cost = match (round.pruned_psnr, round.drop_db()) {
         (Some(p), Some(d)) => format!(
-            "costs {d:+.3} dB held-out on black and white ({p:.2} against {:.2})",
-            round.kept_psnr
+            "costs {d:+.3} dB held-out, the worse of black ({p:.2} against {:.2}) and white \
+             ({:.2} against {:.2})",
+            round.kept_psnr,
+            round.pruned_psnr_white.unwrap_or(f64::NAN),
+            round.kept_psnr_white.unwrap_or(f64::NAN),
         ),
         _ => "not measured".into(),
     };

@@ -37,8 +37,8 @@ pub(super) fn section(h: &mut String, runs: &[RunReport], names: &[String]) {
     h.push_str(
         "<h2>Splat budget: held-out PSNR against splats and size</h2>\n<p>Each round trains \
          the model two ways from the same step: whole (the control) and with its cheapest cells \
-         merged, and scores both on the held-out views on black and white together (the PSNR of \
-         the two backgrounds' mean MSE) after the same number of steps \
+         merged, and scores both on the held-out views on black and on white after the same \
+         number of steps; a round costs what the worse background lost \
          (the same time under a time budget). A pruned branch is kept while the rounds' costs add \
          up to no more than the tolerance (<code>budget.tolerance_db</code>, \
          <code>--budget-tolerance</code>). Lines join each round's two branches (solid: kept, \
@@ -71,7 +71,7 @@ pub(super) fn section(h: &mut String, runs: &[RunReport], names: &[String]) {
         );
         markers.push((
             n as f64,
-            run.metrics.psnr_both(),
+            run.metrics.psnr_black,
             format!("{name}: {n} splats, {size}"),
             colour,
         ));
@@ -79,7 +79,7 @@ pub(super) fn section(h: &mut String, runs: &[RunReport], names: &[String]) {
     h.push_str(&plot::svg(
         &plot::Axes {
             x_label: "splats".into(),
-            y_label: "held-out PSNR, black and white (dB)".into(),
+            y_label: "held-out PSNR on black (dB)".into(),
             round_y: true,
             integer_x: false,
         },
@@ -123,7 +123,7 @@ fn table(h: &mut String, run: &RunReport, name: &str) {
         );
     }
     h.push_str(
-        "<table><tr><th>step</th><th>splats</th><th>merged to</th><th>control PSNR (dB)</th><th>merged PSNR (dB)</th><th>cost (dB)</th>\
+        "<table><tr><th>step</th><th>splats</th><th>merged to</th><th>control PSNR, black / white (dB)</th><th>merged PSNR, black / white (dB)</th><th>cost (dB)</th>\
          <th>steps of the merged branch</th><th>PLY / SPZ of the merged size</th>\
          <th>decision</th></tr>\n",
     );
@@ -142,13 +142,16 @@ fn table(h: &mut String, run: &RunReport, name: &str) {
         };
         let _ = writeln!(
             h,
-            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{:.2}</td><td>{}</td><td>{}</td>\
+            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{:.2} / {}</td><td>{} / {}</td><td>{}</td>\
              <td>{}</td><td>{sizes}</td><td>{decision}</td></tr>",
             r.iteration,
             r.splats,
             r.candidate,
             r.kept_psnr,
+            r.kept_psnr_white.map_or("–".into(), |p| format!("{p:.2}")),
             r.pruned_psnr.map_or("–".into(), |p| format!("{p:.2}")),
+            r.pruned_psnr_white
+                .map_or("–".into(), |p| format!("{p:.2}")),
             r.drop_db().map_or("–".into(), |d| format!("{d:+.3}")),
             r.steps_pruned,
         );
