@@ -5,9 +5,11 @@ use std::time::{Duration, Instant};
 use glam::Vec3;
 use rand::{RngExt, SeedableRng};
 use rand_pcg::Pcg64;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use splat_core::{Rasterizer, RenderCamera, RenderOptions, SplatGrads, Splats, logit};
 
+use crate::adam::Rates;
 use crate::config::{Background, TrainConfig};
 use crate::error::Error;
 use crate::loss::{Loss, alpha_l1};
@@ -585,7 +587,7 @@ impl Trainer {
                 t,
                 bytemuck::cast_slice_mut(&mut st.splats.means),
                 bytemuck::cast_slice(&g.means),
-                |_| lr,
+                Rates::All(lr),
             );
         }
         if !f.scales {
@@ -595,7 +597,7 @@ impl Trainer {
                 t,
                 bytemuck::cast_slice_mut(&mut st.splats.log_scales),
                 bytemuck::cast_slice(&g.log_scales),
-                |_| lr,
+                Rates::All(lr),
             );
         }
         if !f.rotations {
@@ -605,7 +607,7 @@ impl Trainer {
                 t,
                 st.splats.rotations.as_flattened_mut(),
                 g.rotations.as_flattened(),
-                |_| lr,
+                Rates::All(lr),
             );
         }
         if !f.opacities {
@@ -615,7 +617,7 @@ impl Trainer {
                 t,
                 &mut st.splats.opacity_logits,
                 &g.opacity_logits,
-                |_| lr,
+                Rates::All(lr),
             );
         }
         if !f.colors {
@@ -626,8 +628,11 @@ impl Trainer {
                 t,
                 st.splats.sh.as_flattened_mut(),
                 g.sh.as_flattened(),
-                |e| {
-                    if (e / 3) % k == 0 { dc } else { rest }
+                Rates::Split {
+                    stride: 3 * k,
+                    head: 3,
+                    head_rate: dc,
+                    tail_rate: rest,
                 },
             );
         }
@@ -641,14 +646,14 @@ impl Trainer {
         let hi = (MAX_SCALE_OF_EXTENT * self.extent).ln();
         let s = &mut self.state.splats;
         if !self.config.frozen.scales {
-            for ls in &mut s.log_scales {
-                *ls = ls.clamp(Vec3::splat(lo), Vec3::splat(hi));
-            }
+            s.log_scales
+                .par_iter_mut()
+                .for_each(|ls| *ls = ls.clamp(Vec3::splat(lo), Vec3::splat(hi)));
         }
         if !self.config.frozen.opacities {
-            for o in &mut s.opacity_logits {
-                *o = o.clamp(-MAX_OPACITY_LOGIT, MAX_OPACITY_LOGIT);
-            }
+            s.opacity_logits
+                .par_iter_mut()
+                .for_each(|o| *o = o.clamp(-MAX_OPACITY_LOGIT, MAX_OPACITY_LOGIT));
         }
     }
 
@@ -656,7 +661,10 @@ impl Trainer {
     /// clamps, which would turn NaN into a bound and hide it.
     fn handle_non_finite(&mut self) {
         let s = &self.state.splats;
-        let bad: Vec<usize> = (0..s.len()).filter(|&i| !splat_is_finite(s, i)).collect();
+        let bad: Vec<usize> = (0..s.len())
+            .into_par_iter()
+            .filter(|&i| !splat_is_finite(s, i))
+            .collect();
         if bad.is_empty() {
             return;
         }
@@ -956,26 +964,30 @@ fn first_non_finite(s: &Splats) -> Option<usize> {
 fn zero_non_finite_grads(g: &mut SplatGrads) -> u64 {
     let n = g.means.len();
     let k = g.sh.len().checked_div(n).unwrap_or(0);
-    let mut count = 0;
-    for i in 0..n {
-        let ok = g.means[i].is_finite()
-            && g.log_scales[i].is_finite()
-            && g.rotations[i].iter().all(|v| v.is_finite())
-            && g.opacity_logits[i].is_finite()
-            && g.sh[i * k..(i + 1) * k]
-                .iter()
-                .flatten()
-                .all(|v| v.is_finite())
-            && g.screen_grad_norm[i].is_finite();
-        if !ok {
-            g.means[i] = Vec3::ZERO;
-            g.log_scales[i] = Vec3::ZERO;
-            g.rotations[i] = [0.0; 4];
-            g.opacity_logits[i] = 0.0;
-            g.sh[i * k..(i + 1) * k].fill([0.0; 3]);
-            g.screen_grad_norm[i] = 0.0;
-            count += 1;
-        }
+    // The scan reads every gradient in parallel; the rare repair is serial.
+    let grads = &*g;
+    let bad: Vec<usize> = (0..n)
+        .into_par_iter()
+        .filter(|&i| {
+            !(grads.means[i].is_finite()
+                && grads.log_scales[i].is_finite()
+                && grads.rotations[i].iter().all(|v| v.is_finite())
+                && grads.opacity_logits[i].is_finite()
+                && grads.sh[i * k..(i + 1) * k]
+                    .iter()
+                    .flatten()
+                    .all(|v| v.is_finite())
+                && grads.screen_grad_norm[i].is_finite())
+        })
+        .collect();
+    let count = bad.len() as u64;
+    for i in bad {
+        g.means[i] = Vec3::ZERO;
+        g.log_scales[i] = Vec3::ZERO;
+        g.rotations[i] = [0.0; 4];
+        g.opacity_logits[i] = 0.0;
+        g.sh[i * k..(i + 1) * k].fill([0.0; 3]);
+        g.screen_grad_norm[i] = 0.0;
     }
     count
 }

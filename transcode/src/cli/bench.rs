@@ -12,6 +12,9 @@ use super::synth::Grid;
 /// Arguments of `transcode bench`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
+    /// Measure this existing frame (any input `run` reads) instead of generating one.
+    #[arg(long, conflicts_with_all = ["mesh", "frame"])]
+    input: Option<PathBuf>,
     /// Synthesise the frame from this mesh (as `transcode synth`); without it, the built-in demo
     /// scene voxelised finely enough for about `--points` points.
     #[arg(long)]
@@ -52,6 +55,11 @@ pub struct Args {
 
 /// Runs `transcode bench`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if let Some(input) = &args.input {
+        super::config::require_file(input, "input")?;
+        let report = run_bench(input, &options(&args), &mut |what| eprintln!("  {what}"))?;
+        return finish(&report, &args);
+    }
     let cloud = match &args.mesh {
         Some(path) => {
             eprintln!(
@@ -94,28 +102,35 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     plenoptic_io::write_cloud(&frame, &cloud)
         .with_context(|| format!("cannot write the frame {}", frame.display()))?;
     drop(cloud);
-    let machine = rayon::current_num_threads();
-    let threads = if args.threads.is_empty() {
-        vec![1, machine]
-    } else {
-        args.threads.clone()
-    };
-    let opts = BenchOptions {
-        resolution: args.resolution,
-        splats: args.splats,
-        repeats: args.repeats,
-        steps: args.steps,
-        threads,
-    };
-    let result = run_bench(&frame, &opts, &mut |what| eprintln!("  {what}"));
+    let result = run_bench(&frame, &options(&args), &mut |what| eprintln!("  {what}"));
     if temporary {
         // Best effort: a leftover temporary file is not worth failing the measurement for.
         let _ = std::fs::remove_file(&frame);
     }
-    let report = result?;
-    print_report(&report, &opts);
+    finish(&result?, &args)
+}
+
+/// The measurement's options from the arguments (threads: 1 and the machine's by default).
+fn options(args: &Args) -> BenchOptions {
+    let machine = rayon::current_num_threads();
+    BenchOptions {
+        resolution: args.resolution,
+        splats: args.splats,
+        repeats: args.repeats,
+        steps: args.steps,
+        threads: if args.threads.is_empty() {
+            vec![1, machine]
+        } else {
+            args.threads.clone()
+        },
+    }
+}
+
+/// Prints the figures and writes the JSON when asked.
+fn finish(report: &BenchReport, args: &Args) -> anyhow::Result<()> {
+    print_report(report, &options(args));
     if let Some(path) = &args.json {
-        let text = serde_json::to_string_pretty(&report)?;
+        let text = serde_json::to_string_pretty(report)?;
         atomic_output::write_atomic(path, text.as_bytes())
             .with_context(|| format!("cannot write {}", path.display()))?;
         println!("figures written to {}", path.display());
