@@ -56,7 +56,7 @@ pub fn closing_point_size(positions: &[Vec3], base: f32) -> f32 {
 }
 
 /// The side of the square of surface each point stands for, √(area / points), measured as the
-/// module describes; `None` for fewer than [`COUNT_RANGE`]'s low end of finite points or a
+/// module describes; `None` for fewer than 24 finite points or a
 /// cloud with no extent.
 #[must_use]
 pub fn surface_spacing(positions: &[Vec3]) -> Option<f32> {

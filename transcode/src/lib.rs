@@ -5,7 +5,7 @@
 //! and defaults; the `transcode` binary is its command-line face. The stages' work lives in
 //! the other crates (`plenoptic-render`, `splat-init`, `splat-train`, …; `docs/architecture.md`).
 //!
-//! - [`bench`]: the speed figures of a frame, measured in one run (`transcode bench`).
+//! - [`mod@bench`]: the speed figures of a frame, measured in one run (`transcode bench`).
 //! - [`config`]: every setting ([`config::Config`]), with defaults, TOML files and validation.
 //! - [`pipeline`]: the stages, from an input file to a model, a dataset and a report.
 //! - [`plot`]: the reports' inline SVG line plots.
