@@ -94,6 +94,8 @@ pub fn write_dataset(
         None
     };
 
+    // The point size of a sparse cloud is measured once, not once a view.
+    let view = &view.for_model(model);
     let names: Vec<String> = (0..cameras.len()).map(dataset_image_name).collect();
     let slots: Mutex<Vec<Option<ViewImage>>> = Mutex::new(vec![None; cameras.len()]);
     cameras

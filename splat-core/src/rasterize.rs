@@ -297,10 +297,12 @@ pub(crate) fn tile_major_index(x: usize, y: usize, tiles_x: u32) -> usize {
     tile * TILE_PIXELS + (y % ts) * ts + x % ts
 }
 
-/// Whether the AVX2 instantiations of the tile loops can run on this CPU (detected at run time,
-/// so the binary still runs on any x86-64; always false elsewhere).
+/// Whether AVX2 instantiations of hot loops can run on this CPU (detected at run time, so the
+/// binary still runs on any x86-64; always false elsewhere): the tile loops here, and the
+/// trainer's Adam update.
 #[inline]
-pub(crate) fn has_avx2() -> bool {
+#[must_use]
+pub fn has_avx2() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
         std::arch::is_x86_feature_detected!("avx2")

@@ -97,7 +97,7 @@ impl Moments {
         let stride = rates.stride();
         // About 8k values a chunk, in whole records so each chunk starts at a record.
         let chunk = (8192 / stride).max(1) * stride;
-        let avx2 = has_avx2();
+        let avx2 = splat_core::has_avx2();
         params
             .par_chunks_mut(chunk)
             .zip(grads.par_chunks(chunk))
@@ -182,7 +182,7 @@ impl Kernel {
     ) {
         #[cfg(target_arch = "x86_64")]
         if avx2 {
-            // SAFETY: `avx2` is only true when the CPU reports AVX2 (`has_avx2`).
+            // SAFETY: `avx2` is only true when the CPU reports AVX2 (`splat_core::has_avx2`).
             #[allow(unsafe_code)]
             unsafe {
                 self.chunk_avx2(p, g, m, v, rates);
@@ -243,18 +243,6 @@ impl Kernel {
             // PyTorch: p −= lr/bc1 · m / (√v/√bc2 + eps).
             p[i] -= rate * self.inv_bc1 * m[i] / (v[i].sqrt() * self.inv_bc2_sqrt + eps);
         }
-    }
-}
-
-/// Whether the CPU has AVX2 (detected at run time; false off x86-64).
-fn has_avx2() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        std::arch::is_x86_feature_detected!("avx2")
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        false
     }
 }
 
