@@ -309,6 +309,10 @@ fn execute(
         &mut clock,
     )?;
     let surfaces = Surfaces::of(&loaded.model, cfg);
+    // The input is not needed past here (its points live on in `surfaces`): a paper-scale cloud
+    // holds 0.6 GB, most of it per-camera colours, that training would otherwise carry.
+    let Loaded { model, info } = loaded;
+    drop(model);
 
     let mut trained = Vec::new();
     for (k, mode) in init_modes(cfg).into_iter().enumerate() {
@@ -332,7 +336,7 @@ fn execute(
     // "finished" state last: whatever a kill leaves behind, a model file is the final one.
     export(&mut trained, cfg, observer)?;
     let outcome = report(
-        &loaded, &refs, trained, cfg, &layout, clock, started, observer,
+        &info, &refs, trained, cfg, &layout, clock, started, observer,
     )?;
     state.status = Status::Finished;
     state.save(out)?;
@@ -1248,7 +1252,7 @@ fn export(
 /// Stage 6: writes the report (JSON and HTML).
 #[allow(clippy::too_many_arguments)]
 fn report(
-    loaded: &Loaded,
+    input: &InputInfo,
     refs: &References,
     trained: Vec<TrainedModel>,
     cfg: &Config,
@@ -1265,7 +1269,7 @@ fn report(
     let renders: Vec<Vec<RenderedView>> = trained.iter().map(|t| t.renders.clone()).collect();
     let pictures = pick_pictures(&refs.heldout, &renders, cfg.eval.report_views);
     if let Some(main) = trained.first() {
-        let title = format!("transcode: {}", loaded.info.path.display());
+        let title = format!("transcode: {}", input.path.display());
         crate::viewer::write_report_viewer(
             &layout.report_dir,
             &title,
@@ -1277,7 +1281,7 @@ fn report(
     }
     let mut report = Report {
         version: env!("CARGO_PKG_VERSION").to_string(),
-        input: loaded.info.clone(),
+        input: input.clone(),
         config: cfg.clone(),
         train_views: refs.train.len(),
         heldout_views: refs.heldout.len(),
