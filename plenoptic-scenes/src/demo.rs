@@ -1,5 +1,7 @@
-//! The built-in demo scene: a checker-textured matte slab with a glossy sphere sunk into it,
-//! voxelised, with a highlight that moves from capture camera to capture camera.
+//! The built-in demo scenes, voxelised, with a highlight that moves from capture camera to
+//! capture camera: a checker-textured matte slab with a glossy red sphere sunk into it (the
+//! demo), or a wide plain floor with a small glossy checkered ball on it (a large flat region
+//! and a small detailed object: what an automatic splat budget should tell apart).
 
 use glam::{DVec3, Vec3};
 use plenoptic_io::PlenopticCloud;
@@ -24,6 +26,21 @@ pub struct DemoConfig {
     pub shininess: f32,
     /// The shading model.
     pub shading: Shading,
+    /// Which solids and textures.
+    pub layout: DemoLayout,
+}
+
+/// The demo scene's solids and textures.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DemoLayout {
+    /// A 0.7 × 0.2 × 0.7 checker-textured matte slab with a glossy red sphere of radius 0.22
+    /// sunk into it (fractions of the grid): texture everywhere.
+    #[default]
+    Slab,
+    /// A 0.9 × 0.06 × 0.9 plain matte floor with a glossy checkered ball of radius 0.12 resting
+    /// on it: about seven in eight points on the flat, uniform floor, the detail on the ball.
+    Floor,
 }
 
 impl Default for DemoConfig {
@@ -35,6 +52,7 @@ impl Default for DemoConfig {
             specular: 0.8,
             shininess: 60.0,
             shading: Shading::default(),
+            layout: DemoLayout::Slab,
         }
     }
 }
@@ -45,19 +63,57 @@ struct Solids {
     box_hi: Vec3,
     sphere_center: Vec3,
     sphere_radius: f32,
-    /// Checker cell size on the slab.
+    /// Checker cell size (on the slab, or on the ball).
     cell: f32,
+    layout: DemoLayout,
 }
 
+/// The slab's checker colours.
+const CHECKER: [[f32; 3]; 2] = [[0.92, 0.86, 0.70], [0.12, 0.30, 0.55]];
+
 impl Solids {
-    fn new(grid: f32) -> Self {
-        // Fractions of the grid: a 0.7 × 0.2 × 0.7 slab with a sphere of radius 0.22 sunk 0.02 into it.
-        Self {
-            box_lo: Vec3::new(0.15, 0.10, 0.15) * grid,
-            box_hi: Vec3::new(0.85, 0.30, 0.85) * grid,
-            sphere_center: Vec3::new(0.5, 0.50, 0.5) * grid,
-            sphere_radius: 0.22 * grid,
-            cell: grid / 14.0,
+    fn new(grid: f32, layout: DemoLayout) -> Self {
+        match layout {
+            // Fractions of the grid: a 0.7 × 0.2 × 0.7 slab with a sphere of radius 0.22 sunk
+            // 0.02 into it.
+            DemoLayout::Slab => Self {
+                box_lo: Vec3::new(0.15, 0.10, 0.15) * grid,
+                box_hi: Vec3::new(0.85, 0.30, 0.85) * grid,
+                sphere_center: Vec3::new(0.5, 0.50, 0.5) * grid,
+                sphere_radius: 0.22 * grid,
+                cell: grid / 14.0,
+                layout,
+            },
+            // A 0.9 × 0.06 × 0.9 floor with a ball of radius 0.12 sunk 0.01 into it, checkered
+            // in cells a quarter of its radius wide.
+            DemoLayout::Floor => Self {
+                box_lo: Vec3::new(0.05, 0.30, 0.05) * grid,
+                box_hi: Vec3::new(0.95, 0.36, 0.95) * grid,
+                sphere_center: Vec3::new(0.5, 0.47, 0.5) * grid,
+                sphere_radius: 0.12 * grid,
+                cell: 0.03 * grid,
+                layout,
+            },
+        }
+    }
+
+    /// Whether `p` (a surface voxel) belongs to the sphere rather than the box.
+    fn on_sphere(&self, p: Vec3) -> bool {
+        self.sphere_sdf(p).abs() < self.box_sdf(p).abs()
+    }
+
+    /// The albedo at surface voxel `p` and whether it is glossy: the checker is on the slab in
+    /// the demo and on the ball over the floor; the other solid is uniform.
+    fn material(&self, p: Vec3) -> ([f32; 3], bool) {
+        let checker = || {
+            let q = (p / self.cell).floor();
+            CHECKER[usize::from((q.x + q.y + q.z).rem_euclid(2.0) >= 1.0)]
+        };
+        match (self.layout, self.on_sphere(p)) {
+            (DemoLayout::Slab, true) => ([0.80, 0.12, 0.10], true),
+            (DemoLayout::Slab, false) => (checker(), false),
+            (DemoLayout::Floor, true) => (checker(), true),
+            (DemoLayout::Floor, false) => ([0.55, 0.55, 0.52], false),
         }
     }
 
@@ -147,7 +203,7 @@ pub fn demo_scene(config: &DemoConfig) -> Result<PlenopticCloud, Error> {
     }
     config.shading.validate()?;
     let grid = config.grid as f32;
-    let solids = Solids::new(grid);
+    let solids = Solids::new(grid, config.layout);
 
     // Surface voxels, slice by slice in parallel.
     let positions: Vec<Vec3> = (0..config.grid)
@@ -174,7 +230,10 @@ pub fn demo_scene(config: &DemoConfig) -> Result<PlenopticCloud, Error> {
         })
         .collect();
 
-    let center = Vec3::new(0.5, 0.42, 0.5) * grid;
+    let center = match config.layout {
+        DemoLayout::Slab => Vec3::new(0.5, 0.42, 0.5),
+        DemoLayout::Floor => Vec3::new(0.5, 0.4, 0.5),
+    } * grid;
     let radius = positions
         .iter()
         .map(|p| p.distance(center))
@@ -197,21 +256,8 @@ pub fn demo_scene(config: &DemoConfig) -> Result<PlenopticCloud, Error> {
         .par_iter()
         .map(|&p| {
             let normal = solids.normal(p);
-            let on_sphere = solids.sphere_sdf(p).abs() < solids.box_sdf(p).abs();
-            let (albedo, gloss) = if on_sphere {
-                ([0.80, 0.12, 0.10], sphere_gloss)
-            } else {
-                let q = (p / solids.cell).floor();
-                let dark = (q.x + q.y + q.z).rem_euclid(2.0) >= 1.0;
-                (
-                    if dark {
-                        [0.12, 0.30, 0.55]
-                    } else {
-                        [0.92, 0.86, 0.70]
-                    },
-                    matte,
-                )
-            };
+            let (albedo, glossy) = solids.material(p);
+            let gloss = if glossy { sphere_gloss } else { matte };
             let main = config.shading.diffuse_color(normal, albedo);
             // Leave the point's own voxel before testing the line of sight.
             let start = p + 1.5 * normal;
@@ -289,14 +335,13 @@ mod tests {
     #[test]
     fn highlight_moves_between_cameras_on_the_sphere_only() {
         let c = small();
-        let solids = Solids::new(64.0);
+        let solids = Solids::new(64.0, DemoLayout::Slab);
         let (mut sphere_varies, mut slab_varies) = (0, 0);
         for i in 0..c.len() {
             let cc = c.camera_colors_of(i);
             let spread = cc.iter().map(|v| v[1]).fold(0.0f32, f32::max)
                 - cc.iter().map(|v| v[1]).fold(1.0f32, f32::min);
-            let on_sphere =
-                solids.sphere_sdf(c.positions[i]).abs() < solids.box_sdf(c.positions[i]).abs();
+            let on_sphere = solids.on_sphere(c.positions[i]);
             if spread > 0.3 {
                 if on_sphere {
                     sphere_varies += 1
@@ -337,6 +382,45 @@ mod tests {
         for &i in &bottom {
             assert!(c.camera_colors_of(i).iter().all(|&cc| cc == c.colors[i]));
         }
+    }
+
+    #[test]
+    fn the_floor_layout_is_a_plain_floor_under_a_small_checkered_ball() {
+        let c = demo_scene(&DemoConfig {
+            grid: 64,
+            layout: DemoLayout::Floor,
+            ..Default::default()
+        })
+        .unwrap();
+        let solids = Solids::new(64.0, DemoLayout::Floor);
+        let ball: Vec<usize> = (0..c.len())
+            .filter(|&i| solids.on_sphere(c.positions[i]))
+            .collect();
+        // Areas: the ball 4π·7.68² ≈ 740 voxels, the floor's faces 2·57.6² + sides ≈ 7,560.
+        let share = ball.len() as f64 / c.len() as f64;
+        assert!((0.05..0.15).contains(&share), "ball share {share}");
+        // The floor is one view-independent colour wherever a camera sees it.
+        let floor_colours: std::collections::HashSet<[u8; 3]> = (0..c.len())
+            .filter(|i| !ball.contains(i))
+            .flat_map(|i| c.camera_colors_of(i).to_vec())
+            .map(|v| v.map(|x| (x * 255.0).round() as u8))
+            .collect();
+        let ball_colours: std::collections::HashSet<[u8; 3]> = ball
+            .iter()
+            .map(|&i| c.colors[i].map(|x| (x * 255.0).round() as u8))
+            .collect();
+        // Flat faces of one albedo shade to one colour each (top, sides, bottom, under the ball).
+        assert!(
+            floor_colours.len() <= 12,
+            "{} floor colours",
+            floor_colours.len()
+        );
+        // Both checker colours under smooth shading: many distinct colours on the ball.
+        assert!(
+            ball_colours.len() > 100,
+            "{} ball colours",
+            ball_colours.len()
+        );
     }
 
     #[test]

@@ -11,7 +11,8 @@
 //! highlight there, and this keeps such colours plausible where the renderer's interpolation
 //! still gives them weight. The main colour is that same diffuse shade.
 //!
-//! - [`demo_scene`]: the built-in demo (a checkered matte slab and a glossy sphere).
+//! - [`demo_scene`]: the built-in demo (a checkered matte slab and a glossy sphere), or its
+//!   [`DemoLayout::Floor`] variant (a plain floor and a small checkered ball).
 //! - [`synth_from_mesh`]: a plenoptic frame on an 8iVSLF-like voxel grid from a real mesh;
 //!   [`synth_in_volume`] the same on a given grid and rig ([`CaptureVolume`]).
 //! - [`SequenceSynth`]: a sequence of such frames, the mesh moved and bent by a [`Motion`], on one
@@ -37,7 +38,7 @@ mod sequence;
 mod shading;
 mod synth;
 
-pub use demo::{DemoConfig, demo_scene};
+pub use demo::{DemoConfig, DemoLayout, demo_scene};
 pub use sequence::{Motion, SequenceSynth, frame_file_name};
 pub use shading::Shading;
 pub use synth::{

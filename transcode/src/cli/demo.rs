@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use anyhow::Context as _;
-use plenoptic_scenes::{DemoConfig, demo_scene};
+use plenoptic_scenes::{DemoConfig, DemoLayout, demo_scene};
 use transcode::config::Config;
 
 use super::config::{Overrides, flat};
@@ -18,6 +18,11 @@ pub struct Args {
     /// Voxel grid width of the demo scene (128 gives about 35,000 points).
     #[arg(long, default_value_t = DemoConfig::default().grid)]
     grid: u32,
+    /// The scene: `slab` (a checkered slab under a glossy red sphere: texture everywhere) or
+    /// `floor` (a wide plain floor under a small glossy checkered ball: a large flat region and
+    /// a small detailed object).
+    #[arg(long, default_value = "slab", value_parser = parse_layout)]
+    layout: DemoLayout,
     #[command(flatten)]
     overrides: Overrides,
     /// Print nothing but errors and the result.
@@ -43,10 +48,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let config = args.overrides.resolve(demo_config())?;
     let scene = DemoConfig {
         grid: args.grid,
+        layout: args.layout,
         ..DemoConfig::default()
     };
     if !args.quiet {
-        eprintln!("generating the demo scene (grid {})", scene.grid);
+        eprintln!(
+            "generating the demo scene ({:?} layout, grid {})",
+            scene.layout, scene.grid
+        );
     }
     let cloud = demo_scene(&scene).context("generating the demo scene")?;
     let input_dir = args.out.join("input");
@@ -60,4 +69,29 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .map_err(flat)?;
     super::run::print_outcome(&outcome);
     Ok(())
+}
+
+/// `--layout`: `slab` or `floor`.
+fn parse_layout(s: &str) -> Result<DemoLayout, String> {
+    match s {
+        "slab" => Ok(DemoLayout::Slab),
+        "floor" => Ok(DemoLayout::Floor),
+        _ => Err(format!("expected `slab` or `floor`, got {s:?}")),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn layout_flag_names_the_two_scenes() {
+        assert_eq!(parse_layout("slab"), Ok(DemoLayout::Slab));
+        assert_eq!(parse_layout("floor"), Ok(DemoLayout::Floor));
+        assert!(
+            parse_layout("Floor")
+                .unwrap_err()
+                .contains("`slab` or `floor`")
+        );
+    }
 }
