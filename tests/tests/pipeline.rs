@@ -153,9 +153,13 @@ fn pipeline_on_a_small_plenoptic_cloud() {
         "sparse PSNR on black {}",
         sparse.psnr_black
     );
-    // Frozen surface splats sit on the input points.
+    // Surface splats move in training but stay on the surface: within half a point spacing on
+    // average, none of them a floater.
     let d = m.surface.as_ref().unwrap();
-    assert!(d.mean < 1e-3 && d.floater_share == 0.0, "{d:?}");
+    assert!(
+        d.mean < 0.5 * d.spacing && d.p95 < d.spacing && d.floater_share == 0.0,
+        "{d:?}"
+    );
     assert_eq!(main.init.sh_degree, outcome.report.runs[1].init.sh_degree);
 
     // `transcode eval`'s path: the training views read back from the dataset folder (PNG, masks,

@@ -84,9 +84,10 @@ pub struct Overrides {
     /// Random seed.
     #[arg(long)]
     pub seed: Option<u64>,
-    /// Let surface splats move.
+    /// Keep surface splats on the input's points (by default they move, and merged splats
+    /// find their place).
     #[arg(long)]
-    pub free_positions: bool,
+    pub fixed_positions: bool,
     /// Densify surface splats too.
     #[arg(long)]
     pub densify: bool,
@@ -171,7 +172,7 @@ impl Overrides {
         if let Some(v) = o.seed {
             c.training.seed = v;
         }
-        c.init.free_positions |= o.free_positions;
+        c.init.free_positions &= !o.fixed_positions;
         c.init.densify_surface |= o.densify;
         c.output.splat_file |= o.splat_file;
         c.output.spz &= !o.no_spz;
