@@ -4,12 +4,15 @@
 //!
 //! A round is an experiment with a control. From the same trained state the model is trained
 //! [`BudgetPlan::trial`] steps twice: once whole (the control) and once with the lower-scoring
-//! share of its splats removed. Both branches are scored on the held-out views at the same step,
-//! so the round measures what the pruning costs and not what the extra steps gained. The pruned
+//! share of its splats removed. Both branches are scored on the held-out views at the same steps
+//! (under a time budget: the same training times), [`SCORE_POINTS`] times over the trial's
+//! last quarter, so the round measures what the pruning costs and not what the extra steps
+//! gained, above the step-to-step noise of a single score. The pruned
 //! branch is kept while the drops of the accepted rounds add up to no more than
-//! [`BudgetConfig::tolerance_db`]; the first round that would exceed it is undone (training goes
-//! on from the control) and ends the search. The thrown-away branch's time still counts against
-//! the run's time budget.
+//! [`BudgetConfig::tolerance_db`]; a round that would exceed it is undone (training goes on from
+//! the control) and the next round tries to remove half as many splats
+//! ([`BudgetSearch::next_keep`]), until [`MAX_REFUSED_ROUNDS`] were refused. The thrown-away
+//! branch's time still counts against the run's time budget.
 //!
 //! What a merge costs is its members' contributions (the blending weight each supplies, summed
 //! over the pixels of every training view: Mini-Splatting's importance) times how far their
@@ -63,6 +66,10 @@ pub struct BudgetConfig {
     pub max_rounds: u32,
     /// No round prunes below this many splats.
     pub min_splats: usize,
+    /// Levels of nested merge cells a round considers ([`plan_merges`]): cells of 1.5, 3, 6, …
+    /// median spacings. More levels let one round merge a flat region into fewer, larger splats,
+    /// at some cost in held-out PSNR on textured surfaces (docs/pipeline.md).
+    pub merge_levels: u32,
     /// After training: the held-out PSNR (dB) dropping SH bands may cost, within what the rounds
     /// left of `tolerance_db` ([`crate::sh_bands::choose_bands`]).
     pub bands_tolerance_db: f64,
@@ -88,6 +95,7 @@ impl Default for BudgetConfig {
             keep: 0.5,
             max_rounds: 4,
             min_splats: 256,
+            merge_levels: 3,
             splats_per_pixel: 2.0,
             bands_tolerance_db: 0.05,
             static_sh_rms: 0.002,
@@ -131,6 +139,12 @@ impl BudgetConfig {
         }
         if !(self.splats_per_pixel.is_finite() && self.splats_per_pixel > 0.0) {
             return bad("splats_per_pixel", "must be a finite number > 0");
+        }
+        if !(1..=MAX_MERGE_LEVELS).contains(&self.merge_levels) {
+            return bad(
+                "merge_levels",
+                &format!("must be between 1 and {MAX_MERGE_LEVELS}"),
+            );
         }
         Ok(())
     }
@@ -204,10 +218,12 @@ pub struct BudgetRound {
     pub splats: usize,
     /// Splats the pruned branch kept.
     pub candidate: usize,
-    /// Held-out PSNR (dB, on black) of the whole model after the trial steps.
+    /// Held-out PSNR (dB, on black) of the whole model over the trial's last quarter (the mean
+    /// of [`SCORE_POINTS`] scores).
     pub kept_psnr: f64,
-    /// Held-out PSNR (dB, on black) of the pruned model after the same steps (`None`: the
-    /// control ran out of time and the pruned branch did not run).
+    /// Held-out PSNR (dB, on black) of the pruned model over the same steps or, under a time
+    /// budget, the same training times (`None`: the control ran out of time and the pruned
+    /// branch did not run).
     pub pruned_psnr: Option<f64>,
     /// [`BudgetRound::kept_psnr`] on white (`None` in rounds saved before it was measured).
     #[serde(default)]
@@ -264,17 +280,31 @@ impl BudgetSearch {
             .sum()
     }
 
-    /// Whether no more rounds will run: no plan, all planned rounds done, or a round was
-    /// refused or ran out of time.
+    /// Whether no more rounds will run: no plan, all planned rounds done, nothing left to
+    /// merge, a round ran out of time, or [`MAX_REFUSED_ROUNDS`] rounds were refused.
     #[must_use]
     pub fn finished(&self) -> bool {
         let Some(plan) = self.plan else { return true };
         self.exhausted
             || self.rounds.len() as u32 >= plan.rounds
-            || self
-                .rounds
-                .last()
-                .is_some_and(|r| !r.accepted || r.out_of_time)
+            || self.rounds.last().is_some_and(|r| r.out_of_time)
+            || self.refused() >= MAX_REFUSED_ROUNDS
+    }
+
+    /// Rounds whose pruned branch was measured and refused.
+    fn refused(&self) -> u32 {
+        self.rounds
+            .iter()
+            .filter(|r| !r.accepted && !r.out_of_time)
+            .count() as u32
+    }
+
+    /// The share of its splats the next round keeps: `keep`, and after each refused round
+    /// half as many removed as the last try (0.5, 0.75, 0.875, …), so a search that cannot
+    /// halve the model tries a gentler merge before it stops.
+    #[must_use]
+    pub fn next_keep(&self, keep: f64) -> f64 {
+        (0..self.refused()).fold(keep, |k, _| 0.5 * (1.0 + k))
     }
 
     /// Whether the next round is due at `iteration`: its planned start is reached (a round
@@ -319,8 +349,14 @@ impl BudgetSearch {
         };
         let n = trainer.splats().len();
         let contributions = trainer.contributions();
-        let target_count = ((n as f64 * cfg.keep).round() as usize).max(cfg.min_splats.min(n));
-        let merges = plan_merges(trainer.splats(), &contributions, target_count);
+        let keep = self.next_keep(cfg.keep);
+        let target_count = ((n as f64 * keep).round() as usize).max(cfg.min_splats.min(n));
+        let merges = plan_merges(
+            trainer.splats(),
+            &contributions,
+            target_count,
+            cfg.merge_levels,
+        );
         let candidate = n - merges.removed();
         if merges.removed() == 0 {
             // Nothing left to merge (at `min_splats`, or no cell holds two splats): done.
@@ -330,16 +366,27 @@ impl BudgetSearch {
         let target = iteration + plan.trial;
         let start = trainer.snapshot();
         let started_s = trainer.report(false).elapsed_s;
-        let control = trainer.run_until(target, &mut *on_step);
-        let control_s = control.elapsed_s - started_s;
-        let kept = heldout_psnr(trainer.splats())?;
+        // The control, scored at the scoring points of the trial.
+        let mut kept = Scores::default();
+        let mut times = Vec::new();
+        let mut control = trainer.report(false);
+        for k in 1..=SCORE_POINTS {
+            let at = scoring_step(iteration, plan.trial, k);
+            control = trainer.run_until(at, &mut *on_step);
+            if control.iterations < at {
+                break;
+            }
+            times.push(control.elapsed_s - started_s);
+            kept.add(heldout_psnr(trainer.splats())?);
+        }
+        let kept_mean = kept.mean();
         let mut round = BudgetRound {
             iteration,
             splats: n,
             candidate,
-            kept_psnr: kept.black,
+            kept_psnr: kept_mean.black,
             pruned_psnr: None,
-            kept_psnr_white: Some(kept.white),
+            kept_psnr_white: Some(kept_mean.white),
             pruned_psnr_white: None,
             accepted: false,
             out_of_time: control.iterations < target,
@@ -356,26 +403,36 @@ impl BudgetSearch {
             .prune(&keep)
             .map_err(|e| fail(format!("pruning: {e}")))?;
         let equal_time = trainer.config().time_budget.is_some();
-        let pruned = if equal_time {
-            // Under a time budget the branches get equal time: the smaller model's faster steps
-            // are part of what the prune buys.
-            let before = trainer.report(false).elapsed_s;
-            let mut r = trainer.report(false);
-            while r.elapsed_s - before < control_s && r.iterations < trainer.horizon() {
-                r = trainer.run_until(r.iterations + 1, &mut *on_step);
-                if r.stopped_by_budget {
-                    break;
+        // The pruned branch, scored at the same steps, or under a time budget at the same
+        // training times: there the branches get equal time, and the smaller model's faster
+        // steps are part of what the prune buys.
+        let mut pruned_scores = Scores::default();
+        let before = trainer.report(false).elapsed_s;
+        let mut pruned = trainer.report(false);
+        for (k, &t) in (1..=SCORE_POINTS).zip(&times) {
+            let at = scoring_step(iteration, plan.trial, k);
+            if equal_time {
+                while pruned.elapsed_s - before < t && pruned.iterations < trainer.horizon() {
+                    pruned = trainer.run_until(pruned.iterations + 1, &mut *on_step);
+                    if pruned.stopped_by_budget {
+                        break;
+                    }
                 }
+            } else {
+                pruned = trainer.run_until(at, &mut *on_step);
             }
-            r
-        } else {
-            trainer.run_until(target, &mut *on_step)
-        };
+            if pruned.stopped_by_budget || (!equal_time && pruned.iterations < at) {
+                break;
+            }
+            pruned_scores.add(heldout_psnr(trainer.splats())?);
+        }
         round.steps_pruned = pruned.iterations - iteration;
-        round.out_of_time = pruned.stopped_by_budget || (!equal_time && pruned.iterations < target);
-        let pruned = heldout_psnr(trainer.splats())?;
-        round.pruned_psnr = Some(pruned.black);
-        round.pruned_psnr_white = Some(pruned.white);
+        round.out_of_time = pruned_scores.count < SCORE_POINTS;
+        if pruned_scores.count > 0 {
+            let pruned = pruned_scores.mean();
+            round.pruned_psnr = Some(pruned.black);
+            round.pruned_psnr_white = Some(pruned.white);
+        }
         round.accepted = !round.out_of_time
             && self.spent_db() + round.drop_db().unwrap_or(f64::INFINITY).max(0.0)
                 <= cfg.tolerance_db;
@@ -384,6 +441,48 @@ impl BudgetSearch {
         }
         self.rounds.push(round);
         Ok(Some(round))
+    }
+}
+
+/// Refused rounds after which the search stops: with the default `keep` of ½ it tries to
+/// remove ½, ¼ and ⅛ of the splats before it gives up.
+pub const MAX_REFUSED_ROUNDS: u32 = 3;
+
+/// How many times each branch of a round is scored, evenly over the last quarter of its trial
+/// (the last at its end): one held-out score moves by a few tenths of a dB from step to step (each
+/// step follows one view), as much as the tolerance, so a round compares the branches' means.
+pub const SCORE_POINTS: u32 = 4;
+
+/// The step of a round's `k`-th scoring point (1-based, up to [`SCORE_POINTS`]): evenly over
+/// the last quarter of the trial that starts at `start`, the last at its end. Earlier than that
+/// the pruned branch would still be recovering from its merges, and the round would charge it
+/// for steps it has not had yet.
+fn scoring_step(start: u32, trial: u32, k: u32) -> u32 {
+    start + trial - trial * (SCORE_POINTS - k) / (4 * SCORE_POINTS)
+}
+
+/// Held-out scores summed over a branch's scoring points.
+#[derive(Debug, Clone, Copy, Default)]
+struct Scores {
+    black: f64,
+    white: f64,
+    count: u32,
+}
+
+impl Scores {
+    fn add(&mut self, p: HeldoutPsnr) {
+        self.black += p.black;
+        self.white += p.white;
+        self.count += 1;
+    }
+
+    /// The mean scores (of at least one).
+    fn mean(&self) -> HeldoutPsnr {
+        let n = f64::from(self.count.max(1));
+        HeldoutPsnr {
+            black: self.black / n,
+            white: self.white / n,
+        }
     }
 }
 
@@ -418,74 +517,145 @@ impl Merges {
 
 /// Plans merges that bring `splats` down to about `target` splats, cheapest first.
 ///
-/// The splats are binned in cubic cells 1.5 times their median nearest-neighbour spacing (on a
-/// surface a cell holds about two; larger cells where that cannot reach the target). Merging a cell costs what flattening its colours would:
-/// the members' `weights` (contributions) times the squared distance of their colour (SH DC and
-/// the higher bands' norm, opacity-weighted) from the cell's weighted mean. Cells are merged in
-/// order of cost per splat saved until enough are gone, so flat regions merge first and
-/// detailed or glossy ones keep their splats.
+/// The splats are binned in cubic cells on nested grids: `levels` levels whose cells are
+/// 1.5, 3, 6, … times the median nearest-neighbour spacing, each cell the union of eight cells
+/// of the level below (on a surface the finest holds about two splats). Merging a cell costs
+/// what flattening its colours would: the members' `weights` (contributions) times the squared
+/// distance of their colour (SH DC and the higher bands' norm, opacity-weighted) from the
+/// cell's weighted mean. Cells of every level are taken in order of cost per splat saved (cells
+/// larger than a pair that are not flat, taking in an edge or a corner, after all flat ones); a
+/// cell taken replaces the smaller cells already taken inside it, a cell inside one already
+/// taken is skipped, and a cell that would overshoot the target by more than half of what it
+/// saves is left for smaller ones. So a uniform region merges into few large splats, a detailed or glossy one
+/// keeps its splats, and one round can shrink a flat floor many times over while it leaves the
+/// object on it alone.
 #[must_use]
-pub fn plan_merges(splats: &Splats, weights: &[f64], target: usize) -> Merges {
+pub fn plan_merges(splats: &Splats, weights: &[f64], target: usize, levels: u32) -> Merges {
     let n = splats.len();
     if n <= target || n < 2 {
         return Merges::default();
     }
-    let spacing = point_spacing(&splats.means);
+    let cell = 1.5 * point_spacing(&splats.means);
+    if !(cell.is_finite() && cell > 0.0) {
+        return Merges::default();
+    }
     let sig = signatures(splats);
-    // The smallest cells that hold enough merges: 1.5 spacings (about two splats a cell on a
-    // surface) first, larger where the splats are too sparse for that.
-    let mut groups = Vec::new();
-    for factor in CELL_SPACINGS {
-        let cell = factor * spacing;
-        if !(cell.is_finite() && cell > 0.0) {
-            return Merges::default();
+    let finest: Vec<[i64; 3]> = splats
+        .means
+        .iter()
+        .map(|p| (*p / cell).floor().as_i64vec3().to_array())
+        .collect();
+    let mut candidates = Vec::new();
+    for level in 0..levels.min(MAX_MERGE_LEVELS) {
+        // A level's cell is 2^level finest cells wide, aligned so that it nests exactly.
+        let mut cells: HashMap<[i64; 3], Vec<usize>> = HashMap::new();
+        for (i, k) in finest.iter().enumerate() {
+            cells
+                .entry(k.map(|c| c.div_euclid(1 << level)))
+                .or_default()
+                .push(i);
         }
-        groups = cell_groups(splats, cell, &sig, weights);
-        if groups.iter().map(|g| g.2.len() - 1).sum::<usize>() >= n - target {
-            break;
-        }
+        // A cell larger than a pair that takes in an edge or a corner would merge into one
+        // splat sticking out of the surface: such cells come after every flat one.
+        let bent = |m: &[usize]| level > 0 && thickness(splats, m, weights) > 0.25 * cell;
+        candidates.extend(
+            cells
+                .into_iter()
+                .filter(|(_, m)| m.len() > 1)
+                .map(|(key, members)| {
+                    let cost =
+                        flattening_cost(&members, &sig, weights) / (members.len() - 1) as f64;
+                    (bent(&members), cost, level, key, members)
+                }),
+        );
     }
-    // By cost, then by cell, so the plan does not depend on the hash map's order.
-    groups.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
+    // Flat cells first; by cost; at equal cost the larger cell (fewer, larger splats for the
+    // same colour error); then by cell, so the plan does not depend on the hash maps' order.
+    candidates.sort_by(|a, b| {
+        a.0.cmp(&b.0)
+            .then(a.1.total_cmp(&b.1))
+            .then(b.2.cmp(&a.2))
+            .then(a.3.cmp(&b.3))
+    });
+    let need = n - target;
+    // The chosen cell each splat is in (an index into `chosen`), and the chosen cells.
+    let mut owner: Vec<Option<usize>> = vec![None; n];
+    let mut chosen: Vec<Option<(u32, Vec<usize>)>> = Vec::new();
     let mut removed = 0;
-    let mut chosen = Vec::new();
-    for (_, _, mut members) in groups {
-        if removed >= n - target {
+    for (_, _, level, _, members) in candidates {
+        if removed >= need {
             break;
         }
-        // The member carrying most of the images stands for the group.
-        members.sort_by(|&a, &b| weights[b].total_cmp(&weights[a]).then(a.cmp(&b)));
-        removed += members.len() - 1;
-        chosen.push(members);
+        // Cells nest, so a member inside a chosen cell at least as large means the whole cell is.
+        if owner[members[0]].is_some_and(|g| chosen[g].as_ref().is_some_and(|c| c.0 >= level)) {
+            continue;
+        }
+        // The smaller chosen cells inside this one would give way to it.
+        let mut inner: Vec<usize> = members.iter().filter_map(|&m| owner[m]).collect();
+        inner.sort_unstable();
+        inner.dedup();
+        inner.retain(|&g| chosen[g].is_some());
+        let replaced: usize = inner
+            .iter()
+            .filter_map(|&g| chosen[g].as_ref())
+            .map(|(_, m)| m.len() - 1)
+            .sum();
+        let saves = members.len() - 1 - replaced;
+        // A cell that would overshoot the target by more than half of what it saves is left
+        // for smaller ones, so the round ends near its target.
+        if removed + saves > need && 2 * (removed + saves - need) > saves {
+            continue;
+        }
+        for g in inner {
+            chosen[g] = None;
+        }
+        removed += saves;
+        let g = chosen.len();
+        for &m in &members {
+            owner[m] = Some(g);
+        }
+        chosen.push(Some((level, members)));
     }
-    Merges { groups: chosen }
-}
-
-/// Cell sizes tried by [`plan_merges`], in median nearest-neighbour spacings.
-const CELL_SPACINGS: [f32; 4] = [1.5, 2.0, 3.0, 4.0];
-
-/// The cells of size `cell` holding more than one splat: (cell, flattening cost per splat
-/// saved, members).
-fn cell_groups(
-    splats: &Splats,
-    cell: f32,
-    sig: &[[f32; 4]],
-    weights: &[f64],
-) -> Vec<([i64; 3], f64, Vec<usize>)> {
-    let mut cells: HashMap<[i64; 3], Vec<usize>> = HashMap::new();
-    for (i, p) in splats.means.iter().enumerate() {
-        let key = (*p / cell).floor().as_i64vec3().to_array();
-        cells.entry(key).or_default().push(i);
-    }
-    cells
+    let groups = chosen
         .into_iter()
-        .filter(|(_, m)| m.len() > 1)
-        .map(|(key, members)| {
-            let cost = flattening_cost(&members, sig, weights);
-            (key, cost / (members.len() - 1) as f64, members)
+        .flatten()
+        .map(|(_, mut members)| {
+            // The member carrying most of the images stands for the group.
+            members.sort_by(|&a, &b| weights[b].total_cmp(&weights[a]).then(a.cmp(&b)));
+            members
         })
-        .collect()
+        .collect();
+    Merges { groups }
 }
+
+/// The standard deviation of `members`' positions (weighted by `weights`) across their
+/// best-fitting plane: about 0 on a flat patch, large where a cell takes in an edge or a corner.
+fn thickness(splats: &Splats, members: &[usize], weights: &[f64]) -> f32 {
+    let w: Vec<f32> = members
+        .iter()
+        .map(|&j| weights[j].max(0.0) as f32)
+        .collect();
+    let total: f32 = w.iter().sum();
+    if total <= 0.0 {
+        return 0.0;
+    }
+    let mean: Vec3 = members
+        .iter()
+        .zip(&w)
+        .map(|(&j, &wj)| wj * splats.means[j])
+        .sum::<Vec3>()
+        / total;
+    let mut cov = Mat3::ZERO;
+    for (&j, &wj) in members.iter().zip(&w) {
+        let d = splats.means[j] - mean;
+        cov += Mat3::from_cols(d * d.x, d * d.y, d * d.z) * (wj / total);
+    }
+    symmetric_eigen(cov).1.min_element().max(0.0).sqrt()
+}
+
+/// The most levels of nested cells [`plan_merges`] considers: cells up to 1.5·2⁷ = 192 median
+/// nearest-neighbour spacings (on a surface a level-`l` cell holds about 2·4^`l` splats).
+pub const MAX_MERGE_LEVELS: u32 = 8;
 
 /// Each splat's colour signature: opacity times (SH DC, norm of the higher bands).
 fn signatures(splats: &Splats) -> Vec<[f32; 4]> {
@@ -755,19 +925,23 @@ mod tests {
         assert_eq!(splats.opacity_logits[0], 2.0);
     }
 
+    /// A xorshift64 stream of numbers in [0, 1) from `seed` (not 0): test colours.
+    fn xorshift(mut x: u64) -> impl FnMut() -> f32 {
+        move || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 40) as f32 / (1u64 << 24) as f32
+        }
+    }
+
     /// A flat single-colour sheet beside a sheet of random colours: the plan merges the flat
     /// sheet first and reaches the target.
     #[test]
     fn merges_take_flat_regions_first() {
         let mut means = Vec::new();
         let mut colours = Vec::new();
-        let mut x = 1_u64;
-        let mut rand = move || {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            (x >> 40) as f32 / (1u64 << 24) as f32
-        };
+        let mut rand = xorshift(1);
         for i in 0..40 {
             for j in 0..40 {
                 // Left half (x < 0) flat grey, right half random colours.
@@ -786,7 +960,7 @@ mod tests {
             Splats::from_points(&means, &colours, &vec![Vec3::splat(0.03); n], None, 0.8, 0)
                 .unwrap();
         let weights = vec![1.0; n];
-        let plan = plan_merges(&splats, &weights, n * 3 / 4);
+        let plan = plan_merges(&splats, &weights, n * 3 / 4, 4);
         assert!(plan.removed() >= n / 4, "removed {}", plan.removed());
         assert!(plan.removed() < n / 4 + 8, "removed {}", plan.removed());
         let flat_removed: usize = plan
@@ -797,12 +971,136 @@ mod tests {
             .count();
         assert_eq!(flat_removed, plan.removed(), "only the flat half merges");
         // Deterministic.
-        assert_eq!(plan, plan_merges(&splats, &weights, n * 3 / 4));
+        assert_eq!(plan, plan_merges(&splats, &weights, n * 3 / 4, 4));
         // Applying it keeps each group's first member and drops the rest.
         let mut state = ParamState::new(splats);
         let keep = plan.apply(&mut state, &weights);
         assert_eq!(keep.iter().filter(|&&k| !k).count(), plan.removed());
         assert!(plan.groups.iter().all(|g| keep[g[0]]));
+    }
+
+    /// A uniform sheet folded at a right angle, with a small patch of random colours on one
+    /// face: asked for an eighth, the plan merges the uniform faces into large cells (a round
+    /// can shrink a flat region far more than twofold), keeps every splat of the patch, and no
+    /// cell larger than a pair takes in both faces of the fold.
+    #[test]
+    fn flat_regions_merge_into_large_cells_and_detail_stays() {
+        let mut means = Vec::new();
+        let mut colours = Vec::new();
+        let mut rand = xorshift(7);
+        let h = 0.05;
+        for i in 0..64 {
+            for j in 0..64 {
+                // The floor (y = 0) and a wall (x = 0) meeting at the fold.
+                let floor = Vec3::new(i as f32 * h + h, 0.0, j as f32 * h);
+                let detail = i < 8 && (28..36).contains(&j);
+                means.push(floor);
+                colours.push(if detail {
+                    [rand(), rand(), rand()]
+                } else {
+                    [0.5; 3]
+                });
+                means.push(Vec3::new(0.0, i as f32 * h, j as f32 * h));
+                colours.push([0.5; 3]);
+            }
+        }
+        let n = means.len();
+        let splats =
+            Splats::from_points(&means, &colours, &vec![Vec3::splat(0.03); n], None, 0.8, 0)
+                .unwrap();
+        let weights = vec![1.0; n];
+        let target = n / 8;
+        let plan = plan_merges(&splats, &weights, target, 4);
+        let removed = plan.removed();
+        assert!(removed >= n - target, "removed {removed} of {n}");
+        assert!(removed < n - target + n / 50, "removed {removed} of {n}");
+        let mean_group =
+            plan.groups.iter().map(Vec::len).sum::<usize>() as f64 / plan.groups.len() as f64;
+        assert!(mean_group > 8.0, "mean group {mean_group}");
+        // The detail patch sits at floor x < 0.45, z in [1.4, 1.8).
+        let is_detail = |p: Vec3| p.y == 0.0 && p.x < 8.5 * h && p.z >= 1.39 && p.z < 1.76;
+        let merged: Vec<usize> = plan.groups.iter().flatten().copied().collect();
+        assert!(
+            merged.iter().all(|&j| !is_detail(means[j])),
+            "a splat of the detail patch was merged"
+        );
+        for g in plan.groups.iter().filter(|g| g.len() > 2) {
+            let on_wall = g.iter().filter(|&&j| means[j].x == 0.0).count();
+            assert!(
+                on_wall == 0 || on_wall == g.len(),
+                "a cell of {} straddles the fold",
+                g.len()
+            );
+        }
+        // Cells nest: no splat is in two groups.
+        let mut seen = merged.clone();
+        seen.sort_unstable();
+        seen.dedup();
+        assert_eq!(seen.len(), merged.len());
+        // With the finest cells alone (about two splats each) one round cannot get near an
+        // eighth.
+        let finest_only = plan_merges(&splats, &weights, target, 1).removed();
+        assert!(
+            finest_only < n * 5 / 8,
+            "removed {finest_only} of {n} with one level"
+        );
+    }
+
+    #[test]
+    fn branches_are_scored_over_the_last_quarter_of_the_trial() {
+        for (start, trial) in [(500, 160), (375, 120), (10, 50), (0, 7)] {
+            let steps: Vec<u32> = (1..=SCORE_POINTS)
+                .map(|k| scoring_step(start, trial, k))
+                .collect();
+            assert_eq!(*steps.last().unwrap(), start + trial, "{steps:?}");
+            assert!(4 * (steps[0] - start) >= 3 * trial, "{steps:?}");
+            if trial >= 4 * SCORE_POINTS {
+                assert!(steps.windows(2).all(|w| w[0] < w[1]), "{steps:?}");
+            }
+        }
+        assert_eq!(
+            (1..=SCORE_POINTS)
+                .map(|k| scoring_step(500, 160, k))
+                .collect::<Vec<_>>(),
+            [630, 640, 650, 660]
+        );
+    }
+
+    /// After each refused round the next removes half as many splats as the last try, and the
+    /// search ends at the third refusal; out of time ends it at once.
+    #[test]
+    fn a_refused_round_makes_the_next_gentler() {
+        let round = |accepted, out_of_time| BudgetRound {
+            iteration: 0,
+            splats: 100,
+            candidate: 50,
+            kept_psnr: 30.0,
+            pruned_psnr: Some(29.0),
+            kept_psnr_white: None,
+            pruned_psnr_white: None,
+            accepted,
+            out_of_time,
+            steps_pruned: 10,
+        };
+        let mut search = BudgetSearch {
+            plan: BudgetConfig::default().plan(10_000),
+            ..BudgetSearch::default()
+        };
+        search.plan.as_mut().unwrap().rounds = 10;
+        let mut keeps = vec![search.next_keep(0.5)];
+        search.rounds.push(round(true, false));
+        keeps.push(search.next_keep(0.5));
+        for _ in 0..MAX_REFUSED_ROUNDS {
+            assert!(!search.finished());
+            search.rounds.push(round(false, false));
+            keeps.push(search.next_keep(0.5));
+        }
+        assert_eq!(keeps, [0.5, 0.5, 0.75, 0.875, 0.9375]);
+        assert!(search.finished());
+        search.rounds.truncate(2);
+        assert!(!search.finished());
+        search.rounds.push(round(false, true));
+        assert!(search.finished(), "out of time");
     }
 
     #[test]
@@ -850,5 +1148,11 @@ mod tests {
             }),
             "budget.splats_per_pixel"
         );
+        for merge_levels in [0, MAX_MERGE_LEVELS + 1] {
+            assert_eq!(
+                key(BudgetConfig { merge_levels, ..c }),
+                "budget.merge_levels"
+            );
+        }
     }
 }

@@ -52,7 +52,9 @@ pub mod strategy;
 mod trainer;
 mod view;
 
-pub use budget::{BudgetConfig, BudgetPlan, BudgetRound, BudgetSearch, HeldoutPsnr, RoundError};
+pub use budget::{
+    BudgetConfig, BudgetPlan, BudgetRound, BudgetSearch, HeldoutPsnr, RoundError, SCORE_POINTS,
+};
 pub use config::{Background, DensifyConfig, Frozen, LearningRates, TrainConfig, Warmup};
 pub use dataset::{Dataset, DatasetError, read_dataset};
 pub use error::Error;

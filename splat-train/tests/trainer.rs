@@ -523,8 +523,9 @@ fn heldout_psnr(
     })
 }
 
-/// A budget round whose pruned branch is refused leaves no trace: training goes on from the
-/// control branch, which is the run that never branched, bit for bit.
+/// Budget rounds whose pruned branches are refused leave no trace: training goes on from the
+/// control branches, which are the run that never branched, bit for bit; after a refusal the
+/// next round tries a gentler merge.
 #[test]
 fn a_refused_budget_round_changes_nothing() {
     let truth = random_model(300, 11);
@@ -551,20 +552,31 @@ fn a_refused_budget_round_changes_nothing() {
     };
     branched.run_until(20, |_| {});
     assert!(search.due(branched.iteration()));
-    let round = search
-        .run_round(
-            &mut branched,
-            &cfg,
-            &mut |s: &Splats| heldout_psnr(s, &held),
-            &mut |_| {},
-        )
-        .unwrap()
-        .unwrap();
-    assert!(!round.accepted && !round.out_of_time);
-    assert_eq!((round.iteration, round.splats), (20, 300));
-    assert!(round.candidate < 300 && round.pruned_psnr.is_some());
+    // The first round tries to halve the model; once refused, the second (due at once, at
+    // step 35) tries to remove a quarter.
+    for (k, keep) in [(0, 0.5), (1, 0.75)] {
+        assert!(search.due(branched.iteration()));
+        let round = search
+            .run_round(
+                &mut branched,
+                &cfg,
+                &mut |s: &Splats| heldout_psnr(s, &held),
+                &mut |_| {},
+            )
+            .unwrap()
+            .unwrap();
+        assert!(!round.accepted && !round.out_of_time);
+        assert_eq!((round.iteration, round.splats), (20 + 15 * k, 300));
+        let wanted = 300.0 * keep;
+        assert!(
+            (round.candidate as f64 - wanted).abs() <= 0.1 * wanted,
+            "round {k} kept {} of 300, wanted about {wanted}",
+            round.candidate
+        );
+        assert!(round.pruned_psnr.is_some());
+    }
     assert!(search.finished() && !search.due(branched.iteration()));
-    assert_eq!(branched.iteration(), 35);
+    assert_eq!(branched.iteration(), 50);
     branched.run(|_| {});
     assert_eq!(branched.splats(), straight.splats());
 }
@@ -609,7 +621,11 @@ fn accepted_budget_rounds_shrink_the_model() {
         }
         t.run_until(t.iteration() + 1, |_| {});
     }
-    assert_eq!(scored, 6, "both branches of three rounds");
+    assert_eq!(
+        scored,
+        6 * splat_train::SCORE_POINTS,
+        "both branches of three rounds, each at every scoring point"
+    );
     assert_eq!(search.rounds.len(), 3);
     let mut n = 400;
     for r in &search.rounds {
