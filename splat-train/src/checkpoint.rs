@@ -12,6 +12,7 @@
 
 use std::fs;
 use std::path::Path;
+use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 use splat_core::{Splats, num_sh_coeffs};
@@ -97,7 +98,11 @@ pub(crate) fn save(trainer: &Trainer, path: &Path) -> Result<(), Error> {
 }
 
 /// Reads a checkpoint and rebuilds the trainer on `views` with `config`.
-pub(crate) fn load(path: &Path, views: Vec<View>, config: TrainConfig) -> Result<Trainer, Error> {
+pub(crate) fn load(
+    path: &Path,
+    views: Arc<Vec<View>>,
+    config: TrainConfig,
+) -> Result<Trainer, Error> {
     let bytes = fs::read(path).map_err(|source| Error::Io {
         path: path.to_path_buf(),
         source,
@@ -267,7 +272,11 @@ impl Trainer {
     /// # Errors
     /// [`Error::Checkpoint`] when the file is malformed or does not match the views and
     /// configuration, and the errors of [`Trainer::new`].
-    pub fn resume(path: &Path, views: Vec<View>, config: TrainConfig) -> Result<Self, Error> {
-        load(path, views, config)
+    pub fn resume(
+        path: &Path,
+        views: impl Into<Arc<Vec<View>>>,
+        config: TrainConfig,
+    ) -> Result<Self, Error> {
+        load(path, views.into(), config)
     }
 }

@@ -1,5 +1,6 @@
 //! The training loop: one view per step, render, loss, backward, Adam, refinement.
 
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use glam::Vec3;
@@ -191,11 +192,19 @@ impl Trainer {
     /// # Errors
     /// [`Error::Config`] for a bad configuration, [`Error::View`] for a view whose image or mask
     /// does not fit its camera, [`Error::Splats`] for inconsistent or non-finite splats.
-    pub fn new(splats: Splats, views: Vec<View>, config: TrainConfig) -> Result<Self, Error> {
+    ///
+    /// `views` may be shared (`Arc<Vec<View>>`): a paper-scale frame's 44 views at 1024² hold
+    /// 0.7 GB, which the trainer then reads in place instead of copying (it copies them only to
+    /// composite them over a fixed background).
+    pub fn new(
+        splats: Splats,
+        views: impl Into<Arc<Vec<View>>>,
+        config: TrainConfig,
+    ) -> Result<Self, Error> {
         let strategy = config
             .densify
             .map(|d| Box::new(InriaDensify::new(d)) as Box<dyn DensifyStrategy>);
-        Self::build(splats, views, config, strategy)
+        Self::build(splats, views.into(), config, strategy)
     }
 
     /// Like [`Trainer::new`] with a caller-chosen refinement strategy in place of the one
@@ -205,16 +214,16 @@ impl Trainer {
     /// As [`Trainer::new`].
     pub fn with_strategy(
         splats: Splats,
-        views: Vec<View>,
+        views: impl Into<Arc<Vec<View>>>,
         config: TrainConfig,
         strategy: Box<dyn DensifyStrategy>,
     ) -> Result<Self, Error> {
-        Self::build(splats, views, config, Some(strategy))
+        Self::build(splats, views.into(), config, Some(strategy))
     }
 
     fn build(
         splats: Splats,
-        views: Vec<View>,
+        views: Arc<Vec<View>>,
         config: TrainConfig,
         mut strategy: Option<Box<dyn DensifyStrategy>>,
     ) -> Result<Self, Error> {
@@ -299,7 +308,7 @@ impl Trainer {
                 .iter()
                 .map(|v| downsample_view(v, w.factor))
                 .collect();
-            t.levels.push(Level::new(coarse)?);
+            t.levels.push(Level::new(Arc::new(coarse))?);
         }
         Ok(t)
     }
@@ -308,9 +317,13 @@ impl Trainer {
     /// of every step is the photo as it would look over that background.
     fn composite_fixed_background(&mut self) {
         if let Background::Fixed(bg) = self.config.background {
-            for v in &mut self.levels[0].views {
-                if let Some(mask) = &v.mask {
-                    composite_in_place(&mut v.image, mask, bg);
+            let views = &mut self.levels[0].views;
+            if views.iter().any(|v| v.mask.is_some()) {
+                // Copies the views if the caller shares them.
+                for v in Arc::make_mut(views) {
+                    if let Some(mask) = &v.mask {
+                        composite_in_place(&mut v.image, mask, bg);
+                    }
                 }
             }
         }
@@ -867,14 +880,14 @@ impl Trainer {
 /// Views at one resolution with their rasteriser cameras and cached SSIM statistics.
 #[derive(Debug)]
 struct Level {
-    views: Vec<View>,
+    views: Arc<Vec<View>>,
     cameras: Vec<RenderCamera>,
     targets: Vec<Option<SsimTarget>>,
 }
 
 impl Level {
     /// The level of `views` (checked already, so the conversion only fails on a bug).
-    fn new(views: Vec<View>) -> Result<Self, Error> {
+    fn new(views: Arc<Vec<View>>) -> Result<Self, Error> {
         let cameras = views
             .iter()
             .enumerate()

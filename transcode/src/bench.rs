@@ -188,12 +188,11 @@ pub fn run_bench(
         plenoptic_render::render_views(&model, &rig.train, &view_opts).map_err(|e| stage(&e))?;
     let views_s = t.elapsed().as_secs_f64();
     let views: Vec<View> = images
-        .iter()
+        .into_iter()
         .zip(&rig.train)
         .enumerate()
         .map(|(i, (img, cam))| training_view(format!("view_{i:03}"), *cam, img))
         .collect();
-    drop(images);
 
     progress(&format!("initialising at most {} splats", opts.splats));
     let t = Instant::now();

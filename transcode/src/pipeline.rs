@@ -11,6 +11,7 @@
 //! began, and what is cheap and deterministic (views in memory, evaluation, report) is redone.
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
@@ -129,10 +130,11 @@ fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> PipelineError + '_ {
 }
 
 /// A reference view as the trainer wants it: straight (un-premultiplied) colour and its mask
-/// ([`View::from_premultiplied`]).
+/// ([`View::from_premultiplied`]). It takes the rendered image, so that a frame's views are
+/// converted one at a time instead of held twice.
 #[must_use]
-pub fn training_view(name: String, camera: Camera, image: &ViewImage) -> View {
-    View::from_premultiplied(name, camera, &image.rgb, image.alpha.clone())
+pub fn training_view(name: String, camera: Camera, image: ViewImage) -> View {
+    View::from_premultiplied(name, camera, &image.rgb, image.alpha)
 }
 
 /// Steps timed (after one untimed warm-up step) to estimate a time-budgeted run's length before
@@ -146,7 +148,7 @@ const PROBE_STEPS: u32 = 4;
 /// the probe's seconds a step.
 fn step_budget(
     splats: &Splats,
-    views: &[View],
+    views: &Arc<Vec<View>>,
     tc: &TrainConfig,
 ) -> Result<(u32, Option<Duration>, Option<f64>), PipelineError> {
     let Some(budget) = tc.time_budget else {
@@ -159,7 +161,7 @@ fn step_budget(
         ..tc.clone()
     };
     let t0 = Instant::now();
-    let mut probe = Trainer::new(splats.clone(), views.to_vec(), probe_cfg)?;
+    let mut probe = Trainer::new(splats.clone(), Arc::clone(views), probe_cfg)?;
     let setup = t0.elapsed();
     // The first step allocates the loss buffers and targets: time the ones after it.
     probe.run_until(1, |_| {});
@@ -308,21 +310,31 @@ fn execute(
         observer,
         &mut clock,
     )?;
-    let surfaces = Surfaces::of(&loaded.model, cfg);
-    // The input is not needed past here (its points live on in `surfaces`): a paper-scale cloud
-    // holds 0.6 GB, most of it per-camera colours, that training would otherwise carry.
+    // The input is not needed past here: its points move into `surfaces` (a paper-scale cloud
+    // holds 0.6 GB, most of it per-camera colours, that a copy would hold twice).
     let Loaded { model, info } = loaded;
-    drop(model);
+    let mut surfaces = Surfaces::of(model, cfg);
 
     let mut trained = Vec::new();
-    for (k, mode) in init_modes(cfg).into_iter().enumerate() {
+    let modes = init_modes(cfg);
+    let count = modes.len();
+    for (k, mode) in modes.into_iter().enumerate() {
         let run = RunOf {
             mode,
             index: k,
+            last: k + 1 == count,
             model_path: layout.model_path(k, mode),
             warm_start: warm_start.filter(|_| mode == InitMode::Surface),
         };
-        let model = init_train_eval(&run, &surfaces, &refs, cfg, &layout, &mut state, observer)?;
+        let model = init_train_eval(
+            &run,
+            &mut surfaces,
+            &refs,
+            cfg,
+            &layout,
+            &mut state,
+            observer,
+        )?;
         observer(Event::Note(format!(
             "{mode} init: held-out PSNR {:.2} dB on black, {:.2} dB on white, {} splats",
             model.report.metrics.psnr_black,
@@ -503,8 +515,9 @@ fn open_state(
 /// The reference views as the trainer and the evaluator take them.
 #[derive(Debug)]
 pub struct References {
-    /// Training views (straight colour with their masks), named as in the dataset.
-    pub train: Vec<View>,
+    /// Training views (straight colour with their masks), named as in the dataset; shared with
+    /// the trainer, which reads them in place.
+    pub train: Arc<Vec<View>>,
     /// Held-out views, for evaluation only.
     pub heldout: Vec<View>,
 }
@@ -612,10 +625,10 @@ fn reference_views(
     let train = rig
         .train
         .iter()
-        .zip(&train_images)
+        .zip(train_images)
         .enumerate()
         .map(|(i, (c, img))| training_view(views::dataset_image_name(i), *c, img))
-        .collect();
+        .collect::<Vec<_>>();
     let heldout = rig
         .heldout
         .iter()
@@ -623,7 +636,10 @@ fn reference_views(
         .enumerate()
         .map(|(i, (c, img))| View::from_premultiplied(heldout_name(i), *c, &img.rgb, img.alpha))
         .collect();
-    Ok(References { train, heldout })
+    Ok(References {
+        train: Arc::new(train),
+        heldout,
+    })
 }
 
 /// The input's surface as initialisation and the distance metric use it.
@@ -638,20 +654,29 @@ pub struct Surfaces {
 }
 
 impl Surfaces {
-    /// The surfaces of `model` under `cfg`.
+    /// Drops the initialisation's points once every model is initialised: a paper-scale
+    /// cloud's per-camera colours (0.5 GB) would otherwise stay through training.
+    fn release_init(&mut self) {
+        self.init = SurfacePoints::default();
+    }
+
+    /// The surfaces of `model` under `cfg` (a cloud's columns move into them).
     #[must_use]
-    pub fn of(model: &Model, cfg: &Config) -> Self {
+    pub fn of(model: Model, cfg: &Config) -> Self {
+        let distance = match &model {
+            Model::Cloud(_) => None,
+            Model::Mesh(m) => {
+                Some(init::sample_mesh(m, 200_000, cfg.training.seed ^ 0x5eed).positions)
+            }
+        };
         // Mesh samples: K of them when `--splats K` is given, so that K means splats for meshes too.
-        let init = SurfacePoints::from_model(
+        let init = SurfacePoints::from_owned_model(
             model,
             cfg.init.mesh_points,
             cfg.init.splats.unwrap_or(cfg.init.mesh_samples),
             cfg.training.seed,
         );
-        let distance = match model {
-            Model::Cloud(_) => init.positions.clone(),
-            Model::Mesh(m) => init::sample_mesh(m, 200_000, cfg.training.seed ^ 0x5eed).positions,
-        };
+        let distance = distance.unwrap_or_else(|| init.positions.clone());
         let spacing = init::point_spacing(&distance);
         Self {
             init,
@@ -679,6 +704,8 @@ fn init_modes(cfg: &Config) -> Vec<InitMode> {
 struct RunOf<'a> {
     mode: InitMode,
     index: usize,
+    /// Whether no model of the run is initialised after this one.
+    last: bool,
     model_path: PathBuf,
     warm_start: Option<&'a WarmStart>,
 }
@@ -707,7 +734,7 @@ struct Initialised {
 /// trains and evaluates one model of the run, whose progress `state` records.
 fn init_train_eval(
     run: &RunOf<'_>,
-    surfaces: &Surfaces,
+    surfaces: &mut Surfaces,
     refs: &References,
     cfg: &Config,
     layout: &Layout,
@@ -716,6 +743,9 @@ fn init_train_eval(
 ) -> Result<TrainedModel, PipelineError> {
     let mut clock = StageClock::default();
     let init = initialise(run, surfaces, refs, cfg, layout, state, observer)?;
+    if run.last {
+        surfaces.release_init();
+    }
     clock.lap("init");
     let (splats, train_report, heldout_curve, budget) = train(
         run,
@@ -913,7 +943,7 @@ fn warm_start(
     let trained = splat_core::ply::read_splats(&previous.model)
         .map_err(|e| warm_err(format!("cannot read it: {e}")))?;
     let loaded = load(&previous.input, &crate::progress::ignore)?;
-    let surfaces = Surfaces::of(&loaded.model, cfg);
+    let surfaces = Surfaces::of(loaded.model, cfg);
     let (initial, _) = init::initialise(
         &surfaces.init,
         init_cfg,
@@ -1044,13 +1074,13 @@ fn train(
         )));
     }
     let mut trainer = match fresh {
-        Some(splats) => Trainer::new(splats, refs.train.clone(), tc)?,
-        None => {
-            Trainer::resume(&ckpt, refs.train.clone(), tc).map_err(|e| ResumeError::Checkpoint {
+        Some(splats) => Trainer::new(splats, Arc::clone(&refs.train), tc)?,
+        None => Trainer::resume(&ckpt, Arc::clone(&refs.train), tc).map_err(|e| {
+            ResumeError::Checkpoint {
                 path: ckpt.clone(),
                 problem: e.to_string(),
-            })?
-        }
+            }
+        })?,
     };
     // The curve as far as the checkpoint: points taken after it are taken again.
     let mut probe = HeldoutProbe {
@@ -1355,7 +1385,7 @@ fn write_model(
 /// and the budget left after the probe; otherwise the configuration's own.
 fn plan(
     splats: &Splats,
-    views: &[View],
+    views: &Arc<Vec<View>>,
     tc: &TrainConfig,
     scale_schedule: bool,
     budget: Option<&BudgetConfig>,
@@ -1524,8 +1554,10 @@ fn budget_round(
             "out of time, kept the whole model"
         } else if round.accepted {
             "merged"
+        } else if budget.search.finished() {
+            "over the tolerance, kept the whole model; the search ends"
         } else {
-            "over the tolerance, kept the whole model"
+            "over the tolerance, kept the whole model; the next round merges fewer"
         }
     )));
     Ok(())

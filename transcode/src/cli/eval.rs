@@ -3,7 +3,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context as _;
-use splat_init::{self as init, SurfacePoints};
+use splat_init as init;
 use splat_train::eval::evaluate_views;
 use transcode::config::Config;
 
@@ -44,9 +44,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let surface = match &args.surface {
         Some(path) => {
             let model = plenoptic_io::load(path).map_err(flat)?;
-            let points = match &model {
-                plenoptic_io::Model::Cloud(c) => SurfacePoints::from_cloud(c).positions,
-                plenoptic_io::Model::Mesh(m) => init::sample_mesh(m, 200_000, 0).positions,
+            let points = match model {
+                plenoptic_io::Model::Cloud(c) => c.positions,
+                plenoptic_io::Model::Mesh(m) => init::sample_mesh(&m, 200_000, 0).positions,
             };
             let spacing = init::point_spacing(&points);
             Some((points, spacing))
