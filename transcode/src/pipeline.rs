@@ -1518,11 +1518,8 @@ fn budget_round(
     observer: Observer<'_>,
 ) -> Result<(), PipelineError> {
     let mut heldout_psnr = |s: &Splats| -> Result<splat_train::HeldoutPsnr, PipelineError> {
-        let (metrics, _) = evaluate_views(s, probe.views, None, &probe.options)?;
-        Ok(splat_train::HeldoutPsnr {
-            black: metrics.psnr_black,
-            white: metrics.psnr_white,
-        })
+        let (black, white) = splat_train::psnr_black_and_white(s, probe.views, &probe.options)?;
+        Ok(splat_train::HeldoutPsnr { black, white })
     };
     let round = budget
         .search

@@ -12,6 +12,8 @@
 //!   full-image figure), splits the error by region and into its alpha part ([`breakdown`]),
 //!   measures how well the rendered coverage matches the views' masks, and, given the input's
 //!   surface points, how far the splats are from them.
+//! - [`psnr_black_and_white`] gives [`evaluate_views`]' two mean PSNRs alone from one render a
+//!   view, for the splat budget's rounds, which score both branches several times a round.
 
 use std::borrow::Cow;
 
@@ -126,6 +128,66 @@ fn render_options(splats: &Splats, background: Vec3, antialiased: bool) -> Rende
     }
 }
 
+/// A render clamped to [0, 1] as Inria's evaluation clamps it; with `white`, first moved from
+/// a black background to a white one by adding the transmittance left (`1 − alpha`) to every
+/// channel, which is what the rasteriser adds for a white background.
+fn clamped(rgb: &[f32], white: Option<&[f32]>) -> Vec<f32> {
+    match white {
+        None => rgb.par_iter().map(|x| x.clamp(0.0, 1.0)).collect(),
+        Some(alpha) => rgb
+            .par_chunks(3)
+            .zip(alpha.par_iter())
+            .flat_map_iter(|(px, &a)| px.iter().map(move |&c| (c + (1.0 - a)).clamp(0.0, 1.0)))
+            .collect(),
+    }
+}
+
+/// The mean held-out PSNR (dB) of `splats` on black and on white over `views`, as
+/// [`evaluate_views`] reports [`Metrics::psnr_black`] and [`Metrics::psnr_white`] (to float
+/// rounding), from one render a view: the render over white is the render over black plus the
+/// transmittance left. None of the SSIM, breakdown or coverage scores: the splat budget's rounds
+/// need only these two, eight times a round.
+///
+/// # Errors
+/// As [`evaluate_views`]: a view whose camera cannot be rendered, or no covered pixel in any
+/// view.
+pub fn psnr_black_and_white(
+    splats: &Splats,
+    views: &[View],
+    opts: &EvalOptions,
+) -> Result<(f64, f64), EvalError> {
+    let mut raster = Rasterizer::new();
+    let (mut black, mut white, mut scored) = (0.0, 0.0, 0_usize);
+    for v in views {
+        let covered = match &v.mask {
+            Some(m) => m.iter().any(|&a| a > 0.0),
+            None => v.camera.intrinsics.width * v.camera.intrinsics.height > 0,
+        };
+        if !covered {
+            continue;
+        }
+        let cam = v.render_camera().map_err(|problem| EvalError::View {
+            name: v.name.clone(),
+            problem,
+        })?;
+        let out = raster.forward(
+            splats,
+            &cam,
+            &render_options(splats, Vec3::ZERO, opts.antialiased),
+        );
+        black += psnr(&clamped(&out.rgb, None), &v.on_background([0.0; 3]));
+        white += psnr(
+            &clamped(&out.rgb, Some(&out.alpha)),
+            &v.on_background([1.0; 3]),
+        );
+        scored += 1;
+    }
+    if scored == 0 {
+        return Err(EvalError::NothingCovered { views: views.len() });
+    }
+    Ok((black / scored as f64, white / scored as f64))
+}
+
 /// One view scored on one background, with the clamped render and its coverage.
 struct Scored {
     psnr: f64,
@@ -148,7 +210,7 @@ fn score(
         problem,
     })?;
     let out = raster.forward(splats, &cam, opts);
-    let rgb: Vec<f32> = out.rgb.par_iter().map(|x| x.clamp(0.0, 1.0)).collect();
+    let rgb = clamped(&out.rgb, None);
     let target = view.on_background(opts.background.to_array());
     Ok(Scored {
         psnr: psnr(&rgb, &target),
@@ -604,6 +666,68 @@ mod tests {
             ),
             (0.0, 1.0, 0.0)
         );
+    }
+
+    /// The one-render PSNRs match a full evaluation's on both backgrounds, on a model that
+    /// covers part of a view and misses part of its mask (so white and black differ), and
+    /// refuse views with nothing covered as it does.
+    #[test]
+    fn one_render_psnrs_match_the_full_evaluation() {
+        let means: Vec<Vec3> = (0..24)
+            .map(|i| {
+                Vec3::new(
+                    (i % 6) as f32 * 0.1 - 0.25,
+                    (i / 6) as f32 * 0.1 - 0.15,
+                    2.0,
+                )
+            })
+            .collect();
+        let colours: Vec<[f32; 3]> = (0..24)
+            .map(|i| [0.1 + 0.03 * i as f32, 0.8 - 0.02 * i as f32, 0.5])
+            .collect();
+        let splats =
+            Splats::from_points(&means, &colours, &vec![Vec3::splat(0.04); 24], None, 0.7, 0)
+                .unwrap();
+        let (w, h) = (24_u32, 20_u32);
+        let camera = Camera::new(Intrinsics::centered(w, h, 30.0, 30.0), Pose::IDENTITY);
+        let views: Vec<View> = (0..3)
+            .map(|k| {
+                let alpha: Vec<f32> = (0..w * h)
+                    .map(|p| if (p % w) as usize + k < 14 { 0.9 } else { 0.0 })
+                    .collect();
+                let rgb: Vec<f32> = alpha
+                    .iter()
+                    .flat_map(|&a| [0.6 * a, 0.3 * a, 0.2 * a])
+                    .collect();
+                View::from_premultiplied(format!("v{k}"), camera, &rgb, alpha)
+            })
+            .collect();
+        let opts = EvalOptions {
+            alpha_threshold: 0.5,
+            floater_spacings: 2.0,
+            antialiased: false,
+        };
+        let (m, _) = evaluate_views(&splats, &views, None, &opts).unwrap();
+        let (black, white) = psnr_black_and_white(&splats, &views, &opts).unwrap();
+        assert!((m.psnr_white - m.psnr_black).abs() > 0.1, "{m:?}");
+        assert!(
+            (black - m.psnr_black).abs() < 1e-4,
+            "{black} {}",
+            m.psnr_black
+        );
+        assert!(
+            (white - m.psnr_white).abs() < 1e-4,
+            "{white} {}",
+            m.psnr_white
+        );
+        let empty = [View {
+            mask: Some(vec![0.0; (w * h) as usize]),
+            ..views[0].clone()
+        }];
+        assert!(matches!(
+            psnr_black_and_white(&splats, &empty, &opts),
+            Err(EvalError::NothingCovered { views: 1 })
+        ));
     }
 
     /// A view without a mask covers every pixel, and [`evaluate`] (one background, means over
