@@ -37,11 +37,13 @@ pub(super) fn section(h: &mut String, runs: &[RunReport], names: &[String]) {
     h.push_str(
         "<h2>Splat budget: held-out PSNR against splats and size</h2>\n<p>Each round trains \
          the model two ways from the same step: whole (the control) and with its cheapest cells \
-         merged, and scores both on the held-out views on black and on white after the same \
-         number of steps; a round costs what the worse background lost \
-         (the same time under a time budget). A pruned branch is kept while the rounds' costs add \
-         up to no more than the tolerance (<code>budget.tolerance_db</code>, \
-         <code>--budget-tolerance</code>). Lines join each round's two branches (solid: kept, \
+         merged, and scores both on the held-out views on black and on white at the same four \
+         steps over the last quarter of the trial (the same times under a time budget), taking \
+         the means; a round costs what the worse background lost. A pruned branch is kept while \
+         the rounds' costs add up to no more than the tolerance \
+         (<code>budget.tolerance_db</code>, <code>--budget-tolerance</code>); after a refused \
+         round the next one merges half as many splats, and the third refusal ends the search. \
+         Lines join each round's two branches (solid: kept, \
          dashed: refused); the circle is the chosen model after all its training. Sizes of the \
          branches are the final model's files scaled by splat count.</p>\n",
     );
