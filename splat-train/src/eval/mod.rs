@@ -20,7 +20,7 @@ use std::borrow::Cow;
 use glam::Vec3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use splat_core::{Rasterizer, RenderOptions, Splats};
+use splat_core::{Rasterizer, RenderCamera, RenderOptions, Splats};
 
 pub mod breakdown;
 
@@ -166,10 +166,7 @@ pub fn psnr_black_and_white(
         if !covered {
             continue;
         }
-        let cam = v.render_camera().map_err(|problem| EvalError::View {
-            name: v.name.clone(),
-            problem,
-        })?;
+        let cam = camera_of(v)?;
         let out = raster.forward(
             splats,
             &cam,
@@ -186,6 +183,14 @@ pub fn psnr_black_and_white(
         return Err(EvalError::NothingCovered { views: views.len() });
     }
     Ok((black / scored as f64, white / scored as f64))
+}
+
+/// The rasteriser's camera of `view`, or the evaluation error naming it.
+fn camera_of(view: &View) -> Result<RenderCamera, EvalError> {
+    view.render_camera().map_err(|problem| EvalError::View {
+        name: view.name.clone(),
+        problem,
+    })
 }
 
 /// One view scored on one background, with the clamped render and its coverage.
@@ -205,10 +210,7 @@ fn score(
     view: &View,
     opts: &RenderOptions,
 ) -> Result<Scored, EvalError> {
-    let cam = view.render_camera().map_err(|problem| EvalError::View {
-        name: view.name.clone(),
-        problem,
-    })?;
+    let cam = camera_of(view)?;
     let out = raster.forward(splats, &cam, opts);
     let rgb = clamped(&out.rgb, None);
     let target = view.on_background(opts.background.to_array());
