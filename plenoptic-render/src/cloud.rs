@@ -1,6 +1,8 @@
 //! Point clouds drawn as the PccAppRenderer draws them: voxel cubes (or discs), z-buffered,
 //! coloured towards the viewer.
 
+use std::sync::atomic::{AtomicBool, Ordering};
+
 use camera_model::Camera;
 use glam::Vec3;
 use plenoptic_io::PlenopticCloud;
@@ -8,7 +10,7 @@ use plenoptic_io::view_color::interpolate;
 use rayon::prelude::*;
 
 use crate::camera::ViewCamera;
-use crate::pixels::{render_supersampled, shade_pixels};
+use crate::pixels::{render_supersampled, resolve};
 use crate::zbuffer::ZBuffer;
 use crate::{Error, PointShape, ViewImage, ViewOptions};
 
@@ -31,10 +33,97 @@ pub fn render_cloud(
     camera: &Camera,
     opts: &ViewOptions,
 ) -> Result<ViewImage, Error> {
-    check_cloud(cloud)?;
-    let capture: Vec<Vec3> = cloud.camera_positions();
-    let opts = &opts.for_cloud(cloud);
-    render_supersampled(camera, opts, |cam| render_once(cloud, &capture, cam, opts))
+    PreparedCloud::new(cloud, opts)?.render(camera)
+}
+
+/// A cloud made ready to be drawn from many cameras: checked, its point size chosen
+/// ([`ViewOptions::for_cloud`]), its capture cameras' positions gathered and its points put in
+/// Morton order, once rather than once a view.
+pub(crate) struct PreparedCloud<'a> {
+    cloud: &'a PlenopticCloud,
+    capture: Vec<Vec3>,
+    /// Point indices in Morton order. The visibility pass draws points in this order and keys
+    /// the z-buffer by rank in it, so consecutive points write neighbouring pixels and the
+    /// shading pass reads neighbouring colours.
+    order: Vec<u32>,
+    /// The points' positions in that order. Read through `order` instead, a paper-scale frame
+    /// listed in random order spent half its drawing time waiting for positions from memory
+    /// (docs/benchmarks/views.md).
+    positions: Vec<Vec3>,
+    opts: ViewOptions,
+}
+
+impl<'a> PreparedCloud<'a> {
+    /// Checks `cloud` and `opts` and prepares the cloud for drawing.
+    pub(crate) fn new(cloud: &'a PlenopticCloud, opts: &ViewOptions) -> Result<Self, Error> {
+        opts.validate()?;
+        check_cloud(cloud)?;
+        let order = crate::morton::morton_order(&cloud.positions);
+        let positions = order
+            .par_iter()
+            .map(|&i| cloud.positions[i as usize])
+            .collect();
+        Ok(Self {
+            cloud,
+            capture: cloud.camera_positions(),
+            order,
+            positions,
+            opts: opts.for_cloud(cloud),
+        })
+    }
+
+    /// The cloud seen from `camera`.
+    pub(crate) fn render(&self, camera: &Camera) -> Result<ViewImage, Error> {
+        render_supersampled(camera, &self.opts, |cam| self.render_once(cam))
+    }
+
+    /// One render at the camera's own resolution, filtered down to the output's.
+    fn render_once(&self, camera: &Camera) -> Result<ViewImage, Error> {
+        let (cloud, opts) = (self.cloud, &self.opts);
+        let view = ViewCamera::new(camera)?;
+        let zbuf = ZBuffer::new(view.pixels());
+        match opts.point_shape {
+            PointShape::Cube => draw_cubes(&self.positions, &view, 0.5 * opts.point_size, &zbuf),
+            PointShape::Disc => {
+                draw_discs(&self.positions, &view, disc_radius(opts.point_size), &zbuf)
+            }
+        }
+        // A point's colour depends on the point and the viewer, not on the pixel: shade each
+        // visible point once rather than each of its pixels (a supersampled point covers many).
+        let visible: Vec<AtomicBool> = (0..cloud.len()).map(|_| AtomicBool::new(false)).collect();
+        (0..view.pixels())
+            .into_par_iter()
+            .with_min_len(CHUNK)
+            .for_each(|pixel| {
+                if let Some((_, rank)) = zbuf.get(pixel) {
+                    visible[rank as usize].store(true, Ordering::Relaxed);
+                }
+            });
+        let viewer = view.center;
+        let colours: Vec<[f32; 3]> = self
+            .order
+            .par_iter()
+            .zip(&self.positions)
+            .zip(&visible)
+            .map(|((&i, &position), seen)| {
+                if !seen.load(Ordering::Relaxed) {
+                    return [0.0; 3];
+                }
+                let i = i as usize;
+                interpolate(
+                    position,
+                    viewer,
+                    &self.capture,
+                    cloud.camera_colors_of(i),
+                    cloud.colors[i],
+                    opts.exponent,
+                )
+            })
+            .collect();
+        Ok(resolve(&view, &zbuf, opts, |rank, _, _| {
+            colours[rank as usize]
+        }))
+    }
 }
 
 /// Checks that the cloud's arrays agree and that ids fit the z-buffer.
@@ -62,61 +151,14 @@ fn check_cloud(cloud: &PlenopticCloud) -> Result<(), Error> {
     Ok(())
 }
 
-/// One render at the camera's own resolution.
-fn render_once(
-    cloud: &PlenopticCloud,
-    capture: &[Vec3],
-    camera: &Camera,
-    opts: &ViewOptions,
-) -> Result<ViewImage, Error> {
-    let view = ViewCamera::new(camera)?;
-    let zbuf = ZBuffer::new(view.pixels());
-    match opts.point_shape {
-        PointShape::Cube => draw_cubes(&cloud.positions, &view, 0.5 * opts.point_size, &zbuf),
-        PointShape::Disc => {
-            draw_discs(&cloud.positions, &view, disc_radius(opts.point_size), &zbuf)
-        }
-    }
-    // A point's colour depends on the point and the viewer, not on the pixel: shade each visible
-    // point once rather than each of its pixels (a supersampled point covers many).
-    let mut visible = vec![false; cloud.len()];
-    for pixel in 0..view.pixels() {
-        if let Some((_, id)) = zbuf.get(pixel) {
-            visible[id as usize] = true;
-        }
-    }
-    let viewer = view.center;
-    let exponent = opts.exponent;
-    let colours: Vec<[f32; 3]> = visible
-        .par_iter()
-        .enumerate()
-        .map(|(i, &seen)| {
-            if !seen {
-                return [0.0; 3];
-            }
-            interpolate(
-                cloud.positions[i],
-                viewer,
-                capture,
-                cloud.camera_colors_of(i),
-                cloud.colors[i],
-                exponent,
-            )
-        })
-        .collect();
-    Ok(shade_pixels(&view, &zbuf, opts.background, |id, _, _| {
-        colours[id as usize]
-    }))
-}
-
 /// Radius of the PccAppRenderer's disc: its fragment shader keeps exp(−|c|²) ≥ 0.5 on a quad of
 /// half-size `point_size`, i.e. |c| ≤ √ln 2 half-sizes.
 fn disc_radius(point_size: f32) -> f32 {
     std::f32::consts::LN_2.sqrt() * point_size
 }
 
-/// Visibility pass for cubes of half-side `h`: each pixel whose centre ray hits a cube records the
-/// entry depth (camera z) of the nearest hit.
+/// Visibility pass for cubes of half-side `h` centred on `positions`: each pixel whose centre
+/// ray hits a cube records the entry depth (camera z) of the nearest hit and the cube's index.
 fn draw_cubes(positions: &[Vec3], view: &ViewCamera, h: f32, zbuf: &ZBuffer) {
     let r = view.rotation;
     // Camera-space half-extents of a world-axis-aligned cube: |R|·(h, h, h).
@@ -135,7 +177,7 @@ fn draw_cubes(positions: &[Vec3], view: &ViewCamera, h: f32, zbuf: &ZBuffer) {
                 let Some((x0, x1, y0, y1)) = view.pixel_range(c - extent, c + extent) else {
                     continue;
                 };
-                let id = (chunk * CHUNK + j) as u32;
+                let rank = (chunk * CHUNK + j) as u32;
                 // Slab test in world axes, relative to the camera centre for precision.
                 let rel = p - view.center;
                 let (lo, hi) = (rel - h, rel + h);
@@ -148,7 +190,7 @@ fn draw_cubes(positions: &[Vec3], view: &ViewCamera, h: f32, zbuf: &ZBuffer) {
                         let near = t0.min(t1).max_element();
                         let far = t0.max(t1).min_element();
                         if near <= far && near > 0.0 {
-                            zbuf.insert(y as usize * w + x as usize, near, id);
+                            zbuf.insert(y as usize * w + x as usize, near, rank);
                         }
                     }
                 }
@@ -156,8 +198,9 @@ fn draw_cubes(positions: &[Vec3], view: &ViewCamera, h: f32, zbuf: &ZBuffer) {
         });
 }
 
-/// Visibility pass for view-aligned discs of radius `radius` at the point's depth; a disc whose
-/// centre is not more than `radius` in front of the camera is not drawn (see [`render_cloud`]).
+/// Visibility pass for view-aligned discs of radius `radius` at the point's depth, keyed by
+/// index as [`draw_cubes`] does; a disc whose centre is not more than `radius` in front of the
+/// camera is not drawn (see [`render_cloud`]).
 fn draw_discs(positions: &[Vec3], view: &ViewCamera, radius: f32, zbuf: &ZBuffer) {
     let w = view.width as usize;
     let extent = Vec3::new(radius, radius, 0.0);
@@ -174,14 +217,14 @@ fn draw_discs(positions: &[Vec3], view: &ViewCamera, radius: f32, zbuf: &ZBuffer
                 let Some((x0, x1, y0, y1)) = view.pixel_range(c - extent, c + extent) else {
                     continue;
                 };
-                let id = (chunk * CHUNK + j) as u32;
+                let rank = (chunk * CHUNK + j) as u32;
                 for y in y0..=y1 {
                     for x in x0..=x1 {
                         // The pixel ray meets the disc's plane z = c.z at camera_ray·c.z.
                         let q = view.camera_ray(x, y) * c.z;
                         let (dx, dy) = (q.x - c.x, q.y - c.y);
                         if dx * dx + dy * dy <= r2 {
-                            zbuf.insert(y as usize * w + x as usize, c.z, id);
+                            zbuf.insert(y as usize * w + x as usize, c.z, rank);
                         }
                     }
                 }

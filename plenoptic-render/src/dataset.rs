@@ -11,7 +11,7 @@ use plenoptic_io::{Model, PlenopticCloud};
 use rayon::prelude::*;
 
 use crate::output::{encode_png_rgb, write_alpha_png, write_depth_exr};
-use crate::{BitDepth, Error, ViewImage, ViewOptions, render_model};
+use crate::{BitDepth, Error, ModelRenderer, ViewImage, ViewOptions};
 
 /// What [`write_dataset`] writes besides `images/` and `sparse/0/`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -94,15 +94,15 @@ pub fn write_dataset(
         None
     };
 
-    // The point size of a sparse cloud is measured once, not once a view.
-    let view = &view.for_model(model);
+    // A sparse cloud's point size and a cloud's drawing order are worked out once, not once a view.
+    let renderer = ModelRenderer::new(model, view)?;
     let names: Vec<String> = (0..cameras.len()).map(dataset_image_name).collect();
     let slots: Mutex<Vec<Option<ViewImage>>> = Mutex::new(vec![None; cameras.len()]);
     cameras
         .par_iter()
         .enumerate()
         .try_for_each(|(i, camera)| -> Result<(), Error> {
-            let image = render_model(model, camera, view)?;
+            let image = renderer.render(camera)?;
             let name = &names[i];
             let png = encode_png_rgb(&writer.images_dir().join(name), &image, opts.bit_depth)?;
             writer.write_image(name, &png)?;

@@ -15,7 +15,8 @@
 //! Cameras follow COLMAP: pixel (0, 0)'s centre is at (0.5, 0.5), x right, y down, z forward.
 //!
 //! - [`render_cloud`], [`render_mesh`], [`render_model`], [`render_views`], [`render_each`]:
-//!   one view or many, into a [`ViewImage`], with [`ViewOptions`].
+//!   one view or many, into a [`ViewImage`], with [`ViewOptions`]; [`ModelRenderer`] prepares a
+//!   model once for views rendered one at a time.
 //! - [`closing_point_size`]: how large a sparse cloud's points are drawn so its surface is closed.
 //! - [`rig`]: the bounding sphere and the Fibonacci-sphere rig of training and held-out cameras.
 //! - [`dataset`]: the reference views written as a COLMAP dataset (images, masks, depth, model).
@@ -48,6 +49,7 @@ pub mod degenerate;
 mod error;
 mod image;
 mod mesh;
+mod morton;
 mod options;
 pub mod output;
 mod pixels;
@@ -68,5 +70,5 @@ pub use options::{
 pub use output::{
     BitDepth, ViewFiles, write_alpha_png, write_depth_exr, write_rgb_png, write_view_images,
 };
-pub use render::{render_each, render_model, render_views};
+pub use render::{ModelRenderer, render_each, render_model, render_views};
 pub use rig::{FramingSphere, Rig, RigConfig, bounding_sphere, build_rig, fibonacci_rig};

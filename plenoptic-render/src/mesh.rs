@@ -8,7 +8,7 @@ use plenoptic_io::{Mesh, barycentric_mix};
 use rayon::prelude::*;
 
 use crate::camera::ViewCamera;
-use crate::pixels::{render_supersampled, shade_pixels};
+use crate::pixels::{render_supersampled, resolve};
 use crate::zbuffer::ZBuffer;
 use crate::{Error, ViewImage, ViewOptions};
 
@@ -31,6 +31,15 @@ const NEAR: f32 = 1e-4;
 /// [`Mesh::albedo_at`]: material base colour × bilinear texture × vertex colour.
 pub fn render_mesh(mesh: &Mesh, camera: &Camera, opts: &ViewOptions) -> Result<ViewImage, Error> {
     check_mesh(mesh)?;
+    render_checked_mesh(mesh, camera, opts)
+}
+
+/// [`render_mesh`] of a mesh [`check_mesh`] has accepted.
+pub(crate) fn render_checked_mesh(
+    mesh: &Mesh,
+    camera: &Camera,
+    opts: &ViewOptions,
+) -> Result<ViewImage, Error> {
     render_supersampled(camera, opts, |cam| render_once(mesh, cam, opts))
 }
 
@@ -112,7 +121,7 @@ pub fn check_mesh(mesh: &Mesh) -> Result<(), Error> {
     Ok(())
 }
 
-/// One render at the camera's own resolution.
+/// One render at the camera's own resolution, filtered down to the output's.
 fn render_once(mesh: &Mesh, camera: &Camera, opts: &ViewOptions) -> Result<ViewImage, Error> {
     let view = ViewCamera::new(camera)?;
     let cam_space: Vec<Vec3> = mesh
@@ -123,7 +132,7 @@ fn render_once(mesh: &Mesh, camera: &Camera, opts: &ViewOptions) -> Result<ViewI
     let zbuf = ZBuffer::new(view.pixels());
     draw_triangles(&mesh.triangles, &cam_space, &view, &zbuf);
     let plenoptic = vertex_view_colors(mesh, view.center, opts.exponent);
-    Ok(shade_pixels(&view, &zbuf, opts.background, |id, x, y| {
+    Ok(resolve(&view, &zbuf, opts, |id, x, y| {
         let t = id as usize;
         let tri = mesh.triangles[t];
         let [a, b, c] = tri.map(|v| cam_space[v as usize]);

@@ -8,9 +8,8 @@ use crate::camera::{ViewCamera, scaled_camera};
 use crate::zbuffer::ZBuffer;
 use crate::{Error, PIXEL_FILTER_VARIANCE, PixelFilter, ViewImage, ViewOptions};
 
-/// Renders at `opts.supersample`× and filters down with `opts.pixel_filter`: colour (composited
-/// on the background) and alpha alike; depth is the mean over the pixel's own covered
-/// sub-pixels.
+/// Validates `opts` and renders with `render` from `camera` scaled `opts.supersample` times in
+/// each direction; `render` ends with [`resolve`], which filters the sub-pixels down.
 pub(crate) fn render_supersampled<F>(
     camera: &Camera,
     opts: &ViewOptions,
@@ -20,18 +19,67 @@ where
     F: Fn(&Camera) -> Result<ViewImage, Error>,
 {
     opts.validate()?;
-    let k = opts.supersample;
+    match opts.supersample {
+        1 => render(camera),
+        k => render(&scaled_camera(camera, k)),
+    }
+}
+
+/// Output rows per parallel work item of [`filter_down`]. Each item shades the sub-pixel rows
+/// its own rows' filter reaches, so the rows the filter shares with the next item (six at k = 3:
+/// nine taps less the pixel's own three) are shaded twice: an eighth more than the 48 sub-rows
+/// of 16 output rows at k = 3.
+const BAND_ROWS: usize = 16;
+
+/// The image of a resolved z-buffer of `view` (`opts.supersample` times the output's size in
+/// each direction), with `shade(id, x, y)` the colour of primitive `id` at sub-pixel (x, y):
+/// colour (composited on the background) and alpha filtered down with `opts.pixel_filter`,
+/// depth the mean over the pixel's own covered sub-pixels. The sub-pixels are shaded a band of
+/// rows at a time and never stored whole: at 1024² and k = 3 the full-size colour, alpha and
+/// depth took 190 MB a view in flight.
+pub(crate) fn resolve<F>(
+    view: &ViewCamera,
+    zbuf: &ZBuffer,
+    opts: &ViewOptions,
+    shade: F,
+) -> ViewImage
+where
+    F: Fn(u32, u32, u32) -> [f32; 3] + Sync,
+{
+    let k = opts.supersample as usize;
     if k == 1 {
-        return render(camera);
+        return shade_pixels(view, zbuf, opts.background, shade);
     }
-    let big = render(&scaled_camera(camera, k))?;
-    let mut out = downsample(&big, k);
-    if opts.pixel_filter == PixelFilter::Gaussian {
-        let taps = gaussian_taps(k);
-        out.rgb = filter_separable(&big.rgb, big.width, big.height, 3, k, &taps);
-        out.alpha = filter_separable(&big.alpha, big.width, big.height, 1, k, &taps);
+    let (bw, bh) = (view.width as usize, view.height as usize);
+    let [r, g, b] = opts.background;
+    let (rgb, alpha) = filter_down(bw, bh, k, &filter_taps(opts.pixel_filter, k), |sy, row| {
+        for (sx, out) in row.iter_mut().enumerate() {
+            *out = match zbuf.get(sy * bw + sx) {
+                Some((_, id)) => {
+                    let [r, g, b] = shade(id, sx as u32, sy as u32);
+                    [r, g, b, 1.0]
+                }
+                None => [r, g, b, 0.0],
+            };
+        }
+    });
+    ViewImage {
+        width: (bw / k) as u32,
+        height: (bh / k) as u32,
+        rgb,
+        alpha,
+        depth: own_pixel_depth(zbuf, bw, bh, k),
     }
-    Ok(out)
+}
+
+/// The 1-D taps of `filter` for k× sub-pixels: `(offset, weight)` with `offset` in sub-pixels
+/// from the first sub-pixel of an output pixel (negative before it). The box's weights are 1
+/// (sums of coverage stay exact until the one division).
+fn filter_taps(filter: PixelFilter, k: usize) -> Vec<(i64, f32)> {
+    match filter {
+        PixelFilter::Box => (0..k as i64).map(|j| (j, 1.0)).collect(),
+        PixelFilter::Gaussian => gaussian_taps(k as u32),
+    }
 }
 
 /// Weights of the Gaussian pixel filter along one axis, for the sub-pixels of a k×-supersampled
@@ -55,120 +103,131 @@ fn gaussian_taps(k: u32) -> Vec<(i64, f32)> {
     taps
 }
 
-/// Separable filtering of a `width`×`height` image of `channels` interleaved channels from k×
-/// sub-pixels to pixels with 1-D `taps`; at the image's border the taps that fall outside are
-/// dropped and the rest renormalised, so a constant image stays constant.
-fn filter_separable(
-    big: &[f32],
-    width: u32,
-    height: u32,
-    channels: usize,
-    k: u32,
+/// Separable filtering of a `bw`×`bh` image of k× sub-pixels, RGBA, down to its (bw/k)×(bh/k)
+/// pixels with the 1-D `taps`, in parallel over bands of [`BAND_ROWS`] output rows. The image is
+/// never stored: `fill_row(sy, row)` writes sub-pixel row `sy` when a band needs it. At the
+/// image's border the taps that fall outside are dropped and the rest renormalised, so a
+/// constant image stays constant. Returns interleaved RGB and alpha.
+fn filter_down<F>(
+    bw: usize,
+    bh: usize,
+    k: usize,
     taps: &[(i64, f32)],
-) -> Vec<f32> {
-    let (bw, bh) = (width as usize, height as usize);
-    let (w, h) = (bw / k as usize, bh / k as usize);
-    let k = i64::from(k);
-    // Rows first: bh rows of w output pixels.
-    let mut rows = vec![0.0f32; bh * w * channels];
-    rows.par_chunks_mut(w * channels)
+    fill_row: F,
+) -> (Vec<f32>, Vec<f32>)
+where
+    F: Fn(usize, &mut [[f32; 4]]) + Sync,
+{
+    let (w, h) = (bw / k, bh / k);
+    let (first, last) = taps
+        .iter()
+        .fold((i64::MAX, i64::MIN), |(a, b), t| (a.min(t.0), b.max(t.0)));
+    // The weights' sum, added in the same order as the border case adds them, so that an
+    // interior pixel of a constant image comes out exactly that constant.
+    let full_norm = taps.iter().fold(0.0f32, |n, t| n + t.1);
+    // Output pixel x's taps fall inside a row of `len` sub-pixels.
+    let inside =
+        |x: usize, len: usize| (x * k) as i64 + first >= 0 && (x * k) as i64 + last < len as i64;
+    let mut rgb = vec![0.0f32; 3 * w * h];
+    let mut alpha = vec![0.0f32; w * h];
+    rgb.par_chunks_mut(3 * w * BAND_ROWS)
+        .zip(alpha.par_chunks_mut(w * BAND_ROWS))
         .enumerate()
-        .for_each(|(y, out)| {
-            let src = &big[y * bw * channels..(y + 1) * bw * channels];
-            for x in 0..w {
-                let mut acc = [0.0f32; 3];
+        .for_each(|(band, (rgb, alpha))| {
+            let y0 = band * BAND_ROWS;
+            let rows_out = alpha.len() / w;
+            let sy0 = ((y0 * k) as i64 + first).max(0) as usize;
+            let sy1 = (((y0 + rows_out - 1) * k) as i64 + last + 1).min(bh as i64) as usize;
+            let mut sub = vec![[0.0f32; 4]; bw];
+            // Row-filtered sub-rows sy0..sy1, w pixels each.
+            let mut rows = vec![[0.0f32; 4]; (sy1 - sy0) * w];
+            for (sy, out) in (sy0..sy1).zip(rows.chunks_mut(w)) {
+                fill_row(sy, &mut sub);
+                for (x, o) in out.iter_mut().enumerate() {
+                    let mut acc = [0.0f32; 4];
+                    let norm = if inside(x, bw) {
+                        let s = &sub[x * k - (-first) as usize..];
+                        for &(off, wt) in taps {
+                            let v = s[(off - first) as usize];
+                            for c in 0..4 {
+                                acc[c] += wt * v[c];
+                            }
+                        }
+                        full_norm
+                    } else {
+                        let mut norm = 0.0f32;
+                        for &(off, wt) in taps {
+                            let sx = (x * k) as i64 + off;
+                            if sx < 0 || sx >= bw as i64 {
+                                continue;
+                            }
+                            norm += wt;
+                            let v = sub[sx as usize];
+                            for c in 0..4 {
+                                acc[c] += wt * v[c];
+                            }
+                        }
+                        norm
+                    };
+                    *o = acc.map(|a| a / norm);
+                }
+            }
+            // Then columns, from the row-filtered sub-rows.
+            let mut acc = vec![[0.0f32; 4]; w];
+            for r in 0..rows_out {
+                let y = y0 + r;
+                acc.fill([0.0; 4]);
                 let mut norm = 0.0f32;
                 for &(off, wt) in taps {
-                    let sx = x as i64 * k + off;
-                    if sx < 0 || sx >= bw as i64 {
+                    let sy = (y * k) as i64 + off;
+                    if sy < 0 || sy >= bh as i64 {
                         continue;
                     }
                     norm += wt;
-                    for (c, a) in acc.iter_mut().enumerate().take(channels) {
-                        *a += wt * src[sx as usize * channels + c];
-                    }
-                }
-                for c in 0..channels {
-                    out[x * channels + c] = acc[c] / norm;
-                }
-            }
-        });
-    // Then columns: h rows of w output pixels from the row-filtered sub-rows.
-    let mut out = vec![0.0f32; h * w * channels];
-    out.par_chunks_mut(w * channels)
-        .enumerate()
-        .for_each(|(y, out_row)| {
-            let mut norm = 0.0f32;
-            for &(off, wt) in taps {
-                let sy = y as i64 * k + off;
-                if sy < 0 || sy >= bh as i64 {
-                    continue;
-                }
-                norm += wt;
-                let src = &rows[sy as usize * w * channels..(sy as usize + 1) * w * channels];
-                for (o, v) in out_row.iter_mut().zip(src) {
-                    *o += wt * v;
-                }
-            }
-            for o in out_row.iter_mut() {
-                *o /= norm;
-            }
-        });
-    out
-}
-
-/// Box filter of a k×-supersampled image.
-fn downsample(big: &ViewImage, k: u32) -> ViewImage {
-    let (w, h) = (big.width / k, big.height / k);
-    let n = (k * k) as f32;
-    let mut rgb = vec![0.0f32; 3 * w as usize * h as usize];
-    let mut alpha = vec![0.0f32; w as usize * h as usize];
-    let mut depth = vec![0.0f32; w as usize * h as usize];
-    rgb.par_chunks_mut(3 * w as usize)
-        .zip(alpha.par_chunks_mut(w as usize))
-        .zip(depth.par_chunks_mut(w as usize))
-        .enumerate()
-        .for_each(|(y, ((rgb_row, alpha_row), depth_row))| {
-            for x in 0..w as usize {
-                let mut c = [0.0f32; 3];
-                let (mut a, mut d, mut covered) = (0.0f32, 0.0f32, 0u32);
-                for sy in 0..k as usize {
-                    for sx in 0..k as usize {
-                        let j = (y * k as usize + sy) * big.width as usize + x * k as usize + sx;
-                        for (sum, v) in c.iter_mut().zip(&big.rgb[3 * j..3 * j + 3]) {
-                            *sum += v;
-                        }
-                        a += big.alpha[j];
-                        if big.depth[j] > 0.0 {
-                            d += big.depth[j];
-                            covered += 1;
+                    let src = &rows[(sy as usize - sy0) * w..][..w];
+                    for (a, v) in acc.iter_mut().zip(src) {
+                        for c in 0..4 {
+                            a[c] += wt * v[c];
                         }
                     }
                 }
-                for (out, sum) in rgb_row[3 * x..3 * x + 3].iter_mut().zip(c) {
-                    *out = sum / n;
+                for (x, a) in acc.iter().enumerate() {
+                    let i = r * w + x;
+                    for c in 0..3 {
+                        rgb[3 * i + c] = a[c] / norm;
+                    }
+                    alpha[i] = a[3] / norm;
                 }
-                alpha_row[x] = a / n;
-                depth_row[x] = if covered > 0 { d / covered as f32 } else { 0.0 };
             }
         });
-    ViewImage {
-        width: w,
-        height: h,
-        rgb,
-        alpha,
-        depth,
-    }
+    (rgb, alpha)
 }
 
-/// Fills colour, alpha and depth from a resolved z-buffer with `shade(id, x, y)` giving the
-/// colour of primitive `id` at pixel (x, y).
-pub(crate) fn shade_pixels<F>(
-    view: &ViewCamera,
-    zbuf: &ZBuffer,
-    background: [f32; 3],
-    shade: F,
-) -> ViewImage
+/// Depth of each pixel of a k×-supersampled z-buffer: the mean over its own k×k sub-pixels
+/// that something covers (0 where none is).
+fn own_pixel_depth(zbuf: &ZBuffer, bw: usize, bh: usize, k: usize) -> Vec<f32> {
+    let (w, h) = (bw / k, bh / k);
+    let mut depth = vec![0.0f32; w * h];
+    depth.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+        for (x, out) in row.iter_mut().enumerate() {
+            let (mut d, mut covered) = (0.0f32, 0u32);
+            for sy in y * k..(y + 1) * k {
+                for sx in x * k..(x + 1) * k {
+                    if let Some((z, _)) = zbuf.get(sy * bw + sx) {
+                        d += z;
+                        covered += 1;
+                    }
+                }
+            }
+            *out = if covered > 0 { d / covered as f32 } else { 0.0 };
+        }
+    });
+    depth
+}
+
+/// Fills colour, alpha and depth from a resolved z-buffer of one sample a pixel, with
+/// `shade(id, x, y)` giving the colour of primitive `id` at pixel (x, y).
+fn shade_pixels<F>(view: &ViewCamera, zbuf: &ZBuffer, background: [f32; 3], shade: F) -> ViewImage
 where
     F: Fn(u32, u32, u32) -> [f32; 3] + Sync,
 {
@@ -207,69 +266,139 @@ where
 mod tests {
     use super::*;
 
-    /// The separable Gaussian filter against a direct 2-D weighted sum in f64 (border pixels
-    /// renormalised over the sub-pixels inside the image), on a random image, for odd and even k.
-    #[test]
-    fn separable_gaussian_filter_matches_the_direct_sum() {
-        let sigma2 = f64::from(PIXEL_FILTER_VARIANCE);
-        let mut seed = 7u64;
+    /// A random k×-supersampled RGBA image of `bw`×`bh` sub-pixels.
+    fn random_image(bw: usize, bh: usize, seed: u64) -> Vec<[f32; 4]> {
+        let mut seed = seed;
         let mut next = || {
             seed = seed
                 .wrapping_mul(6364136223846793005)
                 .wrapping_add(1442695040888963407);
             (seed >> 40) as f32 / (1u64 << 24) as f32
         };
-        for k in [2u32, 3, 4] {
-            let (w, h) = (5usize, 4usize);
-            let (bw, bh) = (w * k as usize, h * k as usize);
-            let big: Vec<f32> = (0..bw * bh * 3).map(|_| next()).collect();
-            let fast = filter_separable(&big, bw as u32, bh as u32, 3, k, &gaussian_taps(k));
-            for y in 0..h {
-                for x in 0..w {
-                    let (cx, cy) = (x as f64 + 0.5, y as f64 + 0.5);
-                    let mut acc = [0.0f64; 3];
-                    let mut norm = 0.0;
-                    for sy in 0..bh {
-                        for sx in 0..bw {
-                            let dx = (sx as f64 + 0.5) / f64::from(k) - cx;
-                            let dy = (sy as f64 + 0.5) / f64::from(k) - cy;
-                            let reach = 3.0 * sigma2.sqrt();
-                            if dx.abs() > reach || dy.abs() > reach {
-                                continue;
-                            }
-                            let wt = (-(dx * dx + dy * dy) / (2.0 * sigma2)).exp();
-                            norm += wt;
-                            for c in 0..3 {
-                                acc[c] += wt * f64::from(big[(sy * bw + sx) * 3 + c]);
+        (0..bw * bh)
+            .map(|_| [next(), next(), next(), next()])
+            .collect()
+    }
+
+    /// [`filter_down`] of a stored image.
+    fn filter_image(
+        big: &[[f32; 4]],
+        bw: usize,
+        bh: usize,
+        k: usize,
+        taps: &[(i64, f32)],
+    ) -> (Vec<f32>, Vec<f32>) {
+        filter_down(bw, bh, k, taps, |sy, row| {
+            row.copy_from_slice(&big[sy * bw..(sy + 1) * bw]);
+        })
+    }
+
+    /// The banded separable filter against a direct 2-D weighted sum in f64 (border pixels
+    /// renormalised over the sub-pixels inside the image), on a random image tall enough for
+    /// several bands, for odd and even k, with the Gaussian and the box.
+    #[test]
+    fn banded_filter_matches_the_direct_sum() {
+        let sigma2 = f64::from(PIXEL_FILTER_VARIANCE);
+        for k in [2usize, 3, 4] {
+            for filter in [PixelFilter::Gaussian, PixelFilter::Box] {
+                let (w, h) = (5usize, 2 * BAND_ROWS + 3);
+                let (bw, bh) = (w * k, h * k);
+                let big = random_image(bw, bh, 7 + k as u64);
+                let (rgb, alpha) = filter_image(&big, bw, bh, k, &filter_taps(filter, k));
+                for y in 0..h {
+                    for x in 0..w {
+                        let (cx, cy) = (x as f64 + 0.5, y as f64 + 0.5);
+                        let mut acc = [0.0f64; 4];
+                        let mut norm = 0.0;
+                        for sy in 0..bh {
+                            for sx in 0..bw {
+                                let dx = (sx as f64 + 0.5) / k as f64 - cx;
+                                let dy = (sy as f64 + 0.5) / k as f64 - cy;
+                                let wt = match filter {
+                                    PixelFilter::Gaussian => {
+                                        let reach = 3.0 * sigma2.sqrt();
+                                        if dx.abs() > reach || dy.abs() > reach {
+                                            continue;
+                                        }
+                                        (-(dx * dx + dy * dy) / (2.0 * sigma2)).exp()
+                                    }
+                                    PixelFilter::Box => {
+                                        if sx / k != x || sy / k != y {
+                                            continue;
+                                        }
+                                        1.0
+                                    }
+                                };
+                                norm += wt;
+                                for c in 0..4 {
+                                    acc[c] += wt * f64::from(big[sy * bw + sx][c]);
+                                }
                             }
                         }
-                    }
-                    for c in 0..3 {
-                        let direct = acc[c] / norm;
-                        let got = f64::from(fast[(y * w + x) * 3 + c]);
-                        assert!(
-                            (got - direct).abs() < 1e-5,
-                            "k {k} ({x}, {y}) {got} {direct}"
-                        );
+                        let got = [
+                            rgb[3 * (y * w + x)],
+                            rgb[3 * (y * w + x) + 1],
+                            rgb[3 * (y * w + x) + 2],
+                            alpha[y * w + x],
+                        ];
+                        for c in 0..4 {
+                            let direct = acc[c] / norm;
+                            assert!(
+                                (f64::from(got[c]) - direct).abs() < 1e-5,
+                                "k {k} {filter:?} ({x}, {y}) channel {c}: {} vs {direct}",
+                                got[c]
+                            );
+                        }
                     }
                 }
             }
         }
     }
 
-    /// A constant image stays constant up to its borders; the taps sum to 1 and, for odd k,
-    /// are symmetric about the pixel's centre sub-pixel.
+    /// Each band asks for every sub-row its rows' filter reaches, and only those, in order.
     #[test]
-    fn gaussian_filter_keeps_constants_and_is_centred() {
+    fn bands_shade_the_rows_their_filter_reaches() {
+        let k = 3;
+        let (w, h) = (4usize, 2 * BAND_ROWS + 5);
+        let (bw, bh) = (w * k, h * k);
+        let taps = filter_taps(PixelFilter::Gaussian, k);
+        let asked = std::sync::Mutex::new(vec![0u32; bh]);
+        filter_down(bw, bh, k, &taps, |sy, row| {
+            asked.lock().unwrap()[sy] += 1;
+            row.fill([0.5; 4]);
+        });
+        let asked = asked.into_inner().unwrap();
+        // Every sub-row is shaded, the rows near a band's edge at most twice.
+        assert!(asked.iter().all(|&n| (1..=2).contains(&n)), "{asked:?}");
+        let twice = asked.iter().filter(|&&n| n == 2).count();
+        let (first, last) = (taps[0].0, taps[taps.len() - 1].0);
+        let per_seam = (last - first + 1) as usize - k;
+        assert_eq!(
+            twice,
+            2 * per_seam,
+            "two seams of {per_seam} sub-rows: {asked:?}"
+        );
+    }
+
+    /// A constant image stays exactly constant, borders included; the Gaussian's taps sum to
+    /// 1 and, for odd k, are symmetric about the pixel's centre sub-pixel.
+    #[test]
+    fn filters_keep_constants_and_the_gaussian_is_centred() {
         let taps = gaussian_taps(3);
         assert!((taps.iter().map(|t| t.1).sum::<f32>() - 1.0).abs() < 1e-6);
         for &(off, wt) in &taps {
             let mirror = taps.iter().find(|t| t.0 == 2 - off).unwrap();
             assert!((mirror.1 - wt).abs() < 1e-7);
         }
-        let big = vec![0.25f32; 12 * 9];
-        let out = filter_separable(&big, 12, 9, 1, 3, &taps);
-        assert_eq!(out.len(), 4 * 3);
-        assert!(out.iter().all(|v| (v - 0.25).abs() < 1e-6), "{out:?}");
+        for filter in [PixelFilter::Gaussian, PixelFilter::Box] {
+            let big = vec![[0.25f32, 1.0, 0.0, 1.0]; 12 * 9];
+            let (rgb, alpha) = filter_image(&big, 12, 9, 3, &filter_taps(filter, 3));
+            assert_eq!(alpha.len(), 4 * 3);
+            assert!(alpha.iter().all(|&a| a == 1.0), "{filter:?} {alpha:?}");
+            assert!(
+                rgb.chunks(3).all(|c| c == [0.25, 1.0, 0.0]),
+                "{filter:?} {rgb:?}"
+            );
+        }
     }
 }

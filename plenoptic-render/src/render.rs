@@ -1,21 +1,55 @@
 //! Rendering a model (cloud or mesh) from one camera or a set of cameras.
 
 use camera_model::Camera;
-use plenoptic_io::Model;
+use plenoptic_io::{Mesh, Model};
 use rayon::prelude::*;
 
-use crate::{Error, ViewImage, ViewOptions, render_cloud, render_mesh};
+use crate::cloud::PreparedCloud;
+use crate::mesh::{check_mesh, render_checked_mesh};
+use crate::{Error, ViewImage, ViewOptions};
 
-/// Renders a cloud or a mesh (see [`render_cloud`] and [`render_mesh`]).
+/// A model made ready to be drawn from any number of cameras: checked, a cloud's point size
+/// chosen and its points ordered for drawing, once rather than once a view. [`render_each`]
+/// and [`render_views`] use one; make one yourself to render views one at a time.
+pub struct ModelRenderer<'a> {
+    prepared: Prepared<'a>,
+}
+
+enum Prepared<'a> {
+    Cloud(PreparedCloud<'a>),
+    Mesh(&'a Mesh, ViewOptions),
+}
+
+impl<'a> ModelRenderer<'a> {
+    /// Checks `model` and `opts` and prepares the model for drawing.
+    pub fn new(model: &'a Model, opts: &ViewOptions) -> Result<Self, Error> {
+        let prepared = match model {
+            Model::Cloud(cloud) => Prepared::Cloud(PreparedCloud::new(cloud, opts)?),
+            Model::Mesh(mesh) => {
+                opts.validate()?;
+                check_mesh(mesh)?;
+                Prepared::Mesh(mesh, opts.clone())
+            }
+        };
+        Ok(Self { prepared })
+    }
+
+    /// The model seen from `camera`.
+    pub fn render(&self, camera: &Camera) -> Result<ViewImage, Error> {
+        match &self.prepared {
+            Prepared::Cloud(cloud) => cloud.render(camera),
+            Prepared::Mesh(mesh, opts) => render_checked_mesh(mesh, camera, opts),
+        }
+    }
+}
+
+/// Renders a cloud or a mesh (see [`crate::render_cloud`] and [`crate::render_mesh`]).
 pub fn render_model(
     model: &Model,
     camera: &Camera,
     opts: &ViewOptions,
 ) -> Result<ViewImage, Error> {
-    match model {
-        Model::Cloud(cloud) => render_cloud(cloud, camera, opts),
-        Model::Mesh(mesh) => render_mesh(mesh, camera, opts),
-    }
+    ModelRenderer::new(model, opts)?.render(camera)
 }
 
 /// Renders `model` from every camera, in parallel over views, handing each finished view to
@@ -29,11 +63,11 @@ pub fn render_each<F>(
 where
     F: Fn(usize, ViewImage) -> Result<(), Error> + Sync + Send,
 {
-    let opts = &opts.for_model(model);
+    let renderer = ModelRenderer::new(model, opts)?;
     cameras
         .par_iter()
         .enumerate()
-        .try_for_each(|(i, camera)| sink(i, render_model(model, camera, opts)?))
+        .try_for_each(|(i, camera)| sink(i, renderer.render(camera)?))
 }
 
 /// Renders `model` from every camera, in parallel over views, and returns the images in order.
@@ -42,9 +76,9 @@ pub fn render_views(
     cameras: &[Camera],
     opts: &ViewOptions,
 ) -> Result<Vec<ViewImage>, Error> {
-    let opts = &opts.for_model(model);
+    let renderer = ModelRenderer::new(model, opts)?;
     cameras
         .par_iter()
-        .map(|camera| render_model(model, camera, opts))
+        .map(|camera| renderer.render(camera))
         .collect()
 }
