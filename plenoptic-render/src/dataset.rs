@@ -1,7 +1,6 @@
 //! The COLMAP training dataset of an input: rendered images, cameras and the input's points.
 
 use std::path::Path;
-use std::sync::Mutex;
 
 use camera_model::Camera;
 use colmap_io::Format;
@@ -46,18 +45,24 @@ pub fn dataset_image_name(i: usize) -> String {
 /// `dir/images/view_NNN.png`, `dir/masks/` and `dir/depth/` when asked, `dir/sparse/0/` in both
 /// text and binary (PINHOLE cameras, world→camera poses, points3D = the input's points with their
 /// colours and empty tracks) and `dir/sparse/0/points3D.ply` (Inria's loader reads it first).
-/// `on_view` is called once per finished view. Returns the rendered images in camera order.
-/// When more than half of the views see nothing ([`crate::degenerate::check_views`]) the error
-/// comes before `sparse/0/` is written, and a model left there by an earlier run is removed
-/// first, so a failed dataset never looks complete.
-pub fn write_dataset(
+/// `on_view` is called once per finished view. Returns `keep(i, image)` of each view i in camera
+/// order (`|_, image| image` keeps the images; see [`crate::render_views_with`] for why a caller
+/// keeps less). When more than half of the views see nothing
+/// ([`crate::degenerate::check_coverage`]) the error comes before `sparse/0/` is written, and a
+/// model left there by an earlier run is removed first, so a failed dataset never looks complete.
+pub fn write_dataset<T, F>(
     dir: &Path,
     model: &Model,
     cameras: &[Camera],
     view: &ViewOptions,
     opts: &DatasetOptions,
     on_view: &(dyn Fn() + Sync),
-) -> Result<Vec<ViewImage>, Error> {
+    keep: F,
+) -> Result<Vec<T>, Error>
+where
+    T: Send,
+    F: Fn(usize, ViewImage) -> T + Sync,
+{
     view.validate()?;
     if cameras.is_empty() {
         return Err(Error::InvalidOption(
@@ -97,11 +102,11 @@ pub fn write_dataset(
     // A sparse cloud's point size and a cloud's drawing order are worked out once, not once a view.
     let renderer = ModelRenderer::new(model, view)?;
     let names: Vec<String> = (0..cameras.len()).map(dataset_image_name).collect();
-    let slots: Mutex<Vec<Option<ViewImage>>> = Mutex::new(vec![None; cameras.len()]);
-    cameras
+    // Per view: whether anything covers it, and what the caller keeps of it.
+    let kept: Vec<(bool, T)> = cameras
         .par_iter()
         .enumerate()
-        .try_for_each(|(i, camera)| -> Result<(), Error> {
+        .map(|(i, camera)| -> Result<(bool, T), Error> {
             let image = renderer.render(camera)?;
             let name = &names[i];
             let png = encode_png_rgb(&writer.images_dir().join(name), &image, opts.bit_depth)?;
@@ -113,26 +118,16 @@ pub fn write_dataset(
                 let stem = name.trim_end_matches(".png");
                 write_depth_exr(&depth.join(format!("{stem}.exr")), &image)?;
             }
-            // A poisoned lock means another view panicked; its panic propagates from rayon anyway.
-            if let Ok(mut slots) = slots.lock() {
-                slots[i] = Some(image);
-            }
+            let covered = image.alpha.iter().any(|&a| a > 0.0);
+            let kept = keep(i, image);
             on_view();
-            Ok(())
-        })?;
-
-    let images = slots.into_inner().unwrap_or_default();
-    let images: Vec<ViewImage> = images
-        .into_iter()
-        .enumerate()
-        .map(|(i, v)| v.ok_or_else(|| Error::InvalidOption(format!("view {i} was not rendered"))))
+            Ok((covered, kept))
+        })
         .collect::<Result<_, _>>()?;
-    crate::degenerate::check_views(
-        dir,
-        "training",
-        images.iter().map(|v| v.alpha.as_slice()),
-        |i| names[i].clone(),
-    )?;
+    // The drawing order and its copy of the positions are not needed for the model files.
+    drop(renderer);
+    let covered: Vec<bool> = kept.iter().map(|k| k.0).collect();
+    crate::degenerate::check_coverage(dir, "training", &covered, |i| names[i].clone())?;
 
     let points = input_points(model);
     let mut rec = reconstruction_from_cameras(names.iter().map(String::as_str).zip(cameras))?;
@@ -150,7 +145,7 @@ pub fn write_dataset(
         path: ply.clone(),
         message: e.to_string(),
     })?;
-    Ok(images)
+    Ok(kept.into_iter().map(|k| k.1).collect())
 }
 
 /// The files of `sparse/0/` that make a dataset usable, removed before a dataset is written.

@@ -207,10 +207,25 @@ pub fn check_views<'a>(
     coverage: impl ExactSizeIterator<Item = &'a [f32]>,
     name: impl Fn(usize) -> String,
 ) -> Result<(), DegenerateError> {
-    let total = coverage.len();
-    let empty: Vec<usize> = coverage
+    let covered: Vec<bool> = coverage
+        .map(|alpha| alpha.iter().any(|&a| a > 0.0))
+        .collect();
+    check_coverage(path, kind, &covered, name)
+}
+
+/// [`check_views`] of views already reduced to whether any pixel of each is covered
+/// (`covered[i]`), for callers that do not keep the images.
+pub fn check_coverage(
+    path: &Path,
+    kind: &'static str,
+    covered: &[bool],
+    name: impl Fn(usize) -> String,
+) -> Result<(), DegenerateError> {
+    let total = covered.len();
+    let empty: Vec<usize> = covered
+        .iter()
         .enumerate()
-        .filter(|(_, alpha)| !alpha.iter().any(|&a| a > 0.0))
+        .filter(|(_, covered)| !**covered)
         .map(|(i, _)| i)
         .collect();
     if total == 0 || empty.len() as f64 <= MAX_EMPTY_VIEW_SHARE * total as f64 {

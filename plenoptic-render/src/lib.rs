@@ -14,7 +14,8 @@
 //! interpolation (the expensive part) runs once per pixel instead of once per point.
 //! Cameras follow COLMAP: pixel (0, 0)'s centre is at (0.5, 0.5), x right, y down, z forward.
 //!
-//! - [`render_cloud`], [`render_mesh`], [`render_model`], [`render_views`], [`render_each`]:
+//! - [`render_cloud`], [`render_mesh`], [`render_model`], [`render_views`], [`render_views_with`],
+//!   [`render_each`]:
 //!   one view or many, into a [`ViewImage`], with [`ViewOptions`]; [`ModelRenderer`] prepares a
 //!   model once for views rendered one at a time.
 //! - [`closing_point_size`]: how large a sparse cloud's points are drawn so its surface is closed.
@@ -70,5 +71,5 @@ pub use options::{
 pub use output::{
     BitDepth, ViewFiles, write_alpha_png, write_depth_exr, write_rgb_png, write_view_images,
 };
-pub use render::{ModelRenderer, render_each, render_model, render_views};
+pub use render::{ModelRenderer, render_each, render_model, render_views, render_views_with};
 pub use rig::{FramingSphere, Rig, RigConfig, bounding_sphere, build_rig, fibonacci_rig};

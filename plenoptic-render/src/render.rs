@@ -76,9 +76,27 @@ pub fn render_views(
     cameras: &[Camera],
     opts: &ViewOptions,
 ) -> Result<Vec<ViewImage>, Error> {
+    render_views_with(model, cameras, opts, |_, image| image)
+}
+
+/// Renders `model` from every camera, in parallel over views, and returns `keep(i, image)` of
+/// each view i in camera order. `keep` runs as soon as a view is finished, so a caller that keeps
+/// less than the whole image (a trainer's view without depth, a flag) never holds all of a
+/// frame's full images at once: 44 views at 1024² are 0.9 GB.
+pub fn render_views_with<T, F>(
+    model: &Model,
+    cameras: &[Camera],
+    opts: &ViewOptions,
+    keep: F,
+) -> Result<Vec<T>, Error>
+where
+    T: Send,
+    F: Fn(usize, ViewImage) -> T + Sync + Send,
+{
     let renderer = ModelRenderer::new(model, opts)?;
     cameras
         .par_iter()
-        .map(|camera| renderer.render(camera))
+        .enumerate()
+        .map(|(i, camera)| Ok(keep(i, renderer.render(camera)?)))
         .collect()
 }

@@ -43,6 +43,7 @@ fn dataset_round_trips_through_colmap_io() {
         &|| {
             count.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         },
+        |_, image| image,
     )
     .unwrap();
     assert_eq!(count.into_inner(), 5);

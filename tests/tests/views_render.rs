@@ -305,3 +305,69 @@ fn reference_pixel_filter_is_the_rasterisers_dilation() {
         splat_core::constants::DILATION
     );
 }
+
+/// What `render_views_with` hands to `keep` is each view with its own index, the same image
+/// `render_model` makes alone from that camera, for a cloud (drawn in its prepared order) and
+/// for a mesh; and a cloud listed in another order renders the same masks.
+#[test]
+fn views_kept_one_at_a_time_are_the_views_rendered_alone() {
+    let cloud = demo_scene(&DemoConfig {
+        grid: 48,
+        ..Default::default()
+    })
+    .unwrap();
+    let mesh = plenoptic_io::read_mesh(&data("meshes/box-textured/BoxTextured.gltf")).unwrap();
+    for model in [Model::Cloud(cloud.clone()), Model::Mesh(mesh)] {
+        let (c, r) = views::bounding_sphere(&model).unwrap();
+        let cams = views::fibonacci_rig(
+            c,
+            r,
+            &RigConfig {
+                cameras: 5,
+                width: 40,
+                height: 32,
+                ..RigConfig::default()
+            },
+        )
+        .unwrap();
+        let opts = ViewOptions::default();
+        let kept = views::render_views_with(&model, &cams, &opts, |i, img| (i, img)).unwrap();
+        assert_eq!(kept.len(), cams.len());
+        for (i, (index, img)) in kept.into_iter().enumerate() {
+            assert_eq!(index, i);
+            assert_eq!(img, views::render_model(&model, &cams[i], &opts).unwrap());
+            assert!(img.alpha.iter().any(|&a| a > 0.0), "view {i} sees nothing");
+        }
+    }
+    // The same points listed backwards: the same coverage from every camera.
+    let n = cloud.len();
+    let reversed = PlenopticCloud {
+        positions: cloud.positions.iter().rev().copied().collect(),
+        colors: cloud.colors.iter().rev().copied().collect(),
+        camera_colors: (0..n)
+            .rev()
+            .flat_map(|i| cloud.camera_colors_of(i).to_vec())
+            .collect(),
+        normals: None,
+        ..cloud.clone()
+    };
+    let (c, r) = views::bounding_sphere(&Model::Cloud(cloud.clone())).unwrap();
+    let cams = views::fibonacci_rig(
+        c,
+        r,
+        &RigConfig {
+            cameras: 3,
+            width: 40,
+            height: 32,
+            ..RigConfig::default()
+        },
+    )
+    .unwrap();
+    let forward =
+        views::render_views(&Model::Cloud(cloud), &cams, &ViewOptions::default()).unwrap();
+    let backward =
+        views::render_views(&Model::Cloud(reversed), &cams, &ViewOptions::default()).unwrap();
+    for (a, b) in forward.iter().zip(&backward) {
+        assert_eq!(a.alpha, b.alpha);
+    }
+}

@@ -570,7 +570,12 @@ fn reference_views(
         masks: true,
         depth: false,
     };
-    let train_images = if state.dataset_written || !cfg.output.dataset {
+    // Each view becomes the trainer's view as soon as it is rendered (its depth dropped), so a
+    // frame's full images are never all held at once.
+    let to_training = |i: usize, image: ViewImage| {
+        training_view(views::dataset_image_name(i), rig.train[i], image)
+    };
+    let train = if state.dataset_written || !cfg.output.dataset {
         // The dataset's PNGs are quantised: training needs the renders themselves, which are
         // deterministic, so they are made again in memory.
         if state.dataset_written {
@@ -578,9 +583,9 @@ fn reference_views(
                 "the dataset is already written: rendering the training views in memory".into(),
             ));
         }
-        let images = views::render_views(model, &rig.train, &opts)?;
+        let train = views::render_views_with(model, &rig.train, &opts, to_training)?;
         clock.lap("render training views");
-        images
+        train
     } else {
         observer(Event::Begin {
             unit: "views",
@@ -588,7 +593,7 @@ fn reference_views(
             done: 0,
         });
         let done = AtomicU64::new(0);
-        let images = views::write_dataset(
+        let train = views::write_dataset(
             &layout.dataset_dir,
             model,
             &rig.train,
@@ -601,18 +606,23 @@ fn reference_views(
                     message: None,
                 });
             },
+            to_training,
         )?;
         observer(Event::End);
         state.dataset_written = true;
         state.save(&layout.out)?;
         clock.lap("render training views + write dataset");
-        images
+        train
     };
-    let heldout_images = views::render_views(model, &rig.heldout, &opts)?;
+    let heldout: Vec<View> = views::render_views_with(model, &rig.heldout, &opts, |i, image| {
+        training_view(heldout_name(i), rig.heldout[i], image)
+    })?;
     plenoptic_render::degenerate::check_views(
         input,
         "held-out",
-        heldout_images.iter().map(|v| v.alpha.as_slice()),
+        heldout
+            .iter()
+            .map(|v| v.mask.as_deref().unwrap_or_default()),
         heldout_name,
     )?;
     clock.lap("render held-out views");
@@ -622,20 +632,6 @@ fn reference_views(
             layout.dataset_dir.display()
         )));
     }
-    let train = rig
-        .train
-        .iter()
-        .zip(train_images)
-        .enumerate()
-        .map(|(i, (c, img))| training_view(views::dataset_image_name(i), *c, img))
-        .collect::<Vec<_>>();
-    let heldout = rig
-        .heldout
-        .iter()
-        .zip(heldout_images)
-        .enumerate()
-        .map(|(i, (c, img))| View::from_premultiplied(heldout_name(i), *c, &img.rgb, img.alpha))
-        .collect();
     Ok(References {
         train: Arc::new(train),
         heldout,

@@ -90,12 +90,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ProgressStyle::with_template("{bar:40} {pos}/{len} views [{elapsed} < {eta}]")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
-    let images = views::write_dataset(&args.out, &model, &cameras, &view, &opts, &|| bar.inc(1))
-        .with_context(|| format!("cannot write the dataset {}", args.out.display()))?;
+    // The images are on disk: nothing of them is kept in memory.
+    let written = views::write_dataset(
+        &args.out,
+        &model,
+        &cameras,
+        &view,
+        &opts,
+        &|| bar.inc(1),
+        |_, _| (),
+    )
+    .with_context(|| format!("cannot write the dataset {}", args.out.display()))?;
     bar.finish_and_clear();
     println!(
         "wrote {} views of {}×{} to {} (images/, masks/, sparse/0/ in text and binary)",
-        images.len(),
+        written.len(),
         config.rig.width,
         config.rig.height,
         args.out.display()
