@@ -146,12 +146,9 @@ where
                 for (x, o) in out.iter_mut().enumerate() {
                     let mut acc = [0.0f32; 4];
                     let norm = if inside(x, bw) {
-                        let s = &sub[x * k - (-first) as usize..];
+                        let s = &sub[((x * k) as i64 + first) as usize..];
                         for &(off, wt) in taps {
-                            let v = s[(off - first) as usize];
-                            for c in 0..4 {
-                                acc[c] += wt * v[c];
-                            }
+                            add_weighted(&mut acc, wt, s[(off - first) as usize]);
                         }
                         full_norm
                     } else {
@@ -162,10 +159,7 @@ where
                                 continue;
                             }
                             norm += wt;
-                            let v = sub[sx as usize];
-                            for c in 0..4 {
-                                acc[c] += wt * v[c];
-                            }
+                            add_weighted(&mut acc, wt, sub[sx as usize]);
                         }
                         norm
                     };
@@ -185,10 +179,8 @@ where
                     }
                     norm += wt;
                     let src = &rows[(sy as usize - sy0) * w..][..w];
-                    for (a, v) in acc.iter_mut().zip(src) {
-                        for c in 0..4 {
-                            a[c] += wt * v[c];
-                        }
+                    for (a, &v) in acc.iter_mut().zip(src) {
+                        add_weighted(a, wt, v);
                     }
                 }
                 for (x, a) in acc.iter().enumerate() {
@@ -201,6 +193,14 @@ where
             }
         });
     (rgb, alpha)
+}
+
+/// `acc += wt · v`, channel by channel.
+#[inline]
+fn add_weighted(acc: &mut [f32; 4], wt: f32, v: [f32; 4]) {
+    for (a, v) in acc.iter_mut().zip(v) {
+        *a += wt * v;
+    }
 }
 
 /// Depth of each pixel of a k×-supersampled z-buffer: the mean over its own k×k sub-pixels
