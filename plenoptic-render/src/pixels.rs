@@ -153,13 +153,9 @@ where
                         full_norm
                     } else {
                         let mut norm = 0.0f32;
-                        for &(off, wt) in taps {
-                            let sx = (x * k) as i64 + off;
-                            if sx < 0 || sx >= bw as i64 {
-                                continue;
-                            }
+                        for (sx, wt) in taps_within(taps, x * k, bw) {
                             norm += wt;
-                            add_weighted(&mut acc, wt, sub[sx as usize]);
+                            add_weighted(&mut acc, wt, sub[sx]);
                         }
                         norm
                     };
@@ -172,13 +168,9 @@ where
                 let y = y0 + r;
                 acc.fill([0.0; 4]);
                 let mut norm = 0.0f32;
-                for &(off, wt) in taps {
-                    let sy = (y * k) as i64 + off;
-                    if sy < 0 || sy >= bh as i64 {
-                        continue;
-                    }
+                for (sy, wt) in taps_within(taps, y * k, bh) {
                     norm += wt;
-                    let src = &rows[(sy as usize - sy0) * w..][..w];
+                    let src = &rows[(sy - sy0) * w..][..w];
                     for (a, &v) in acc.iter_mut().zip(src) {
                         add_weighted(a, wt, v);
                     }
@@ -193,6 +185,19 @@ where
             }
         });
     (rgb, alpha)
+}
+
+/// The taps of the output pixel whose first sub-pixel is `start` that fall inside a row (or
+/// column) of `len` sub-pixels, as (sub-pixel index, weight), in tap order.
+fn taps_within(
+    taps: &[(i64, f32)],
+    start: usize,
+    len: usize,
+) -> impl Iterator<Item = (usize, f32)> + '_ {
+    taps.iter().filter_map(move |&(off, wt)| {
+        let i = start as i64 + off;
+        (0..len as i64).contains(&i).then_some((i as usize, wt))
+    })
 }
 
 /// `acc += wt · v`, channel by channel.
