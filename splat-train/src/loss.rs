@@ -2,7 +2,7 @@
 
 use rayon::prelude::*;
 
-use crate::ssim::{Ssim, SsimTarget};
+use crate::ssim::Ssim;
 
 /// Value of one evaluation of the loss, with its parts.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -48,24 +48,12 @@ impl Loss {
         self.ssim.height()
     }
 
-    /// Windowed statistics of a target image, to cache per view.
-    #[must_use]
-    pub fn target(&mut self, image: &[f32]) -> SsimTarget {
-        self.ssim.target(image)
-    }
-
     /// Evaluates the loss of `render` against `image` with D-SSIM weight `lambda` and leaves
     /// ∂loss/∂render in [`Loss::d_rgb`].
     ///
     /// # Panics
     /// If the image sizes do not match the buffers (a caller bug).
-    pub fn evaluate(
-        &mut self,
-        render: &[f32],
-        image: &[f32],
-        target: &SsimTarget,
-        lambda: f32,
-    ) -> LossValue {
+    pub fn evaluate(&mut self, render: &[f32], image: &[f32], lambda: f32) -> LossValue {
         let n = render.len();
         let k = (1.0 - lambda) / n as f32;
         // L1 part: d|r − g|/dr = sign(r − g), 0 at equality (PyTorch's subgradient).
@@ -96,7 +84,7 @@ impl Loss {
             .fold((0.0, 0.0), |a, p| (a.0 + p.0, a.1 + p.1));
         let ssim = self
             .ssim
-            .evaluate(render, image, target, Some((-lambda, &mut self.d_rgb)));
+            .evaluate(render, image, Some((-lambda, &mut self.d_rgb)));
         let l1 = l1 / n as f64;
         LossValue {
             total: f64::from(1.0 - lambda) * l1 + f64::from(lambda) * (1.0 - ssim),
@@ -149,8 +137,7 @@ mod tests {
             .map(|&v| v + 0.2 * (rng.random::<f32>() - 0.5))
             .collect();
         let mut loss = Loss::new(w, h);
-        let t = loss.target(&image);
-        let v = loss.evaluate(&render, &image, &t, 0.2);
+        let v = loss.evaluate(&render, &image, 0.2);
         let grad = loss.d_rgb().to_vec();
         let l1: f64 = render
             .iter()
@@ -166,9 +153,9 @@ mod tests {
             }
             let mut p = render.clone();
             p[i] += eps;
-            let fp = loss.evaluate(&p, &image, &t, 0.2).total;
+            let fp = loss.evaluate(&p, &image, 0.2).total;
             p[i] -= 2.0 * eps;
-            let fm = loss.evaluate(&p, &image, &t, 0.2).total;
+            let fm = loss.evaluate(&p, &image, 0.2).total;
             let fd = (fp - fm) / f64::from(2.0 * eps);
             let err = (fd - f64::from(grad[i])).abs() * n as f64;
             assert!(err < 0.05, "pixel {i}: fd {fd} analytic {}", grad[i]);

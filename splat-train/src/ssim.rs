@@ -4,6 +4,16 @@
 //! with σ = 1.5, applied per channel as a zero-padded "same" convolution, C1 = 0.01², C2 = 0.03²,
 //! and the mean of the SSIM map over all pixels and channels. The window is separable, so every
 //! filter is a horizontal then a vertical 11-tap pass.
+//!
+//! Only where the images differ: where x and y are equal over a pixel's whole window, that
+//! pixel's SSIM is exactly 1 (μx = μy and σx² = σy² = σxy make both factors equal their
+//! denominators) and it adds exactly nothing to the gradient (∂SSIM/∂μx = 0, and the
+//! σ terms, −2x/B₂ + 2y/B₂, cancel wherever x = y). A render and its reference agree exactly on
+//! the background a splat never touches (both are the background colour), which is most of a
+//! view of a single object, so every pass runs only over each row's span of pixels that can
+//! matter, worked out from where the images differ. Inside the spans the arithmetic is the
+//! dense filter's; outside them the value is the exact 1 and the gradient the exact 0 that the
+//! dense filter approaches up to rounding.
 
 use rayon::prelude::*;
 
@@ -30,26 +40,94 @@ pub fn gaussian_taps() -> [f32; TAPS] {
     g.map(|v| (v / sum) as f32)
 }
 
-/// Windowed mean and variance of a fixed target image, computed once and reused every step.
-#[derive(Debug, Clone)]
-pub struct SsimTarget {
-    width: u32,
-    height: u32,
-    mu: Vec<f32>,
-    sigma2: Vec<f32>,
+/// A half-open range of pixel columns in one row; empty when `lo >= hi`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Span {
+    lo: usize,
+    hi: usize,
 }
 
-/// Reusable buffers for SSIM at one image size: no allocation per evaluation.
+impl Span {
+    const EMPTY: Self = Self { lo: 0, hi: 0 };
+
+    fn is_empty(self) -> bool {
+        self.lo >= self.hi
+    }
+
+    fn len(self) -> usize {
+        self.hi.saturating_sub(self.lo)
+    }
+
+    /// The smallest span holding both.
+    fn union(self, other: Self) -> Self {
+        match (self.is_empty(), other.is_empty()) {
+            (true, _) => other,
+            (_, true) => self,
+            _ => Self {
+                lo: self.lo.min(other.lo),
+                hi: self.hi.max(other.hi),
+            },
+        }
+    }
+
+    fn intersect(self, other: Self) -> Self {
+        Self {
+            lo: self.lo.max(other.lo),
+            hi: self.hi.min(other.hi),
+        }
+    }
+
+    /// Widened by `r` columns each way, within a row of `w` pixels.
+    fn widen(self, r: usize, w: usize) -> Self {
+        if self.is_empty() {
+            return self;
+        }
+        Self {
+            lo: self.lo.saturating_sub(r),
+            hi: (self.hi + r).min(w),
+        }
+    }
+}
+
+/// For every row, the union of `spans` over the rows at most `RADIUS` away, widened by `widen`.
+fn spread(spans: &[Span], widen: usize, w: usize, out: &mut Vec<Span>) {
+    let h = spans.len();
+    out.clear();
+    out.extend((0..h).map(|y| {
+        spans[y.saturating_sub(RADIUS)..(y + RADIUS + 1).min(h)]
+            .iter()
+            .fold(Span::EMPTY, |a, &s| a.union(s))
+            .widen(widen, w)
+    }));
+}
+
+/// Per row, where each pass works (see the module docs for why nothing outside matters).
+#[derive(Debug, Default)]
+struct Spans {
+    /// Pixels where x and y differ in some channel.
+    differ: Vec<Span>,
+    /// Pixels whose window holds a differing pixel: where the SSIM map is computed.
+    map: Vec<Span>,
+    /// Where horizontal window sums of the images are needed (the map spans of the rows
+    /// within reach of the vertical pass).
+    sums: Vec<Span>,
+    /// Where horizontal window sums of the map's partial derivatives are nonzero.
+    partial_sums: Vec<Span>,
+    /// Pixels that receive gradient.
+    grad: Vec<Span>,
+}
+
+/// Reusable buffers for SSIM at one image size: no allocation per evaluation once warm.
 #[derive(Debug)]
 pub struct Ssim {
     width: usize,
     height: usize,
     taps: [f32; TAPS],
-    tmp: Vec<f32>,
-    mu_x: Vec<f32>,
-    e_xx: Vec<f32>,
-    e_xy: Vec<f32>,
-    prod: Vec<f32>,
+    spans: Spans,
+    /// Horizontal window sums of x, y, x², y² and xy (then of the three partials), 3·W·H each.
+    sums: [Vec<f32>; 5],
+    /// ∂SSIM/∂μx (with the chain through σx² and σxy folded in), ∂SSIM/∂E[x²], ∂SSIM/∂E[xy].
+    partials: [Vec<f32>; 3],
     row_sums: Vec<f64>,
 }
 
@@ -62,11 +140,9 @@ impl Ssim {
             width: width as usize,
             height: height as usize,
             taps: gaussian_taps(),
-            tmp: vec![0.0; n],
-            mu_x: vec![0.0; n],
-            e_xx: vec![0.0; n],
-            e_xy: vec![0.0; n],
-            prod: vec![0.0; n],
+            spans: Spans::default(),
+            sums: std::array::from_fn(|_| vec![0.0; n]),
+            partials: std::array::from_fn(|_| vec![0.0; n]),
             row_sums: Vec::with_capacity(height as usize),
         }
     }
@@ -83,133 +159,137 @@ impl Ssim {
         self.height as u32
     }
 
-    /// Precomputes the windowed statistics of a target image `y` (RGB, 3·W·H).
-    ///
-    /// # Panics
-    /// If `y` does not hold 3·W·H values (a caller bug, not an input condition).
-    #[must_use]
-    pub fn target(&mut self, y: &[f32]) -> SsimTarget {
-        assert_eq!(
-            y.len(),
-            self.mu_x.len(),
-            "target size does not match SSIM buffers"
-        );
-        let mut mu = vec![0.0; y.len()];
-        let mut sigma2 = vec![0.0; y.len()];
-        blur(
-            y,
-            &mut mu,
-            &mut self.tmp,
-            self.width,
-            self.height,
-            &self.taps,
-        );
-        self.prod
-            .par_iter_mut()
-            .zip(y.par_iter())
-            .for_each(|(p, &v)| *p = v * v);
-        blur(
-            &self.prod,
-            &mut sigma2,
-            &mut self.tmp,
-            self.width,
-            self.height,
-            &self.taps,
-        );
-        sigma2
-            .par_iter_mut()
-            .zip(mu.par_iter())
-            .for_each(|(s, &m)| *s -= m * m);
-        SsimTarget {
-            width: self.width as u32,
-            height: self.height as u32,
-            mu,
-            sigma2,
-        }
-    }
-
     /// Mean SSIM of `x` against `y` (both RGB, 3·W·H).
     ///
     /// # Panics
     /// If the image sizes do not match the buffers (a caller bug).
     pub fn value(&mut self, x: &[f32], y: &[f32]) -> f64 {
-        let target = self.target(y);
-        self.evaluate(x, y, &target, None)
+        self.evaluate(x, y, None)
     }
 
-    /// Mean SSIM of `x` against the target `y` whose statistics are `target`; when `grad` is
-    /// given as `(scale, out)`, adds `scale · ∂SSIM/∂x` into `out`.
+    /// Mean SSIM of `x` against `y` (both RGB, 3·W·H); when `grad` is given as `(scale, out)`,
+    /// adds `scale · ∂SSIM/∂x` into `out`.
     ///
     /// # Panics
     /// If the image sizes do not match the buffers (a caller bug).
-    pub fn evaluate(
-        &mut self,
-        x: &[f32],
-        y: &[f32],
-        target: &SsimTarget,
-        grad: Option<(f32, &mut [f32])>,
-    ) -> f64 {
-        let n = self.mu_x.len();
+    pub fn evaluate(&mut self, x: &[f32], y: &[f32], grad: Option<(f32, &mut [f32])>) -> f64 {
+        let n = self.sums[0].len();
         assert!(
             x.len() == n && y.len() == n,
             "image size does not match SSIM buffers"
         );
-        assert!(
-            target.width as usize == self.width && target.height as usize == self.height,
-            "SSIM target statistics are for another image size"
-        );
-        let (w, h, taps) = (self.width, self.height, self.taps);
-        blur(x, &mut self.mu_x, &mut self.tmp, w, h, &taps);
-        self.prod
-            .par_iter_mut()
-            .zip(x.par_iter())
-            .for_each(|(p, &v)| *p = v * v);
-        blur(&self.prod, &mut self.e_xx, &mut self.tmp, w, h, &taps);
-        self.prod
-            .par_iter_mut()
-            .zip(x.par_iter().zip(y.par_iter()))
-            .for_each(|(p, (&a, &b))| *p = a * b);
-        blur(&self.prod, &mut self.e_xy, &mut self.tmp, w, h, &taps);
-
-        // Per pixel, SSIM = A1·A2 / (B1·B2) with A1 = 2μxμy + C1, A2 = 2σxy + C2,
-        // B1 = μx² + μy² + C1, B2 = σx² + σy² + C2, σx² = E[x²] − μx², σxy = E[xy] − μxμy.
-        // With a gradient, the three buffers are overwritten by ∂SSIM/∂μx, ∂SSIM/∂E[x²] and
-        // ∂SSIM/∂E[xy] (the chain through σx² and σxy folded into the first).
-        let want_grad = grad.is_some();
+        let (w, h) = (self.width, self.height);
+        if n == 0 {
+            return f64::NAN;
+        }
         let row = 3 * w;
+        self.find_spans(x, y);
+        let taps = &self.taps;
+        let sp = &self.spans;
+
+        // Horizontal window sums of x, y, x², y², xy over each row's `sums` span.
+        let [s_x, s_y, s_xx, s_yy, s_xy] = &mut self.sums;
+        s_x.par_chunks_mut(row)
+            .zip(s_y.par_chunks_mut(row))
+            .zip(s_xx.par_chunks_mut(row))
+            .zip(s_yy.par_chunks_mut(row))
+            .zip(s_xy.par_chunks_mut(row))
+            .zip(x.par_chunks(row).zip(y.par_chunks(row)))
+            .enumerate()
+            .for_each_init(
+                || vec![0.0_f32; 3 * row],
+                |products, (r, (((((ox, oy), oxx), oyy), oxy), (xr, yr)))| {
+                    let out = sp.sums[r];
+                    if out.is_empty() {
+                        return;
+                    }
+                    // The products are only needed where the sums read them.
+                    let need = out.widen(RADIUS, w);
+                    let (pxx, rest) = products.split_at_mut(row);
+                    let (pyy, pxy) = rest.split_at_mut(row);
+                    for i in 3 * need.lo..3 * need.hi {
+                        pxx[i] = xr[i] * xr[i];
+                        pyy[i] = yr[i] * yr[i];
+                        pxy[i] = xr[i] * yr[i];
+                    }
+                    let whole = Span { lo: 0, hi: w };
+                    horizontal(xr, whole, ox, out, taps);
+                    horizontal(yr, whole, oy, out, taps);
+                    horizontal(pxx, need, oxx, out, taps);
+                    horizontal(pyy, need, oyy, out, taps);
+                    horizontal(pxy, need, oxy, out, taps);
+                },
+            );
+
+        // Vertical window sums and the map over each row's `map` span, with its partials. Per
+        // SSIM = A1·A2 / (B1·B2) with A1 = 2μxμy + C1, A2 = 2σxy + C2, B1 = μx² + μy² + C1,
+        // B2 = σx² + σy² + C2, σx² = E[x²] − μx², σxy = E[xy] − μxμy.
+        let want_grad = grad.is_some();
+        let sums = &self.sums;
+        let [p_mu, p_xx, p_xy] = &mut self.partials;
         // Per-row partial sums, added in row order afterwards: rayon's reduction tree depends on
         // scheduling, and a fixed order keeps the value bit-identical from run to run.
-        self.mu_x
-            .par_chunks_mut(row)
-            .zip(self.e_xx.par_chunks_mut(row))
-            .zip(self.e_xy.par_chunks_mut(row))
-            .zip(target.mu.par_chunks(row).zip(target.sigma2.par_chunks(row)))
-            .map(|(((mx, exx), exy), (my, syy))| {
-                let mut s = 0.0f64;
-                for i in 0..mx.len() {
-                    let (mu_x, mu_y) = (mx[i], my[i]);
-                    let sxx = exx[i] - mu_x * mu_x;
-                    let sxy = exy[i] - mu_x * mu_y;
-                    let a1 = 2.0 * mu_x * mu_y + C1;
-                    let a2 = 2.0 * sxy + C2;
-                    let b1 = mu_x * mu_x + mu_y * mu_y + C1;
-                    let b2 = sxx + syy[i] + C2;
-                    let map = (a1 * a2) / (b1 * b2);
-                    s += f64::from(map);
-                    if want_grad {
-                        let inv = 1.0 / (b1 * b2);
-                        let d_sxx = -map / b2;
-                        let d_sxy = 2.0 * a1 * inv;
-                        let d_mu = 2.0 * mu_y * a2 * inv - map * 2.0 * mu_x / b1;
-                        mx[i] = d_mu - 2.0 * mu_x * d_sxx - mu_y * d_sxy;
-                        exx[i] = d_sxx;
-                        exy[i] = d_sxy;
+        p_mu.par_chunks_mut(row)
+            .zip(p_xx.par_chunks_mut(row))
+            .zip(p_xy.par_chunks_mut(row))
+            .enumerate()
+            .map_init(
+                || vec![0.0_f32; 5 * row],
+                |scratch, (r, ((d_mu, d_xx), d_xy))| {
+                    let span = sp.map[r];
+                    // Every pixel outside the span has SSIM exactly 1.
+                    let mut s = (3 * (w - span.len())) as f64;
+                    if span.is_empty() {
+                        return s;
                     }
-                }
-                s
-            })
+                    let cols = 3 * span.lo..3 * span.hi;
+                    let mut v: [&mut [f32]; 5] = {
+                        let (a, rest) = scratch.split_at_mut(row);
+                        let (b, rest) = rest.split_at_mut(row);
+                        let (c, rest) = rest.split_at_mut(row);
+                        let (d, e) = rest.split_at_mut(row);
+                        [a, b, c, d, e]
+                    };
+                    for (q, out) in v.iter_mut().enumerate() {
+                        vertical(
+                            &sums[q],
+                            r,
+                            h,
+                            row,
+                            span,
+                            &sp.sums,
+                            &mut out[cols.clone()],
+                            taps,
+                        );
+                    }
+                    let [mx, my, exx, eyy, exy] = v.each_ref().map(|b| &b[cols.clone()]);
+                    for (j, i) in cols.clone().enumerate() {
+                        let (mu_x, mu_y) = (mx[j], my[j]);
+                        let sxx = exx[j] - mu_x * mu_x;
+                        let syy = eyy[j] - mu_y * mu_y;
+                        let sxy = exy[j] - mu_x * mu_y;
+                        let a1 = 2.0 * mu_x * mu_y + C1;
+                        let a2 = 2.0 * sxy + C2;
+                        let b1 = mu_x * mu_x + mu_y * mu_y + C1;
+                        let b2 = sxx + syy + C2;
+                        let map = (a1 * a2) / (b1 * b2);
+                        s += f64::from(map);
+                        if want_grad {
+                            let inv = 1.0 / (b1 * b2);
+                            let g_sxx = -map / b2;
+                            let g_sxy = 2.0 * a1 * inv;
+                            let g_mu = 2.0 * mu_y * a2 * inv - map * 2.0 * mu_x / b1;
+                            d_mu[i] = g_mu - 2.0 * mu_x * g_sxx - mu_y * g_sxy;
+                            d_xx[i] = g_sxx;
+                            d_xy[i] = g_sxy;
+                        }
+                    }
+                    s
+                },
+            )
             .collect_into_vec(&mut self.row_sums);
         let sum: f64 = self.row_sums.iter().sum();
+
         if let Some((scale, out)) = grad {
             assert_eq!(
                 out.len(),
@@ -218,77 +298,128 @@ impl Ssim {
             );
             // The adjoint of a zero-padded "same" convolution with a symmetric kernel is the
             // same convolution, so each partial is blurred back onto the pixels of x.
-            blur_in_place(&mut self.mu_x, &mut self.tmp, w, h, &taps);
-            blur_in_place(&mut self.e_xx, &mut self.tmp, w, h, &taps);
-            blur_in_place(&mut self.e_xy, &mut self.tmp, w, h, &taps);
+            let [h_mu, h_xx, h_xy, _, _] = &mut self.sums;
+            let partials = &self.partials;
+            h_mu.par_chunks_mut(row)
+                .zip(h_xx.par_chunks_mut(row))
+                .zip(h_xy.par_chunks_mut(row))
+                .enumerate()
+                .for_each(|(r, ((o_mu, o_xx), o_xy))| {
+                    let (valid, out) = (sp.map[r], sp.partial_sums[r]);
+                    if out.is_empty() {
+                        return;
+                    }
+                    let rows = r * row..(r + 1) * row;
+                    horizontal(&partials[0][rows.clone()], valid, o_mu, out, taps);
+                    horizontal(&partials[1][rows.clone()], valid, o_xx, out, taps);
+                    horizontal(&partials[2][rows], valid, o_xy, out, taps);
+                });
+            let sums = &self.sums;
             let k = scale / n as f32;
             out.par_chunks_mut(row)
                 .zip(x.par_chunks(row).zip(y.par_chunks(row)))
-                .zip(self.mu_x.par_chunks(row))
-                .zip(self.e_xx.par_chunks(row).zip(self.e_xy.par_chunks(row)))
-                .for_each(|(((o, (xr, yr)), dm), (dxx, dxy))| {
-                    for i in 0..o.len() {
-                        o[i] += k * (dm[i] + 2.0 * xr[i] * dxx[i] + yr[i] * dxy[i]);
-                    }
-                });
+                .enumerate()
+                .for_each_init(
+                    || vec![0.0_f32; 3 * row],
+                    |scratch, (r, (o, (xr, yr)))| {
+                        let span = sp.grad[r];
+                        if span.is_empty() {
+                            return;
+                        }
+                        let cols = 3 * span.lo..3 * span.hi;
+                        let (a, rest) = scratch.split_at_mut(row);
+                        let (b, c) = rest.split_at_mut(row);
+                        let mut v = [a, b, c];
+                        for (q, buf) in v.iter_mut().enumerate() {
+                            let dst = &mut buf[cols.clone()];
+                            vertical(&sums[q], r, h, row, span, &sp.partial_sums, dst, taps);
+                        }
+                        let [dm, dxx, dxy] = v.each_ref().map(|b| &b[cols.clone()]);
+                        for (j, i) in cols.enumerate() {
+                            o[i] += k * (dm[j] + 2.0 * xr[i] * dxx[j] + yr[i] * dxy[j]);
+                        }
+                    },
+                );
         }
         sum / n as f64
     }
-}
 
-/// Zero-padded separable Gaussian blur of an interleaved RGB image: `src` → `dst`, `tmp` scratch.
-fn blur(src: &[f32], dst: &mut [f32], tmp: &mut [f32], w: usize, h: usize, taps: &[f32; TAPS]) {
-    horizontal(src, tmp, w, taps);
-    vertical(tmp, dst, w, h, taps);
-}
-
-/// [`blur`] whose result replaces its input.
-fn blur_in_place(buf: &mut [f32], tmp: &mut [f32], w: usize, h: usize, taps: &[f32; TAPS]) {
-    horizontal(buf, tmp, w, taps);
-    vertical(tmp, buf, w, h, taps);
-}
-
-/// Horizontal pass: along a row, neighbouring pixels of the same channel are 3 floats apart, so
-/// each tap is one shifted, contiguous multiply-add over the row (vectorisable); samples beyond
-/// the border are zero.
-fn horizontal(src: &[f32], dst: &mut [f32], w: usize, taps: &[f32; TAPS]) {
-    let row = 3 * w;
-    dst.par_chunks_mut(row)
-        .zip(src.par_chunks(row))
-        .for_each(|(d, s)| {
-            d.fill(0.0);
-            for (k, &g) in taps.iter().enumerate() {
-                let off = 3 * k as isize - 3 * RADIUS as isize;
-                let lo = (-off).max(0) as usize;
-                let hi = (row as isize - off).min(row as isize).max(0) as usize;
-                if lo >= hi {
-                    continue;
+    /// Fills the per-row spans for images `x` and `y`.
+    fn find_spans(&mut self, x: &[f32], y: &[f32]) {
+        let w = self.width;
+        let sp = &mut self.spans;
+        x.par_chunks(3 * w)
+            .zip(y.par_chunks(3 * w))
+            .map(|(xr, yr)| {
+                let differs = |p: usize| xr[3 * p..3 * p + 3] != yr[3 * p..3 * p + 3];
+                match (0..w).find(|&p| differs(p)) {
+                    Some(lo) => {
+                        let hi = (lo..w).rev().find(|&p| differs(p)).map_or(lo, |p| p) + 1;
+                        Span { lo, hi }
+                    }
+                    None => Span::EMPTY,
                 }
-                let src_lo = (lo as isize + off) as usize;
-                let src_hi = (hi as isize + off) as usize;
-                for (o, &v) in d[lo..hi].iter_mut().zip(&s[src_lo..src_hi]) {
-                    *o += g * v;
-                }
-            }
-        });
+            })
+            .collect_into_vec(&mut sp.differ);
+        spread(&sp.differ, RADIUS, w, &mut sp.map);
+        spread(&sp.map, 0, w, &mut sp.sums);
+        sp.partial_sums.clear();
+        sp.partial_sums
+            .extend(sp.map.iter().map(|s| s.widen(RADIUS, w)));
+        spread(&sp.partial_sums, 0, w, &mut sp.grad);
+    }
 }
 
-/// Vertical pass: each output row is the weighted sum of up to 11 input rows.
-fn vertical(src: &[f32], dst: &mut [f32], w: usize, h: usize, taps: &[f32; TAPS]) {
-    let row = 3 * w;
-    dst.par_chunks_mut(row).enumerate().for_each(|(y, d)| {
-        d.fill(0.0);
-        for (k, &g) in taps.iter().enumerate() {
-            let yy = y as isize + k as isize - RADIUS as isize;
-            if yy < 0 || yy >= h as isize {
-                continue;
-            }
-            let s = &src[yy as usize * row..(yy as usize + 1) * row];
-            for (o, &v) in d.iter_mut().zip(s) {
-                *o += g * v;
-            }
+/// Horizontal pass over the columns of `out` in one interleaved RGB row: `dst[c] = Σₜ gₜ ·
+/// src[c + t − R]` per channel, with `src` taken as zero outside `valid` (and the row). Along a
+/// row, neighbouring pixels of a channel are 3 floats apart, so each tap is one shifted,
+/// contiguous multiply-add (vectorisable).
+fn horizontal(src: &[f32], valid: Span, dst: &mut [f32], out: Span, taps: &[f32; TAPS]) {
+    dst[3 * out.lo..3 * out.hi].fill(0.0);
+    for (t, &g) in taps.iter().enumerate() {
+        // Output column c reads source column c + t − R, which must lie in `valid`.
+        let lo = out.lo.max((valid.lo + RADIUS).saturating_sub(t));
+        let hi = out.hi.min((valid.hi + RADIUS).saturating_sub(t));
+        if lo >= hi {
+            continue;
         }
-    });
+        let (s_lo, s_hi) = (lo + t - RADIUS, hi + t - RADIUS);
+        for (o, &v) in dst[3 * lo..3 * hi].iter_mut().zip(&src[3 * s_lo..3 * s_hi]) {
+            *o += g * v;
+        }
+    }
+}
+
+/// Vertical pass for row `r` over the columns of `out`: the weighted sum of the rows of `src`
+/// (H rows of `row` floats) up to `RADIUS` away, each taken as zero outside the image and
+/// outside its own span in `filled` (where its horizontal sums were written). `dst` holds the
+/// span's 3·len floats.
+#[allow(clippy::too_many_arguments)]
+fn vertical(
+    src: &[f32],
+    r: usize,
+    h: usize,
+    row: usize,
+    out: Span,
+    filled: &[Span],
+    dst: &mut [f32],
+    taps: &[f32; TAPS],
+) {
+    dst.fill(0.0);
+    for (t, &g) in taps.iter().enumerate() {
+        let Some(rr) = (r + t).checked_sub(RADIUS).filter(|&rr| rr < h) else {
+            continue;
+        };
+        let cols = out.intersect(filled[rr]);
+        if cols.is_empty() {
+            continue;
+        }
+        let s = &src[rr * row + 3 * cols.lo..rr * row + 3 * cols.hi];
+        let d = &mut dst[3 * (cols.lo - out.lo)..3 * (cols.hi - out.lo)];
+        for (o, &v) in d.iter_mut().zip(s) {
+            *o += g * v;
+        }
+    }
 }
 
 #[cfg(test)]
@@ -377,9 +508,8 @@ mod tests {
         let (w, h) = (13, 9);
         let (x, y) = random_pair(w, h, 3);
         let mut s = Ssim::new(w as u32, h as u32);
-        let target = s.target(&y);
         let mut grad = vec![0.0f32; x.len()];
-        s.evaluate(&x, &y, &target, Some((1.0, &mut grad)));
+        s.evaluate(&x, &y, Some((1.0, &mut grad)));
         let xd: Vec<f64> = x.iter().map(|&v| f64::from(v)).collect();
         let yd: Vec<f64> = y.iter().map(|&v| f64::from(v)).collect();
         let n = x.len() as f64;
@@ -404,13 +534,139 @@ mod tests {
         let (w, h) = (12, 12);
         let (x, y) = random_pair(w, h, 4);
         let mut s = Ssim::new(w as u32, h as u32);
-        let t = s.target(&y);
         let mut g1 = vec![0.0f32; x.len()];
-        s.evaluate(&x, &y, &t, Some((1.0, &mut g1)));
+        s.evaluate(&x, &y, Some((1.0, &mut g1)));
         let mut g2 = vec![1.0f32; x.len()];
-        s.evaluate(&x, &y, &t, Some((-0.5, &mut g2)));
+        s.evaluate(&x, &y, Some((-0.5, &mut g2)));
         for (a, b) in g1.iter().zip(&g2) {
             assert!((1.0 - 0.5 * a - b).abs() < 1e-6);
         }
+    }
+
+    /// The exact gradient of [`reference_ssim`] with respect to x, in f64, from direct 2D
+    /// window sums over the whole image (no spans, no separable passes).
+    fn reference_grad(x: &[f64], y: &[f64], w: usize, h: usize) -> Vec<f64> {
+        let g: Vec<f64> = (0..TAPS)
+            .map(|i| {
+                let d = i as f64 - RADIUS as f64;
+                (-d * d / (2.0 * 1.5 * 1.5)).exp()
+            })
+            .collect();
+        let gs: f64 = g.iter().sum();
+        let (c1, c2) = (0.01f64.powi(2), 0.03f64.powi(2));
+        let n = (3 * w * h) as f64;
+        let mut grad = vec![0.0; x.len()];
+        let g = &g;
+        let window = |px: usize, py: usize| {
+            (0..TAPS * TAPS).filter_map(move |k| {
+                let sx = (px + k % TAPS).checked_sub(RADIUS)?;
+                let sy = (py + k / TAPS).checked_sub(RADIUS)?;
+                (sx < w && sy < h).then(|| (sy * w + sx, g[k % TAPS] * g[k / TAPS] / (gs * gs)))
+            })
+        };
+        for py in 0..h {
+            for px in 0..w {
+                for c in 0..3 {
+                    let (mut mx, mut my, mut exx, mut eyy, mut exy) = (0.0, 0.0, 0.0, 0.0, 0.0);
+                    for (p, wt) in window(px, py) {
+                        let (a, b) = (x[3 * p + c], y[3 * p + c]);
+                        mx += wt * a;
+                        my += wt * b;
+                        exx += wt * a * a;
+                        eyy += wt * b * b;
+                        exy += wt * a * b;
+                    }
+                    let (sxx, syy, sxy) = (exx - mx * mx, eyy - my * my, exy - mx * my);
+                    let (a1, a2) = (2.0 * mx * my + c1, 2.0 * sxy + c2);
+                    let (b1, b2) = (mx * mx + my * my + c1, sxx + syy + c2);
+                    let map = a1 * a2 / (b1 * b2);
+                    // ∂map/∂μx, ∂map/∂σx², ∂map/∂σxy, then chained to each window pixel's x.
+                    let d_mu = 2.0 * my * a2 / (b1 * b2) - map * 2.0 * mx / b1;
+                    let d_sxx = -map / b2;
+                    let d_sxy = 2.0 * a1 / (b1 * b2);
+                    for (p, wt) in window(px, py) {
+                        let (a, b) = (x[3 * p + c], y[3 * p + c]);
+                        let dx = d_mu + d_sxx * (2.0 * a - 2.0 * mx) + d_sxy * (b - my);
+                        grad[3 * p + c] += wt * dx / n;
+                    }
+                }
+            }
+        }
+        grad
+    }
+
+    /// Images equal on a flat, non-black background except for a patch at the right border and
+    /// one pixel in the top-left corner: the spans skip most of the image, and the value and
+    /// every pixel's gradient still match the dense f64 computation.
+    #[test]
+    fn images_equal_outside_small_regions_match_the_dense_computation() {
+        let (w, h) = (41, 33);
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(5);
+        let y: Vec<f32> = (0..3 * w * h).map(|i| [0.7, 0.2, 0.45][i % 3]).collect();
+        let mut x = y.clone();
+        for py in 12..20 {
+            for px in 35..41 {
+                for c in 0..3 {
+                    x[3 * (py * w + px) + c] = rng.random::<f32>();
+                }
+            }
+        }
+        x[1] = 0.9;
+        let mut s = Ssim::new(w as u32, h as u32);
+        let mut grad = vec![0.0f32; x.len()];
+        let ours = s.evaluate(&x, &y, Some((1.0, &mut grad)));
+        let xd: Vec<f64> = x.iter().map(|&v| f64::from(v)).collect();
+        let yd: Vec<f64> = y.iter().map(|&v| f64::from(v)).collect();
+        let reference = reference_ssim(&xd, &yd, w, h);
+        assert!(
+            (ours - reference).abs() < 2e-6,
+            "ours {ours} reference {reference}"
+        );
+        assert!(reference < 0.995, "the images must differ");
+        let truth = reference_grad(&xd, &yd, w, h);
+        let n = x.len() as f64;
+        let scale = truth.iter().fold(0.0f64, |m, g| m.max(g.abs())) * n;
+        for (i, (&ours, &t)) in grad.iter().zip(&truth).enumerate() {
+            let err = (f64::from(ours) - t).abs() * n;
+            assert!(err < 1e-4 * scale, "value {i}: ours {ours} truth {t}");
+        }
+        // Far from both regions the gradient is exactly zero, not rounding noise.
+        let (px, py) = (15, 28);
+        assert_eq!(grad[3 * (py * w + px)], 0.0);
+        // The spans left most of the image out.
+        let mapped: usize = s.spans.map.iter().map(|sp| sp.len()).sum();
+        assert!(mapped < w * h / 2, "{mapped} of {} pixels mapped", w * h);
+    }
+
+    /// The f64 gradient reference agrees with finite differences of the f64 value.
+    #[test]
+    fn reference_gradient_matches_finite_differences() {
+        let (w, h) = (9, 8);
+        let (x, y) = random_pair(w, h, 6);
+        let xd: Vec<f64> = x.iter().map(|&v| f64::from(v)).collect();
+        let yd: Vec<f64> = y.iter().map(|&v| f64::from(v)).collect();
+        let g = reference_grad(&xd, &yd, w, h);
+        let eps = 1e-6;
+        for i in (0..xd.len()).step_by(5) {
+            let (mut p, mut m) = (xd.clone(), xd.clone());
+            p[i] += eps;
+            m[i] -= eps;
+            let fd = (reference_ssim(&p, &yd, w, h) - reference_ssim(&m, &yd, w, h)) / (2.0 * eps);
+            assert!(
+                (fd - g[i]).abs() < 1e-7,
+                "value {i}: fd {fd} analytic {}",
+                g[i]
+            );
+        }
+    }
+
+    #[test]
+    fn identical_images_do_no_work_and_give_zero_gradient() {
+        let (_, y) = random_pair(20, 17, 7);
+        let mut s = Ssim::new(20, 17);
+        let mut grad = vec![0.0f32; y.len()];
+        assert_eq!(s.evaluate(&y, &y, Some((1.0, &mut grad))), 1.0);
+        assert!(grad.iter().all(|&g| g == 0.0));
+        assert!(s.spans.map.iter().all(|sp| sp.is_empty()));
     }
 }

@@ -16,7 +16,6 @@ use crate::error::Error;
 use crate::loss::{Loss, alpha_l1};
 use crate::metrics::psnr_from_mse;
 use crate::schedule::{Pace, camera_extent, exponential_lr, scale_steps, sh_degree_at};
-use crate::ssim::SsimTarget;
 use crate::state::ParamState;
 use crate::strategy::{DensifyStrategy, InriaDensify, RefineContext, RefineReport};
 use crate::view::{View, composite_in_place, composite_into};
@@ -29,6 +28,8 @@ const MAX_SCALE_OF_EXTENT: f32 = 10.0;
 const MAX_OPACITY_LOGIT: f32 = 20.0;
 /// Opacity given to a splat whose parameters became non-finite and are reset (Inria's initial 0.1).
 const RESET_OPACITY: f32 = 0.1;
+/// Pixels per parallel task when a target is composited over a random background.
+const COMPOSITE_CHUNK: usize = 16 * 1024;
 
 /// Figures of one step.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -459,7 +460,7 @@ impl Trainer {
             .warmup
             .is_some_and(|w| iteration <= self.scheduled(w.until));
         let li = usize::from(coarse && self.levels.len() > 1);
-        let level = &mut self.levels[li];
+        let level = &self.levels[li];
         let cam = level.cameras[vi];
         let (w, h) = (cam.width, cam.height);
         if self
@@ -476,27 +477,23 @@ impl Trainer {
         // Target: the photo, or the photo over this step's random background.
         let view = &level.views[vi];
         let random_bg = matches!(self.config.background, Background::Random);
-        let (target_img, fresh_target) = match (&view.mask, random_bg) {
+        let target_img = match (&view.mask, random_bg) {
             (Some(mask), true) => {
                 self.composite.resize(view.image.len(), 0.0);
-                composite_into(&mut self.composite, &view.image, mask, bg.to_array());
-                (&self.composite[..], Some(loss.target(&self.composite)))
+                self.composite
+                    .par_chunks_mut(3 * COMPOSITE_CHUNK)
+                    .zip(view.image.par_chunks(3 * COMPOSITE_CHUNK))
+                    .zip(mask.par_chunks(COMPOSITE_CHUNK))
+                    .for_each(|((o, img), m)| composite_into(o, img, m, bg.to_array()));
+                &self.composite[..]
             }
-            _ => {
-                if level.targets[vi].is_none() {
-                    level.targets[vi] = Some(loss.target(&view.image));
-                }
-                (&view.image[..], None)
-            }
+            _ => &view.image[..],
         };
 
         let t0 = Instant::now();
         let out = self.rasterizer.forward(&self.state.splats, &cam, &opts);
         let t1 = Instant::now();
-        let Some(target) = fresh_target.as_ref().or(level.targets[vi].as_ref()) else {
-            unreachable!("the SSIM target was just computed")
-        };
-        let value = loss.evaluate(&out.rgb, target_img, target, self.config.ssim_weight);
+        let value = loss.evaluate(&out.rgb, target_img, self.config.ssim_weight);
         let mut total = value.total;
         let use_alpha = self.config.alpha_loss_weight > 0.0 && view.mask.is_some();
         if let (true, Some(mask)) = (use_alpha, &view.mask) {
@@ -877,12 +874,11 @@ impl Trainer {
     }
 }
 
-/// Views at one resolution with their rasteriser cameras and cached SSIM statistics.
+/// Views at one resolution with their rasteriser cameras.
 #[derive(Debug)]
 struct Level {
     views: Arc<Vec<View>>,
     cameras: Vec<RenderCamera>,
-    targets: Vec<Option<SsimTarget>>,
 }
 
 impl Level {
@@ -899,12 +895,7 @@ impl Level {
                 })
             })
             .collect::<Result<_, _>>()?;
-        let targets = vec![None; views.len()];
-        Ok(Self {
-            views,
-            cameras,
-            targets,
-        })
+        Ok(Self { views, cameras })
     }
 }
 
