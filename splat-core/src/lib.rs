@@ -56,7 +56,7 @@ mod tiles;
 
 pub use camera::RenderCamera;
 pub use error::Error;
-pub use rasterize::{MAX_PIXELS, Rasterizer, RenderStats, has_avx2};
+pub use rasterize::{MAX_PIXELS, RasterPhases, Rasterizer, RenderStats, has_avx2};
 pub use render::{RenderOptions, RenderOutput, SplatGrads};
 pub use sh::num_sh_coeffs;
 pub use splats::{

@@ -66,13 +66,20 @@ impl ViewConsts {
     }
 }
 
-/// Every intermediate of one splat's projection, kept for the backward pass.
+/// One splat's projection: what the tiles draw, where, and what the backward pass chains through.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Intermediates {
     pub out: Projected,
     /// Tile rectangle [x0, x1) × [y0, y1).
     pub rect: [u32; 4],
     pub radius: u32,
+    pub chain: Chain,
+}
+
+/// The intermediates of a splat's projection that its backward needs, kept from the forward
+/// pass so the backward does not project again.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct Chain {
     quat: Quat,
     quat_norm: f32,
     quat_zero: bool,
@@ -274,21 +281,23 @@ pub(crate) fn project(splats: &Splats, i: usize, v: &ViewConsts) -> Result<Inter
         },
         rect,
         radius: radius_f as u32,
-        quat,
-        quat_norm,
-        quat_zero,
-        scale,
-        rot,
-        mc,
-        p_cam,
-        u: Vec2::new(ux, uy),
-        clamped,
-        t_rows,
-        comp,
-        sigmoid_o,
-        dir,
-        dir_len,
-        color_raw,
+        chain: Chain {
+            quat,
+            quat_norm,
+            quat_zero,
+            scale,
+            rot,
+            mc,
+            p_cam,
+            u: Vec2::new(ux, uy),
+            clamped,
+            t_rows,
+            comp,
+            sigmoid_o,
+            dir,
+            dir_len,
+            color_raw,
+        },
     })
 }
 
@@ -303,6 +312,15 @@ pub(crate) struct ProjectedGrad {
 }
 
 impl ProjectedGrad {
+    /// Whether every component is zero (no pixel passed the splat any gradient).
+    pub fn is_zero(&self) -> bool {
+        self.xy == [0.0; 2]
+            && self.conic == [0.0; 3]
+            && self.opacity == 0.0
+            && self.color == [0.0; 3]
+            && self.depth == 0.0
+    }
+
     pub fn add(&mut self, o: &Self) {
         for k in 0..2 {
             self.xy[k] += o.xy[k];
@@ -345,7 +363,7 @@ pub(crate) fn project_backward(
     splats: &Splats,
     i: usize,
     v: &ViewConsts,
-    it: &Intermediates,
+    it: &Chain,
     g: &ProjectedGrad,
     image_size: (u32, u32),
     d_sh: &mut [[f32; 3]],

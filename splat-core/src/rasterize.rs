@@ -1,10 +1,12 @@
 //! The forward pass: project, bin into tiles, composite each tile front to back in parallel.
 
+use std::time::{Duration, Instant};
+
 use glam::Vec3;
 use rayon::prelude::*;
 
 use crate::constants::{MAX_ALPHA, MIN_ALPHA, MIN_TRANSMITTANCE};
-use crate::project::{Cull, ProjectedGrad, ViewConsts, project};
+use crate::project::{Chain, Cull, ProjectedGrad, ViewConsts, project};
 use crate::projected::Projected;
 use crate::tiles::{Bins, Falloff, HALF_ROWS, LANES, RowSpans, TILE_PIXELS, TILE_SIZE};
 use crate::{Error, RenderCamera, RenderOptions, RenderOutput, Splats};
@@ -34,6 +36,25 @@ pub struct RenderStats {
     pub contributions: u64,
 }
 
+/// Wall time of each phase of the last forward and the last backward pass, for benchmarks.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RasterPhases {
+    /// Projection of every splat (covariance, conic, extent, SH colour).
+    pub project: Duration,
+    /// Depth sort and binning into tile lists.
+    pub bin: Duration,
+    /// Front-to-back compositing of every tile.
+    pub composite: Duration,
+    /// Tile-major buffers to the row-major output images.
+    pub resolve: Duration,
+    /// Back-to-front tile walks writing one gradient record per (tile, splat) pair.
+    pub backward_tiles: Duration,
+    /// The records summed per splat.
+    pub backward_sum: Duration,
+    /// Each splat's sum chained through projection, covariance and SH to its parameters.
+    pub backward_chain: Duration,
+}
+
 /// A reusable CPU rasteriser: buffers grow to the largest view seen and are then reused, so the
 /// per-view loop does not allocate once warm.
 #[derive(Debug, Default)]
@@ -41,6 +62,8 @@ pub struct Rasterizer {
     pub(crate) proj: Vec<Projected>,
     pub(crate) rects: Vec<[u32; 4]>,
     pub(crate) radii: Vec<u32>,
+    /// What each visible splat's backward chains through, from the projection.
+    pub(crate) chain: Vec<Chain>,
     pub(crate) visible: Vec<bool>,
     non_finite: Vec<bool>,
     pub(crate) bins: Bins,
@@ -53,6 +76,7 @@ pub struct Rasterizer {
     pub(crate) px_last: Vec<u32>,
     pub(crate) output: RenderOutput,
     pub(crate) stats: RenderStats,
+    pub(crate) phases: RasterPhases,
     /// (splat count, width, height) of the last forward pass.
     pub(crate) last_view: Option<(usize, u32, u32)>,
     pub(crate) pair_grads: Vec<ProjectedGrad>,
@@ -111,6 +135,12 @@ impl Rasterizer {
     #[must_use]
     pub fn stats(&self) -> RenderStats {
         self.stats
+    }
+
+    /// Returns the wall time of each phase of the last forward and backward passes.
+    #[must_use]
+    pub fn phases(&self) -> RasterPhases {
+        self.phases
     }
 
     /// Returns each splat's screen radius in pixels from the last forward pass (0 when culled).
@@ -178,10 +208,14 @@ impl Rasterizer {
         Self::check_view_size(cam.width, cam.height)?;
         let n = splats.len();
         let v = ViewConsts::new(cam, opts, splats);
+        let t0 = Instant::now();
         self.project_all(splats, &v);
+        let t1 = Instant::now();
         self.bins
             .build(&self.proj, &self.rects, &self.visible, v.tiles_x, v.tiles_y);
+        let t2 = Instant::now();
         let (evaluations, contributions) = self.composite(cam, v.tiles_x, v.tiles_y);
+        let t3 = Instant::now();
         self.stats = RenderStats {
             visible: self.visible.iter().filter(|&&b| b).count(),
             culled_non_finite: self.non_finite.iter().filter(|&&b| b).count(),
@@ -190,6 +224,10 @@ impl Rasterizer {
             contributions,
         };
         self.resolve(cam, v.tiles_x, opts.background);
+        self.phases.project = t1 - t0;
+        self.phases.bin = t2 - t1;
+        self.phases.composite = t3 - t2;
+        self.phases.resolve = t3.elapsed();
         self.last_view = Some((n, cam.width, cam.height));
         Ok(&self.output)
     }
@@ -199,21 +237,24 @@ impl Rasterizer {
         self.proj.resize(n, Projected::default());
         self.rects.resize(n, [0; 4]);
         self.radii.resize(n, 0);
+        self.chain.resize(n, Chain::default());
         self.visible.resize(n, false);
         self.non_finite.resize(n, false);
         self.proj
             .par_iter_mut()
             .zip(self.rects.par_iter_mut())
             .zip(self.radii.par_iter_mut())
+            .zip(self.chain.par_iter_mut())
             .zip(self.visible.par_iter_mut())
             .zip(self.non_finite.par_iter_mut())
             .enumerate()
             .for_each(
-                |(i, ((((p, r), rad), vis), nf))| match project(splats, i, v) {
+                |(i, (((((p, r), rad), ch), vis), nf))| match project(splats, i, v) {
                     Ok(it) => {
                         *p = it.out;
                         *r = it.rect;
                         *rad = it.radius;
+                        *ch = it.chain;
                         *vis = true;
                         *nf = false;
                     }

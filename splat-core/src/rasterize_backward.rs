@@ -8,10 +8,12 @@
 //! Every floating-point sum therefore happens in an order that does not depend on the thread
 //! count or scheduling: gradients are bit-for-bit identical for any number of threads.
 
+use std::time::Instant;
+
 use rayon::prelude::*;
 
 use crate::constants::{MAX_ALPHA, MIN_ALPHA};
-use crate::project::{ProjectedGrad, ViewConsts, project, project_backward};
+use crate::project::{ProjectedGrad, ViewConsts, project_backward};
 use crate::rasterize::{
     DEPTH_MIN_ALPHA, PREFETCH_AHEAD, lanes_mut, prefetch, tile_extent, tile_major_index,
 };
@@ -93,6 +95,7 @@ impl Rasterizer {
             width: w,
             tiles_x: v.tiles_x,
         };
+        let t0 = Instant::now();
         self.pair_grads.clear();
         self.pair_grads
             .resize(self.bins.pairs(), ProjectedGrad::default());
@@ -109,14 +112,28 @@ impl Rasterizer {
             this.backward_tile(tile, &this.bins.list[s..e], cam, &pg, out, avx2);
         });
 
-        // Sum the pair records per splat in tile order (deterministic).
+        let t1 = Instant::now();
+        // Sum the pair records per splat in tile order (deterministic). Each task owns a range
+        // of splats and picks their records out of the whole list, so every splat's sum runs
+        // in the same (tile) order whatever the number of tasks.
         self.splat_grads.clear();
         self.splat_grads
             .resize(splats.len(), ProjectedGrad::default());
-        for (&sid, g) in self.bins.list.iter().zip(&self.pair_grads) {
-            self.splat_grads[sid as usize].add(g);
-        }
-
+        let tasks = rayon::current_num_threads().max(1);
+        let per_task = splats.len().div_ceil(tasks).max(1);
+        let (list, pair_grads) = (&self.bins.list, &self.pair_grads);
+        self.splat_grads
+            .par_chunks_mut(per_task)
+            .enumerate()
+            .for_each(|(task, sums)| {
+                let first = task * per_task;
+                for (&sid, g) in list.iter().zip(pair_grads) {
+                    if let Some(sum) = (sid as usize).checked_sub(first).and_then(|j| sums.get_mut(j)) {
+                        sum.add(g);
+                    }
+                }
+            });
+        let t2 = Instant::now();
         let k = splats.coeffs_per_splat();
         let size = (cam.width, cam.height);
         let this = &*self;
@@ -130,13 +147,20 @@ impl Rasterizer {
             .zip(grads.screen_grad_norm.par_iter_mut())
             .enumerate()
             .for_each(|(i, (((((gm, gs), gr), go), gsh), gn))| {
-                if !this.visible[i] {
+                // A splat with no gradient record (hidden behind others in every tile it is
+                // listed in) would add exact zeros: skip its chain.
+                if !this.visible[i] || this.splat_grads[i].is_zero() {
                     return;
                 }
-                let Ok(it) = project(splats, i, &v) else {
-                    return;
-                };
-                let p = project_backward(splats, i, &v, &it, &this.splat_grads[i], size, gsh);
+                let p = project_backward(
+                    splats,
+                    i,
+                    &v,
+                    &this.chain[i],
+                    &this.splat_grads[i],
+                    size,
+                    gsh,
+                );
                 *gm += p.mean;
                 *gs += p.log_scale;
                 for (r, d) in gr.iter_mut().zip(p.rotation) {
@@ -145,6 +169,9 @@ impl Rasterizer {
                 *go += p.opacity_logit;
                 *gn += p.screen_norm;
             });
+        self.phases.backward_tiles = t1 - t0;
+        self.phases.backward_sum = t2 - t1;
+        self.phases.backward_chain = t2.elapsed();
     }
 
     /// Walks one tile back to front: the AVX2 instantiation where the CPU has it, else the

@@ -13,7 +13,7 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 use serde::{Deserialize, Serialize};
-use splat_core::{Rasterizer, RenderCamera, SplatGrads, Splats};
+use splat_core::{RasterPhases, Rasterizer, RenderCamera, SplatGrads, Splats};
 use splat_init::{InitConfig, InitMode, SurfacePoints};
 use splat_train::{Trainer, View};
 
@@ -65,6 +65,28 @@ pub struct RasterFigure {
     pub forward_backward_ms: f64,
     /// Estimated useful GFLOP/s of forward + backward ([`FLOPS_PER_PAIR_FORWARD_BACKWARD`]).
     pub gflops: f64,
+    /// Median of each phase over the repeats, ms: projection, binning, compositing, resolve
+    /// (forward), then tile walks, per-splat sums, chain to the parameters (backward).
+    pub phases_ms: PhaseTimes,
+}
+
+/// Median wall time of each rasteriser phase, ms (see `splat_core::RasterPhases`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct PhaseTimes {
+    /// Projection.
+    pub project: f64,
+    /// Depth sort and binning.
+    pub bin: f64,
+    /// Tile compositing.
+    pub composite: f64,
+    /// Output images.
+    pub resolve: f64,
+    /// Backward tile walks.
+    pub backward_tiles: f64,
+    /// Per-splat sums of the pair records.
+    pub backward_sum: f64,
+    /// Chain to the splat parameters.
+    pub backward_chain: f64,
 }
 
 /// Mean milliseconds a training step spends in each phase.
@@ -228,7 +250,8 @@ pub fn run_bench(
             .num_threads(threads.max(1))
             .build()
             .map_err(|e| stage(&e))?;
-        let (fwd, fwd_bwd, evals) = pool.install(|| time_raster(&splats, &camera, repeats));
+        let (fwd, fwd_bwd, evals, phases_ms) =
+            pool.install(|| time_raster(&splats, &camera, repeats));
         pixel_evaluations = evals;
         avx2 = Rasterizer::new().uses_avx2();
         raster.push(RasterFigure {
@@ -236,6 +259,7 @@ pub fn run_bench(
             forward_ms: ms(fwd),
             forward_backward_ms: ms(fwd_bwd),
             gflops: evals as f64 * FLOPS_PER_PAIR_FORWARD_BACKWARD / fwd_bwd.as_secs_f64() / 1e9,
+            phases_ms,
         });
     }
     let serial_fraction = match (raster.first(), raster.last()) {
@@ -307,13 +331,13 @@ pub fn amdahl_serial_fraction(a: f64, b: f64, r: f64) -> f64 {
     }
 }
 
-/// Median forward, median forward + backward, and the pairs evaluated, over `repeats` each
-/// (after one untimed pass that sizes the buffers).
+/// Median forward, median forward + backward, the pairs evaluated, and each phase's median,
+/// over `repeats` each (after one untimed pass that sizes the buffers).
 fn time_raster(
     splats: &Splats,
     camera: &RenderCamera,
     repeats: usize,
-) -> (Duration, Duration, u64) {
+) -> (Duration, Duration, u64, PhaseTimes) {
     let opts = splat_core::RenderOptions::default();
     let mut r = Rasterizer::new();
     let mut grads = SplatGrads::zeros_like(splats);
@@ -323,6 +347,7 @@ fn time_raster(
     let evaluations = r.stats().pixel_evaluations;
     let mut fwd = Vec::with_capacity(repeats);
     let mut both = Vec::with_capacity(repeats);
+    let mut phases = Vec::with_capacity(repeats);
     for _ in 0..repeats {
         let t = Instant::now();
         r.forward(splats, camera, &opts);
@@ -331,8 +356,21 @@ fn time_raster(
         r.forward(splats, camera, &opts);
         r.backward(splats, camera, &opts, &d_rgb, None, None, &mut grads);
         both.push(t.elapsed());
+        phases.push(r.phases());
     }
-    (median(&mut fwd), median(&mut both), evaluations)
+    let mut phase = |get: fn(&RasterPhases) -> Duration| {
+        ms(median(&mut phases.iter().map(get).collect::<Vec<_>>()))
+    };
+    let phase_times = PhaseTimes {
+        project: phase(|p| p.project),
+        bin: phase(|p| p.bin),
+        composite: phase(|p| p.composite),
+        resolve: phase(|p| p.resolve),
+        backward_tiles: phase(|p| p.backward_tiles),
+        backward_sum: phase(|p| p.backward_sum),
+        backward_chain: phase(|p| p.backward_chain),
+    };
+    (median(&mut fwd), median(&mut both), evaluations, phase_times)
 }
 
 fn median(d: &mut [Duration]) -> Duration {

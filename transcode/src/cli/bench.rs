@@ -163,6 +163,17 @@ fn print_report(r: &BenchReport, opts: &BenchOptions) {
             "  {:3} thread(s): forward {:8.1} ms, forward + backward {:8.1} ms (≈ {:.1} GFLOP/s)",
             f.threads, f.forward_ms, f.forward_backward_ms, f.gflops
         );
+        let p = &f.phases_ms;
+        println!(
+            "      forward: project {:.1}, bin {:.1}, composite {:.1}, resolve {:.1} ms; backward: tiles {:.1}, sums {:.1}, chain {:.1} ms",
+            p.project,
+            p.bin,
+            p.composite,
+            p.resolve,
+            p.backward_tiles,
+            p.backward_sum,
+            p.backward_chain
+        );
     }
     if let Some(f) = r.serial_fraction {
         println!(
