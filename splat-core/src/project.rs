@@ -160,6 +160,7 @@ impl Cov2 {
 }
 
 /// Projects splat `i`; returns its intermediates or why it is culled.
+#[inline(always)]
 pub(crate) fn project(splats: &Splats, i: usize, v: &ViewConsts) -> Result<Intermediates, Cull> {
     let mean = splats.means[i];
     let ls = splats.log_scales[i];

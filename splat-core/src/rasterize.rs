@@ -240,29 +240,27 @@ impl Rasterizer {
         self.chain.resize(n, Chain::default());
         self.visible.resize(n, false);
         self.non_finite.resize(n, false);
+        let avx2 = self.use_avx2();
+        const CHUNK: usize = PROJECT_CHUNK;
         self.proj
-            .par_iter_mut()
-            .zip(self.rects.par_iter_mut())
-            .zip(self.radii.par_iter_mut())
-            .zip(self.chain.par_iter_mut())
-            .zip(self.visible.par_iter_mut())
-            .zip(self.non_finite.par_iter_mut())
+            .par_chunks_mut(CHUNK)
+            .zip(self.rects.par_chunks_mut(CHUNK))
+            .zip(self.radii.par_chunks_mut(CHUNK))
+            .zip(self.chain.par_chunks_mut(CHUNK))
+            .zip(self.visible.par_chunks_mut(CHUNK))
+            .zip(self.non_finite.par_chunks_mut(CHUNK))
             .enumerate()
             .for_each(
-                |(i, (((((p, r), rad), ch), vis), nf))| match project(splats, i, v) {
-                    Ok(it) => {
-                        *p = it.out;
-                        *r = it.rect;
-                        *rad = it.radius;
-                        *ch = it.chain;
-                        *vis = true;
-                        *nf = false;
-                    }
-                    Err(c) => {
-                        *rad = 0;
-                        *vis = false;
-                        *nf = c == Cull::NonFinite;
-                    }
+                |(c, (((((proj, rects), radii), chain), visible), non_finite))| {
+                    let out = ProjectOut {
+                        proj,
+                        rects,
+                        radii,
+                        chain,
+                        visible,
+                        non_finite,
+                    };
+                    project_chunk(splats, v, c * CHUNK, out, avx2);
                 },
             );
     }
@@ -351,6 +349,62 @@ pub fn has_avx2() -> bool {
     #[cfg(not(target_arch = "x86_64"))]
     {
         false
+    }
+}
+
+/// Splats per projection task.
+const PROJECT_CHUNK: usize = 1024;
+
+/// One chunk's slices of the projection outputs, from splat `first` on.
+struct ProjectOut<'a> {
+    proj: &'a mut [Projected],
+    rects: &'a mut [[u32; 4]],
+    radii: &'a mut [u32],
+    chain: &'a mut [Chain],
+    visible: &'a mut [bool],
+    non_finite: &'a mut [bool],
+}
+
+/// Projects the splats of one chunk: the AVX2 instantiation where the CPU has it (its floor,
+/// ceil and square roots become single instructions instead of library calls), else the
+/// portable one; the results are bit-identical (those operations are exact or correctly
+/// rounded either way, and there is no FMA contraction).
+fn project_chunk(splats: &Splats, v: &ViewConsts, first: usize, out: ProjectOut<'_>, avx2: bool) {
+    #[cfg(target_arch = "x86_64")]
+    if avx2 {
+        // SAFETY: `avx2` is only true when `has_avx2()` is, so the CPU supports the enabled features.
+        #[allow(unsafe_code)]
+        return unsafe { project_chunk_avx2(splats, v, first, out) };
+    }
+    let _ = avx2;
+    project_chunk_impl(splats, v, first, out);
+}
+
+/// [`project_chunk_impl`] compiled with AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn project_chunk_avx2(splats: &Splats, v: &ViewConsts, first: usize, out: ProjectOut<'_>) {
+    project_chunk_impl(splats, v, first, out);
+}
+
+#[inline(always)]
+fn project_chunk_impl(splats: &Splats, v: &ViewConsts, first: usize, o: ProjectOut<'_>) {
+    for j in 0..o.proj.len() {
+        match project(splats, first + j, v) {
+            Ok(it) => {
+                o.proj[j] = it.out;
+                o.rects[j] = it.rect;
+                o.radii[j] = it.radius;
+                o.chain[j] = it.chain;
+                o.visible[j] = true;
+                o.non_finite[j] = false;
+            }
+            Err(c) => {
+                o.radii[j] = 0;
+                o.visible[j] = false;
+                o.non_finite[j] = c == Cull::NonFinite;
+            }
+        }
     }
 }
 

@@ -128,7 +128,10 @@ impl Rasterizer {
             .for_each(|(task, sums)| {
                 let first = task * per_task;
                 for (&sid, g) in list.iter().zip(pair_grads) {
-                    if let Some(sum) = (sid as usize).checked_sub(first).and_then(|j| sums.get_mut(j)) {
+                    if let Some(sum) = (sid as usize)
+                        .checked_sub(first)
+                        .and_then(|j| sums.get_mut(j))
+                    {
                         sum.add(g);
                     }
                 }
@@ -403,7 +406,8 @@ mod tests {
 
     use crate::{Rasterizer, RenderCamera, RenderOptions, SplatGrads, Splats};
 
-    /// Renders and differentiates `splats` with either instantiation of the tile loops.
+    /// Renders and differentiates `splats` with either instantiation of the projection and
+    /// tile loops.
     fn run(portable: bool, s: &Splats, cam: &RenderCamera, d_rgb: &[f32]) -> (Vec<u32>, Vec<u32>) {
         let mut r = Rasterizer::new();
         r.portable_only = portable;

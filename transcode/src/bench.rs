@@ -13,7 +13,7 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 
 use serde::{Deserialize, Serialize};
-use splat_core::{RasterPhases, Rasterizer, RenderCamera, SplatGrads, Splats};
+use splat_core::{RasterPhases, Rasterizer, RenderCamera, RenderStats, SplatGrads, Splats};
 use splat_init::{InitConfig, InitMode, SurfacePoints};
 use splat_train::{Trainer, View};
 
@@ -131,6 +131,8 @@ pub struct BenchReport {
     pub splats: usize,
     /// Evaluated (pixel, splat) pairs of the timed view's forward pass.
     pub pixel_evaluations: u64,
+    /// (tile, splat) pairs of the timed view's forward pass.
+    pub tile_pairs: u64,
     /// The rasteriser at each thread count.
     pub raster: Vec<RasterFigure>,
     /// Amdahl serial fraction of forward + backward from the fewest and most threads timed
@@ -241,6 +243,7 @@ pub fn run_bench(
     let camera = RenderCamera::try_from(&rig.train[0]).map_err(|e| stage(&e))?;
     let mut raster = Vec::new();
     let mut pixel_evaluations = 0;
+    let mut tile_pairs = 0;
     let mut avx2 = false;
     for &threads in &thread_counts {
         progress(&format!(
@@ -250,8 +253,10 @@ pub fn run_bench(
             .num_threads(threads.max(1))
             .build()
             .map_err(|e| stage(&e))?;
-        let (fwd, fwd_bwd, evals, phases_ms) =
+        let (fwd, fwd_bwd, stats, phases_ms) =
             pool.install(|| time_raster(&splats, &camera, repeats));
+        let evals = stats.pixel_evaluations;
+        tile_pairs = stats.pairs as u64;
         pixel_evaluations = evals;
         avx2 = Rasterizer::new().uses_avx2();
         raster.push(RasterFigure {
@@ -308,6 +313,7 @@ pub fn run_bench(
         init_s,
         splats: trainer.splats().len(),
         pixel_evaluations,
+        tile_pairs,
         raster,
         serial_fraction,
         step,
@@ -331,20 +337,20 @@ pub fn amdahl_serial_fraction(a: f64, b: f64, r: f64) -> f64 {
     }
 }
 
-/// Median forward, median forward + backward, the pairs evaluated, and each phase's median,
+/// Median forward, median forward + backward, the forward's counts, and each phase's median,
 /// over `repeats` each (after one untimed pass that sizes the buffers).
 fn time_raster(
     splats: &Splats,
     camera: &RenderCamera,
     repeats: usize,
-) -> (Duration, Duration, u64, PhaseTimes) {
+) -> (Duration, Duration, RenderStats, PhaseTimes) {
     let opts = splat_core::RenderOptions::default();
     let mut r = Rasterizer::new();
     let mut grads = SplatGrads::zeros_like(splats);
     let d_rgb = vec![1e-3_f32; 3 * (camera.width as usize) * (camera.height as usize)];
     r.forward(splats, camera, &opts);
     r.backward(splats, camera, &opts, &d_rgb, None, None, &mut grads);
-    let evaluations = r.stats().pixel_evaluations;
+    let stats = r.stats();
     let mut fwd = Vec::with_capacity(repeats);
     let mut both = Vec::with_capacity(repeats);
     let mut phases = Vec::with_capacity(repeats);
@@ -358,7 +364,7 @@ fn time_raster(
         both.push(t.elapsed());
         phases.push(r.phases());
     }
-    let mut phase = |get: fn(&RasterPhases) -> Duration| {
+    let phase = |get: fn(&RasterPhases) -> Duration| {
         ms(median(&mut phases.iter().map(get).collect::<Vec<_>>()))
     };
     let phase_times = PhaseTimes {
@@ -370,7 +376,7 @@ fn time_raster(
         backward_sum: phase(|p| p.backward_sum),
         backward_chain: phase(|p| p.backward_chain),
     };
-    (median(&mut fwd), median(&mut both), evaluations, phase_times)
+    (median(&mut fwd), median(&mut both), stats, phase_times)
 }
 
 fn median(d: &mut [Duration]) -> Duration {

@@ -152,9 +152,10 @@ fn print_report(r: &BenchReport, opts: &BenchOptions) {
     );
     println!("surface init to {} splats: {:8.2} s", r.splats, r.init_s);
     println!(
-        "rasteriser, {} splats at {}², {} evaluated pairs, {} loops:",
+        "rasteriser, {} splats at {}², {} (tile, splat) pairs, {} evaluated (pixel, splat) pairs, {} loops:",
         r.splats,
         opts.resolution,
+        r.tile_pairs,
         r.pixel_evaluations,
         if r.avx2 { "AVX2" } else { "portable" }
     );
