@@ -96,7 +96,8 @@ impl Rasterizer {
             tiles_x: v.tiles_x,
         };
         let t0 = Instant::now();
-        self.pair_grads.clear();
+        // Not zeroed: every tile walk writes each slot of its own range (zero where the splat
+        // passed no gradient), so stale records from the last view are all overwritten.
         self.pair_grads
             .resize(self.bins.pairs(), ProjectedGrad::default());
         let slots = SharedSlots(self.pair_grads.as_mut_ptr());
@@ -116,7 +117,6 @@ impl Rasterizer {
         // Sum the pair records per splat in tile order (deterministic). Each task owns a range
         // of splats and picks their records out of the whole list, so every splat's sum runs
         // in the same (tile) order whatever the number of tasks.
-        self.splat_grads.clear();
         self.splat_grads
             .resize(splats.len(), ProjectedGrad::default());
         let tasks = rayon::current_num_threads().max(1);
@@ -127,6 +127,7 @@ impl Rasterizer {
             .enumerate()
             .for_each(|(task, sums)| {
                 let first = task * per_task;
+                sums.fill(ProjectedGrad::default());
                 for (&sid, g) in list.iter().zip(pair_grads) {
                     if let Some(sum) = (sid as usize)
                         .checked_sub(first)

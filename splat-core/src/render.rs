@@ -1,6 +1,7 @@
 //! Rasteriser options, outputs and gradients.
 
 use glam::Vec3;
+use rayon::prelude::*;
 
 use crate::Splats;
 
@@ -72,22 +73,22 @@ impl SplatGrads {
         g
     }
 
-    /// Resizes to `splats` and sets every gradient to zero, reusing the allocations.
+    /// Resizes to `splats` and sets every gradient to zero, reusing the allocations (zeroed in
+    /// parallel: at 250 k splats of degree 3 these are 60 MB, rewritten before every backward).
     pub fn reset(&mut self, splats: &Splats) {
         let n = splats.len();
-        let fill = |v: &mut Vec<_>, len, zero| {
-            v.clear();
-            v.resize(len, zero);
-        };
-        fill(&mut self.means, n, Vec3::ZERO);
-        fill(&mut self.log_scales, n, Vec3::ZERO);
-        self.rotations.clear();
-        self.rotations.resize(n, [0.0; 4]);
-        self.opacity_logits.clear();
-        self.opacity_logits.resize(n, 0.0);
-        self.sh.clear();
-        self.sh.resize(splats.sh.len(), [0.0; 3]);
-        self.screen_grad_norm.clear();
-        self.screen_grad_norm.resize(n, 0.0);
+        zero_fill(&mut self.means, n, Vec3::ZERO);
+        zero_fill(&mut self.log_scales, n, Vec3::ZERO);
+        zero_fill(&mut self.rotations, n, [0.0; 4]);
+        zero_fill(&mut self.opacity_logits, n, 0.0);
+        zero_fill(&mut self.sh, splats.sh.len(), [0.0; 3]);
+        zero_fill(&mut self.screen_grad_norm, n, 0.0);
     }
+}
+
+/// Sets `v` to `len` copies of `zero`, the kept part in parallel.
+fn zero_fill<T: Copy + Send + Sync>(v: &mut Vec<T>, len: usize, zero: T) {
+    v.truncate(len);
+    v.par_chunks_mut(1 << 14).for_each(|c| c.fill(zero));
+    v.resize(len, zero);
 }
