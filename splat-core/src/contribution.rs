@@ -4,21 +4,23 @@
 //! the training views it says how much of the images each splat carries, which is what a
 //! pruning budget ranks splats by.
 //!
-//! This is a second walk over the tiles of a forward pass, scalar and not on any training step's
-//! path: it runs once per view when a model is scored, so clarity wins over the tile loops'
-//! vector layout. It evaluates the same alphas as the forward pass (the same falloff, the same
-//! 1/255 and transmittance tests), so the weights of a pixel sum to its rendered alpha.
+//! This is a second walk over the tiles of a forward pass with the forward's own tile loop
+//! (`rasterize::walk_tile`), which hands each splat's weights to a sink here: the same alphas,
+//! the same 1/255 and transmittance tests, so the weights of a pixel sum to its rendered alpha.
+//! A splat budget runs it once per training view for every model it scores, so its speed counts
+//! (a scalar per-pixel walk took 7× a forward pass at paper scale).
 
 use rayon::prelude::*;
 
-use crate::constants::{MAX_ALPHA, MIN_ALPHA, MIN_TRANSMITTANCE};
-use crate::rasterize::tile_extent;
-use crate::tiles::{TILE_SIZE, falloff_power, fast_exp};
+use crate::rasterize::{TileScratch, WeightSink, walk_tile};
+use crate::tiles::LANES;
 use crate::{Error, Rasterizer, RenderCamera, RenderOptions, Splats};
 
 impl Rasterizer {
-    /// Renders `splats` from `cam` and adds each splat's summed blending weight over the view's
-    /// pixels to `sums[i]` (f64, so totals over many views stay exact to the last pixel).
+    /// Walks the tiles of `splats` seen from `cam` as a forward pass does and adds each splat's
+    /// summed blending weight over the view's pixels to `sums[i]` (f64, so totals over many
+    /// views stay exact to the last pixel). No image is resolved: [`Rasterizer::output`] keeps
+    /// the last forward pass's, and a backward pass after this runs its forward pass again.
     ///
     /// The weights of one pixel sum to its alpha, so `sums` grows by the view's total alpha. The
     /// result does not depend on the thread count: each tile's weights are gathered on its own
@@ -41,16 +43,23 @@ impl Rasterizer {
                 splats.len()
             )));
         }
-        self.try_forward(splats, cam, opts)?;
-        let tiles_x = cam.width.div_ceil(TILE_SIZE);
+        // Projection and tile lists only: the walk below composites each tile itself.
+        self.project_and_bin(splats, cam, opts)?;
         let tiles = self.bins.offsets.len().saturating_sub(1);
-        let (bins, proj) = (&self.bins, &self.proj);
+        let this = &*self;
         let per_tile: Vec<Vec<(u32, f64)>> = (0..tiles)
             .into_par_iter()
-            .map(|tile| {
-                let list = &bins.list[bins.offsets[tile]..bins.offsets[tile + 1]];
-                let (x0, y0, tw, th) = tile_extent(tile, tiles_x, cam.width, cam.height);
-                tile_weights(list, proj, (x0, y0, tw, th))
+            .map_init(TileScratch::new, |scratch, tile| {
+                let list = &this.bins.list[this.bins.offsets[tile]..this.bins.offsets[tile + 1]];
+                let mut sums = TileSums {
+                    weights: vec![0.0; list.len()],
+                };
+                walk_tile(this, tile, cam, scratch, &mut sums);
+                list.iter()
+                    .zip(sums.weights)
+                    .filter(|&(_, w)| w > 0.0)
+                    .map(|(&sid, w)| (sid, w))
+                    .collect()
             })
             .collect();
         for (sid, w) in per_tile.into_iter().flatten() {
@@ -60,44 +69,20 @@ impl Rasterizer {
     }
 }
 
-/// The summed weights of the splats of one tile's depth-ordered `list`, pixel by pixel with the
-/// forward pass's tests: (splat, weight) for every splat that contributed.
-fn tile_weights(
-    list: &[u32],
-    proj: &[crate::projected::Projected],
-    (x0, y0, tw, th): (i32, i32, i32, i32),
-) -> Vec<(u32, f64)> {
-    let mut weights = vec![0.0_f64; list.len()];
-    for ly in 0..th {
-        for lx in 0..tw {
-            let mut t = 1.0_f32;
-            for (k, &sid) in list.iter().enumerate() {
-                let p = &proj[sid as usize];
-                let dx = p.xy[0] - (x0 + lx) as f32;
-                let dy = p.xy[1] - (y0 + ly) as f32;
-                let [a, b, c] = p.conic;
-                let power = falloff_power(a, b, c, dx, dy);
-                if power > 0.0 {
-                    continue;
-                }
-                let alpha = (p.opacity * fast_exp(power)).min(MAX_ALPHA);
-                if alpha < MIN_ALPHA {
-                    continue;
-                }
-                let next_t = t * (1.0 - alpha);
-                if next_t < MIN_TRANSMITTANCE {
-                    break;
-                }
-                weights[k] += f64::from(alpha * t);
-                t = next_t;
-            }
+/// The summed weights of each entry of one tile's list, added pixel by pixel in row-major order
+/// (f64, so a splat's total over many pixels and views stays exact to the last pixel).
+struct TileSums {
+    weights: Vec<f64>,
+}
+
+impl WeightSink for TileSums {
+    #[inline(always)]
+    fn add(&mut self, k: usize, w: &[f32; LANES]) {
+        let sum = &mut self.weights[k];
+        for &x in w {
+            *sum += f64::from(x);
         }
     }
-    list.iter()
-        .zip(weights)
-        .filter(|&(_, w)| w > 0.0)
-        .map(|(&sid, w)| (sid, w))
-        .collect()
 }
 
 #[cfg(test)]
@@ -156,7 +141,8 @@ mod tests {
         let mut sums = vec![0.0; splats.len()];
         r.accumulate_contributions(&splats, &cam, &opts, &mut sums)
             .unwrap();
-        let alpha: f64 = r.output().alpha.iter().map(|&a| f64::from(a)).sum();
+        let rendered = r.forward(&splats, &cam, &opts);
+        let alpha: f64 = rendered.alpha.iter().map(|&a| f64::from(a)).sum();
         let total: f64 = sums.iter().sum();
         assert!(alpha > 100.0, "the view should be well covered: {alpha}");
         assert!(
@@ -164,6 +150,61 @@ mod tests {
             "contributions {total} against alpha {alpha}"
         );
         assert!(sums.iter().all(|&w| w >= 0.0));
+    }
+
+    /// Each splat's weight against a direct per-pixel walk (every pixel of a tile over its
+    /// whole list, in f64, with the forward pass's thresholds), written independently of the
+    /// vector tile loop.
+    #[test]
+    fn each_splat_matches_a_direct_per_pixel_walk() {
+        use crate::constants::{MAX_ALPHA, MIN_ALPHA, MIN_TRANSMITTANCE};
+        let splats = random_splats(300, 9);
+        let cam = camera(47);
+        let opts = RenderOptions::default();
+        let mut r = Rasterizer::new();
+        let mut sums = vec![0.0; splats.len()];
+        r.accumulate_contributions(&splats, &cam, &opts, &mut sums)
+            .unwrap();
+        r.forward(&splats, &cam, &opts);
+        let tiles_x = cam.width.div_ceil(crate::TILE_SIZE);
+        let mut truth = vec![0.0_f64; splats.len()];
+        for tile in 0..r.bins.offsets.len() - 1 {
+            let list = &r.bins.list[r.bins.offsets[tile]..r.bins.offsets[tile + 1]];
+            let (x0, y0, tw, th) =
+                crate::rasterize::tile_extent(tile, tiles_x, cam.width, cam.height);
+            for py in y0..y0 + th {
+                for px in x0..x0 + tw {
+                    let mut t = 1.0_f64;
+                    for &sid in list {
+                        let p = &r.proj[sid as usize];
+                        let dx = f64::from(p.xy[0]) - f64::from(px);
+                        let dy = f64::from(p.xy[1]) - f64::from(py);
+                        let [a, b, c] = p.conic.map(f64::from);
+                        let power = -0.5 * (a * dx * dx + c * dy * dy) - b * dx * dy;
+                        if power > 0.0 {
+                            continue;
+                        }
+                        let alpha = (f64::from(p.opacity) * power.exp()).min(f64::from(MAX_ALPHA));
+                        if alpha < f64::from(MIN_ALPHA) {
+                            continue;
+                        }
+                        if t * (1.0 - alpha) < f64::from(MIN_TRANSMITTANCE) {
+                            break;
+                        }
+                        truth[sid as usize] += alpha * t;
+                        t *= 1.0 - alpha;
+                    }
+                }
+            }
+        }
+        let total: f64 = truth.iter().sum();
+        assert!(total > 50.0, "the view should be well covered: {total}");
+        for (i, (&ours, &want)) in sums.iter().zip(&truth).enumerate() {
+            assert!(
+                (ours - want).abs() <= 1e-4 * want.max(1e-3),
+                "splat {i}: {ours} against {want}"
+            );
+        }
     }
 
     /// One splat alone: its contribution is its alpha image's sum. A second, identical splat
@@ -186,7 +227,8 @@ mod tests {
         let mut one = [0.0];
         r.accumulate_contributions(&front, &cam, &opts, &mut one)
             .unwrap();
-        let alpha_front: Vec<f64> = r.output().alpha.iter().map(|&a| f64::from(a)).collect();
+        let rendered = r.forward(&front, &cam, &opts);
+        let alpha_front: Vec<f64> = rendered.alpha.iter().map(|&a| f64::from(a)).collect();
         let alone: f64 = alpha_front.iter().sum();
         assert!((one[0] - alone).abs() < 1e-6 * alone);
         let mut two = [0.0; 2];

@@ -204,15 +204,7 @@ impl Rasterizer {
         cam: &RenderCamera,
         opts: &RenderOptions,
     ) -> Result<&RenderOutput, Error> {
-        splats.validate()?;
-        Self::check_view_size(cam.width, cam.height)?;
-        let n = splats.len();
-        let v = ViewConsts::new(cam, opts, splats);
-        let t0 = Instant::now();
-        self.project_all(splats, &v);
-        let t1 = Instant::now();
-        self.bins
-            .build(&self.proj, &self.rects, &self.visible, v.tiles_x, v.tiles_y);
+        let v = self.project_and_bin(splats, cam, opts)?;
         let t2 = Instant::now();
         let (evaluations, contributions) = self.composite(cam, v.tiles_x, v.tiles_y);
         let t3 = Instant::now();
@@ -224,12 +216,33 @@ impl Rasterizer {
             contributions,
         };
         self.resolve(cam, v.tiles_x, opts.background);
-        self.phases.project = t1 - t0;
-        self.phases.bin = t2 - t1;
         self.phases.composite = t3 - t2;
         self.phases.resolve = t3.elapsed();
-        self.last_view = Some((n, cam.width, cam.height));
+        self.last_view = Some((splats.len(), cam.width, cam.height));
         Ok(&self.output)
+    }
+
+    /// The first half of a forward pass: checks the inputs, projects every splat and bins the
+    /// visible ones into tile lists. The compositing state is then stale, so `last_view` is
+    /// cleared until a forward pass completes (a backward pass would otherwise use it).
+    pub(crate) fn project_and_bin(
+        &mut self,
+        splats: &Splats,
+        cam: &RenderCamera,
+        opts: &RenderOptions,
+    ) -> Result<ViewConsts, Error> {
+        splats.validate()?;
+        Self::check_view_size(cam.width, cam.height)?;
+        self.last_view = None;
+        let v = ViewConsts::new(cam, opts, splats);
+        let t0 = Instant::now();
+        self.project_all(splats, &v);
+        let t1 = Instant::now();
+        self.bins
+            .build(&self.proj, &self.rects, &self.visible, v.tiles_x, v.tiles_y);
+        self.phases.project = t1 - t0;
+        self.phases.bin = t1.elapsed();
+        Ok(v)
     }
 
     fn project_all(&mut self, splats: &Splats, v: &ViewConsts) {
@@ -285,7 +298,8 @@ impl Rasterizer {
             .map(|(tile, (((t, d), rgb), last))| {
                 let list = &bins.list[bins.offsets[tile]..bins.offsets[tile + 1]];
                 let ext = tile_extent(tile, tiles_x, w, h);
-                composite_tile(list, proj, ext, TileOut { t, d, rgb, last }, avx2)
+                let o = TileOut { t, d, rgb, last };
+                composite_tile(list, proj, ext, o, &mut NoWeights, avx2)
             })
             .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1))
     }
@@ -408,37 +422,96 @@ fn project_chunk_impl(splats: &Splats, v: &ViewConsts, first: usize, o: ProjectO
     }
 }
 
+/// What a tile walk hands on of each splat's blending weights wᵢ = Tᵢ·αᵢ besides compositing
+/// them: nothing in the forward pass, their sums per splat in a contribution pass.
+pub(crate) trait WeightSink {
+    /// Takes the weights of one half-row of list entry `k`, lane by lane (0 where the splat
+    /// supplies nothing).
+    fn add(&mut self, k: usize, w: &[f32; LANES]);
+}
+
+/// The forward pass's sink: the weights are only composited (the calls compile to nothing).
+pub(crate) struct NoWeights;
+
+impl WeightSink for NoWeights {
+    #[inline(always)]
+    fn add(&mut self, _: usize, _: &[f32; LANES]) {}
+}
+
+/// Per-pixel compositing state of one tile, in tile-local arrays, for walks that keep none of it
+/// (a contribution pass).
+pub(crate) struct TileScratch {
+    t: [f32; TILE_PIXELS],
+    d: [f32; TILE_PIXELS],
+    rgb: [[f32; 3]; TILE_PIXELS],
+    last: [u32; TILE_PIXELS],
+}
+
+impl TileScratch {
+    pub(crate) fn new() -> Self {
+        Self {
+            t: [0.0; TILE_PIXELS],
+            d: [0.0; TILE_PIXELS],
+            rgb: [[0.0; 3]; TILE_PIXELS],
+            last: [0; TILE_PIXELS],
+        }
+    }
+}
+
+/// Composites one tile of a view whose projection and tile lists `r` holds into `scratch`,
+/// handing every splat's weights to `sink`.
+pub(crate) fn walk_tile<S: WeightSink>(
+    r: &Rasterizer,
+    tile: usize,
+    cam: &RenderCamera,
+    scratch: &mut TileScratch,
+    sink: &mut S,
+) {
+    let tiles_x = cam.width.div_ceil(TILE_SIZE);
+    let list = &r.bins.list[r.bins.offsets[tile]..r.bins.offsets[tile + 1]];
+    let ext = tile_extent(tile, tiles_x, cam.width, cam.height);
+    let o = TileOut {
+        t: &mut scratch.t,
+        d: &mut scratch.d,
+        rgb: &mut scratch.rgb,
+        last: &mut scratch.last,
+    };
+    composite_tile(list, &r.proj, ext, o, sink, r.use_avx2());
+}
+
 /// Composites one tile front to back: the AVX2 instantiation where the CPU has it, else the
 /// portable one. Both compute the same IEEE operations in the same order (no FMA contraction),
 /// so the images are bit-identical either way.
-fn composite_tile(
+fn composite_tile<S: WeightSink>(
     list: &[u32],
     proj: &[Projected],
     ext: (i32, i32, i32, i32),
     o: TileOut<'_>,
+    sink: &mut S,
     avx2: bool,
 ) -> (u64, u64) {
     #[cfg(target_arch = "x86_64")]
     if avx2 {
         // SAFETY: `avx2` is only true when `has_avx2()` is, so the CPU supports the enabled features.
         #[allow(unsafe_code)]
-        return unsafe { composite_tile_avx2(list, proj, ext, o) };
+        return unsafe { composite_tile_avx2(list, proj, ext, o, sink) };
     }
     let _ = avx2;
-    composite_tile_impl(list, proj, ext, o)
+    composite_tile_impl(list, proj, ext, o, sink)
 }
 
 /// [`composite_tile_impl`] compiled with AVX2 so LLVM turns each 8-lane half-row into one
 /// 256-bit vector op per step.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn composite_tile_avx2(
+fn composite_tile_avx2<S: WeightSink>(
     list: &[u32],
     proj: &[Projected],
     ext: (i32, i32, i32, i32),
     o: TileOut<'_>,
+    sink: &mut S,
 ) -> (u64, u64) {
-    composite_tile_impl(list, proj, ext, o)
+    composite_tile_impl(list, proj, ext, o, sink)
 }
 
 /// Composites one tile front to back (Inria `renderCUDA`), splat by splat over the 8-pixel
@@ -447,11 +520,12 @@ fn composite_tile_avx2(
 /// a mask and no branches, so it maps onto one SIMD vector. Returns the (pixel, splat)
 /// evaluations and contributions.
 #[inline(always)]
-fn composite_tile_impl(
+fn composite_tile_impl<S: WeightSink>(
     list: &[u32],
     proj: &[Projected],
     ext: (i32, i32, i32, i32),
     o: TileOut<'_>,
+    sink: &mut S,
 ) -> (u64, u64) {
     let (x0, y0, tw, th) = ext;
     let ts = TILE_SIZE as usize;
@@ -504,6 +578,7 @@ fn composite_tile_impl(
             let ll: &mut [u32; LANES] = lanes_mut(&mut last, base);
             let mut finished = 0;
             let mut contributed = 0;
+            let mut weights = [0.0_f32; LANES];
             for l in 0..LANES {
                 // G is 0 outside the span, so alpha fails the 1/255 test there.
                 let alpha = (p.opacity * g[l]).min(MAX_ALPHA);
@@ -514,6 +589,7 @@ fn composite_tile_impl(
                 let finish = valid & (next_t < MIN_TRANSMITTANCE);
                 let add = valid & !finish;
                 let w = if add { alpha * ti } else { 0.0 };
+                weights[l] = w;
                 rl[l] += w * p.color[0];
                 gl[l] += w * p.color[1];
                 bl[l] += w * p.color[2];
@@ -528,6 +604,7 @@ fn composite_tile_impl(
                 finished += u32::from(finish);
                 contributed += u32::from(add);
             }
+            sink.add(k, &weights);
             contributions += u64::from(contributed);
             done_count[hr] += finished;
             if done_count[hr] == LANES as u32 {

@@ -87,6 +87,9 @@ pub struct PhaseTimes {
     pub backward_sum: f64,
     /// Chain to the splat parameters.
     pub backward_chain: f64,
+    /// A contribution pass (forward plus each splat's summed blending weight), as the splat
+    /// budget runs once per training view when it scores a model.
+    pub contributions: f64,
 }
 
 /// Mean milliseconds a training step spends in each phase.
@@ -354,6 +357,8 @@ fn time_raster(
     let mut fwd = Vec::with_capacity(repeats);
     let mut both = Vec::with_capacity(repeats);
     let mut phases = Vec::with_capacity(repeats);
+    let mut contributions = Vec::with_capacity(repeats);
+    let mut sums = vec![0.0; splats.len()];
     for _ in 0..repeats {
         let t = Instant::now();
         r.forward(splats, camera, &opts);
@@ -363,6 +368,12 @@ fn time_raster(
         r.backward(splats, camera, &opts, &d_rgb, None, None, &mut grads);
         both.push(t.elapsed());
         phases.push(r.phases());
+        let t = Instant::now();
+        if r.accumulate_contributions(splats, camera, &opts, &mut sums)
+            .is_ok()
+        {
+            contributions.push(t.elapsed());
+        }
     }
     let phase = |get: fn(&RasterPhases) -> Duration| {
         ms(median(&mut phases.iter().map(get).collect::<Vec<_>>()))
@@ -375,6 +386,7 @@ fn time_raster(
         backward_tiles: phase(|p| p.backward_tiles),
         backward_sum: phase(|p| p.backward_sum),
         backward_chain: phase(|p| p.backward_chain),
+        contributions: ms(median(&mut contributions)),
     };
     (median(&mut fwd), median(&mut both), stats, phase_times)
 }
