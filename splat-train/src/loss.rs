@@ -106,19 +106,27 @@ impl Loss {
 pub fn alpha_l1(alpha: &[f32], mask: &[f32], weight: f32, d_alpha: &mut [f32]) -> f64 {
     let n = alpha.len();
     let k = weight / n as f32;
-    let mut sum = 0.0f64;
-    for ((d, &a), &m) in d_alpha.iter_mut().zip(alpha).zip(mask) {
-        let e = a - m;
-        sum += f64::from(e.abs());
-        *d = if e > 0.0 {
-            k
-        } else if e < 0.0 {
-            -k
-        } else {
-            0.0
-        };
-    }
-    sum / n as f64
+    // Partial sums per chunk, added in order so the value does not depend on scheduling.
+    let partials: Vec<f64> = d_alpha
+        .par_chunks_mut(4096)
+        .zip(alpha.par_chunks(4096).zip(mask.par_chunks(4096)))
+        .map(|(d, (a, m))| {
+            let mut sum = 0.0f64;
+            for ((d, &a), &m) in d.iter_mut().zip(a).zip(m) {
+                let e = a - m;
+                sum += f64::from(e.abs());
+                *d = if e > 0.0 {
+                    k
+                } else if e < 0.0 {
+                    -k
+                } else {
+                    0.0
+                };
+            }
+            sum
+        })
+        .collect();
+    partials.iter().sum::<f64>() / n as f64
 }
 
 #[cfg(test)]
