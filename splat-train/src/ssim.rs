@@ -470,6 +470,10 @@ mod tests {
         total / (3 * w * h) as f64
     }
 
+    fn f64s(v: &[f32]) -> Vec<f64> {
+        v.iter().map(|&x| f64::from(x)).collect()
+    }
+
     fn random_pair(w: usize, h: usize, seed: u64) -> (Vec<f32>, Vec<f32>) {
         let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
         let y: Vec<f32> = (0..3 * w * h).map(|_| rng.random::<f32>()).collect();
@@ -493,8 +497,8 @@ mod tests {
         let (x, y) = random_pair(w, h, 2);
         let mut s = Ssim::new(w as u32, h as u32);
         let ours = s.value(&x, &y);
-        let xd: Vec<f64> = x.iter().map(|&v| f64::from(v)).collect();
-        let yd: Vec<f64> = y.iter().map(|&v| f64::from(v)).collect();
+        let xd = f64s(&x);
+        let yd = f64s(&y);
         let reference = reference_ssim(&xd, &yd, w, h);
         assert!(
             (ours - reference).abs() < 2e-6,
@@ -510,8 +514,8 @@ mod tests {
         let mut s = Ssim::new(w as u32, h as u32);
         let mut grad = vec![0.0f32; x.len()];
         s.evaluate(&x, &y, Some((1.0, &mut grad)));
-        let xd: Vec<f64> = x.iter().map(|&v| f64::from(v)).collect();
-        let yd: Vec<f64> = y.iter().map(|&v| f64::from(v)).collect();
+        let xd = f64s(&x);
+        let yd = f64s(&y);
         let n = x.len() as f64;
         let eps = 1e-5;
         let mut max_rel = 0.0f64;
@@ -615,8 +619,8 @@ mod tests {
         let mut s = Ssim::new(w as u32, h as u32);
         let mut grad = vec![0.0f32; x.len()];
         let ours = s.evaluate(&x, &y, Some((1.0, &mut grad)));
-        let xd: Vec<f64> = x.iter().map(|&v| f64::from(v)).collect();
-        let yd: Vec<f64> = y.iter().map(|&v| f64::from(v)).collect();
+        let xd = f64s(&x);
+        let yd = f64s(&y);
         let reference = reference_ssim(&xd, &yd, w, h);
         assert!(
             (ours - reference).abs() < 2e-6,
@@ -643,8 +647,8 @@ mod tests {
     fn reference_gradient_matches_finite_differences() {
         let (w, h) = (9, 8);
         let (x, y) = random_pair(w, h, 6);
-        let xd: Vec<f64> = x.iter().map(|&v| f64::from(v)).collect();
-        let yd: Vec<f64> = y.iter().map(|&v| f64::from(v)).collect();
+        let xd = f64s(&x);
+        let yd = f64s(&y);
         let g = reference_grad(&xd, &yd, w, h);
         let eps = 1e-6;
         for i in (0..xd.len()).step_by(5) {
