@@ -474,6 +474,17 @@ mod tests {
         v.iter().map(|&x| f64::from(x)).collect()
     }
 
+    /// Asserts that `ours` (the SSIM of `x` against `y`) is within 2e-6 of the f64 direct
+    /// window sum, and returns that reference value.
+    fn checked_against_reference(ours: f64, x: &[f32], y: &[f32], w: usize, h: usize) -> f64 {
+        let reference = reference_ssim(&f64s(x), &f64s(y), w, h);
+        assert!(
+            (ours - reference).abs() < 2e-6,
+            "ours {ours} reference {reference}"
+        );
+        reference
+    }
+
     fn random_pair(w: usize, h: usize, seed: u64) -> (Vec<f32>, Vec<f32>) {
         let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
         let y: Vec<f32> = (0..3 * w * h).map(|_| rng.random::<f32>()).collect();
@@ -497,13 +508,7 @@ mod tests {
         let (x, y) = random_pair(w, h, 2);
         let mut s = Ssim::new(w as u32, h as u32);
         let ours = s.value(&x, &y);
-        let xd = f64s(&x);
-        let yd = f64s(&y);
-        let reference = reference_ssim(&xd, &yd, w, h);
-        assert!(
-            (ours - reference).abs() < 2e-6,
-            "ours {ours} reference {reference}"
-        );
+        let reference = checked_against_reference(ours, &x, &y, w, h);
         assert!(reference < 0.99, "test images must differ");
     }
 
@@ -619,14 +624,9 @@ mod tests {
         let mut s = Ssim::new(w as u32, h as u32);
         let mut grad = vec![0.0f32; x.len()];
         let ours = s.evaluate(&x, &y, Some((1.0, &mut grad)));
-        let xd = f64s(&x);
-        let yd = f64s(&y);
-        let reference = reference_ssim(&xd, &yd, w, h);
-        assert!(
-            (ours - reference).abs() < 2e-6,
-            "ours {ours} reference {reference}"
-        );
+        let reference = checked_against_reference(ours, &x, &y, w, h);
         assert!(reference < 0.995, "the images must differ");
+        let (xd, yd) = (f64s(&x), f64s(&y));
         let truth = reference_grad(&xd, &yd, w, h);
         let n = x.len() as f64;
         let scale = truth.iter().fold(0.0f64, |m, g| m.max(g.abs())) * n;
