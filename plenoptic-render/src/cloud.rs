@@ -99,19 +99,24 @@ impl<'a> PreparedCloud<'a> {
                     visible[rank as usize].store(true, Ordering::Relaxed);
                 }
             });
-        let viewer = view.center;
-        let colours: Vec<[f32; 3]> = self
-            .order
+        // Visible points as (index in the cloud, rank), shaded in the cloud's order: their
+        // per-camera colours (13 × 12 bytes a point at 8iVSLF's size) are then read forwards
+        // through memory. Read in rank (Morton) order they came from all over a 490 MB array,
+        // and the shading pass spent most of its time waiting for them (docs/benchmarks/views.md).
+        let mut by_index: Vec<(u32, u32)> = visible
             .par_iter()
-            .zip(&self.positions)
-            .zip(&visible)
-            .map(|((&i, &position), seen)| {
-                if !seen.load(Ordering::Relaxed) {
-                    return [0.0; 3];
-                }
+            .enumerate()
+            .filter(|(_, seen)| seen.load(Ordering::Relaxed))
+            .map(|(rank, _)| (self.order[rank], rank as u32))
+            .collect();
+        by_index.par_sort_unstable();
+        let viewer = view.center;
+        let shaded: Vec<[f32; 3]> = by_index
+            .par_iter()
+            .map(|&(i, _)| {
                 let i = i as usize;
                 interpolate(
-                    position,
+                    cloud.positions[i],
                     viewer,
                     &self.capture,
                     cloud.camera_colors_of(i),
@@ -120,6 +125,10 @@ impl<'a> PreparedCloud<'a> {
                 )
             })
             .collect();
+        let mut colours = vec![[0.0f32; 3]; cloud.len()];
+        for (&(_, rank), colour) in by_index.iter().zip(shaded) {
+            colours[rank as usize] = colour;
+        }
         Ok(resolve(&view, &zbuf, opts, |rank, _, _| {
             colours[rank as usize]
         }))
@@ -160,6 +169,11 @@ fn disc_radius(point_size: f32) -> f32 {
 /// Visibility pass for cubes of half-side `h` centred on `positions`: each pixel whose centre
 /// ray hits a cube records the entry depth (camera z) of the nearest hit and the cube's index.
 fn draw_cubes(positions: &[Vec3], view: &ViewCamera, h: f32, zbuf: &ZBuffer) {
+    draw_cubes_using(positions, view, h, zbuf, has_avx2());
+}
+
+/// [`draw_cubes`] with the AVX2 instantiation or without it.
+fn draw_cubes_using(positions: &[Vec3], view: &ViewCamera, h: f32, zbuf: &ZBuffer, avx2: bool) {
     let r = view.rotation;
     // Camera-space half-extents of a world-axis-aligned cube: |R|·(h, h, h).
     let extent = Vec3::new(
@@ -167,35 +181,91 @@ fn draw_cubes(positions: &[Vec3], view: &ViewCamera, h: f32, zbuf: &ZBuffer) {
         h * (r.x_axis.y.abs() + r.y_axis.y.abs() + r.z_axis.y.abs()),
         h * (r.x_axis.z.abs() + r.y_axis.z.abs() + r.z_axis.z.abs()),
     );
-    let w = view.width as usize;
+    let cubes = Cubes {
+        view,
+        h,
+        extent,
+        zbuf,
+    };
     positions
         .par_chunks(CHUNK)
         .enumerate()
-        .for_each(|(chunk, points)| {
-            for (j, &p) in points.iter().enumerate() {
-                let c = r * p + view.translation;
-                let Some((x0, x1, y0, y1)) = view.pixel_range(c - extent, c + extent) else {
-                    continue;
-                };
-                let rank = (chunk * CHUNK + j) as u32;
-                // Slab test in world axes, relative to the camera centre for precision.
-                let rel = p - view.center;
-                let (lo, hi) = (rel - h, rel + h);
-                for y in y0..=y1 {
-                    for x in x0..=x1 {
-                        let d = view.world_ray(x, y);
-                        let inv = d.recip();
-                        let t0 = lo * inv;
-                        let t1 = hi * inv;
-                        let near = t0.min(t1).max_element();
-                        let far = t0.max(t1).min_element();
-                        if near <= far && near > 0.0 {
-                            zbuf.insert(y as usize * w + x as usize, near, rank);
-                        }
+        .for_each(|(chunk, points)| cubes.draw(points, chunk * CHUNK, avx2));
+}
+
+/// What every cube of one view's visibility pass shares.
+struct Cubes<'a> {
+    view: &'a ViewCamera,
+    /// Half the cube's side.
+    h: f32,
+    /// Camera-space half-extents of the cube's bounding box.
+    extent: Vec3,
+    zbuf: &'a ZBuffer,
+}
+
+impl Cubes<'_> {
+    /// Draws the cubes centred on `points`, the first of rank `first`: the AVX2 instantiation
+    /// where the CPU has it (rounding and division become single instructions instead of
+    /// library calls), else the portable one; the same operations in the same order, so the
+    /// same bits either way.
+    fn draw(&self, points: &[Vec3], first: usize, avx2: bool) {
+        #[cfg(target_arch = "x86_64")]
+        if avx2 {
+            // SAFETY: `avx2` is only true when `has_avx2()` is, so the CPU has AVX2.
+            #[allow(unsafe_code)]
+            return unsafe { self.draw_avx2(points, first) };
+        }
+        let _ = avx2;
+        self.draw_portable(points, first);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn draw_avx2(&self, points: &[Vec3], first: usize) {
+        self.draw_portable(points, first);
+    }
+
+    #[inline(always)]
+    fn draw_portable(&self, points: &[Vec3], first: usize) {
+        let (view, h, extent) = (self.view, self.h, self.extent);
+        let w = view.width as usize;
+        for (j, &p) in points.iter().enumerate() {
+            let c = view.rotation * p + view.translation;
+            let Some((x0, x1, y0, y1)) = view.pixel_range(c - extent, c + extent) else {
+                continue;
+            };
+            let rank = (first + j) as u32;
+            // Slab test in world axes, relative to the camera centre for precision.
+            let rel = p - view.center;
+            let (lo, hi) = (rel - h, rel + h);
+            for y in y0..=y1 {
+                for x in x0..=x1 {
+                    let d = view.world_ray(x, y);
+                    let inv = d.recip();
+                    let t0 = lo * inv;
+                    let t1 = hi * inv;
+                    let near = t0.min(t1).max_element();
+                    let far = t0.max(t1).min_element();
+                    if near <= far && near > 0.0 {
+                        self.zbuf.insert(y as usize * w + x as usize, near, rank);
                     }
                 }
             }
-        });
+        }
+    }
+}
+
+/// Whether the AVX2 instantiations of the drawing loops can run on this CPU (detected at run
+/// time, so the binary runs on any x86-64; always false elsewhere).
+fn has_avx2() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx2")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
 }
 
 /// Visibility pass for view-aligned discs of radius `radius` at the point's depth, keyed by
@@ -315,6 +385,35 @@ mod tests {
                 }
             }
             assert!(inside > 100, "the sphere covers {inside} pixels only");
+        }
+    }
+
+    #[test]
+    fn avx2_and_portable_cube_passes_write_the_same_z_buffer() {
+        // A voxel sphere with a shifted, oblique camera (cubes straddling pixel centres, rays
+        // near axis-parallel at the image's middle) and cubes larger than a pixel.
+        let pts = voxel_sphere(30.0);
+        for (eye, w, h) in [
+            (DVec3::new(0.0, 0.0, 200.0), 200, 0.5),
+            (DVec3::new(170.0, 120.0, 190.0), 331, 0.5),
+            (DVec3::new(-90.0, 40.0, 50.0), 257, 1.7),
+        ] {
+            let cam = camera(eye, DVec3::new(0.3, -0.2, 0.1), w, w, 40.0);
+            let view = ViewCamera::new(&cam).unwrap();
+            let (portable, vector) = (ZBuffer::new(view.pixels()), ZBuffer::new(view.pixels()));
+            draw_cubes_using(&pts, &view, h, &portable, false);
+            draw_cubes_using(&pts, &view, h, &vector, has_avx2());
+            let mut covered = 0;
+            for pixel in 0..view.pixels() {
+                let (a, b) = (portable.get(pixel), vector.get(pixel));
+                assert_eq!(
+                    a.map(|(z, id)| (z.to_bits(), id)),
+                    b.map(|(z, id)| (z.to_bits(), id)),
+                    "pixel {pixel} seen from {eye}"
+                );
+                covered += usize::from(a.is_some());
+            }
+            assert!(covered > 1000, "the sphere covers {covered} pixels only");
         }
     }
 
