@@ -25,47 +25,92 @@ pub fn interpolate(
     main: [f32; 3],
     exponent: i32,
 ) -> [f32; 3] {
-    let view_dir = (viewer - point).normalize_or_zero();
-    let mut sum = [0.0f32; 3];
-    let mut total = 0.0f32;
-    for (camera, color) in cameras.iter().zip(colors) {
-        let w = weight((*camera - point).normalize_or_zero(), view_dir, exponent);
-        total += w;
-        for c in 0..3 {
-            sum[c] += w * color[c];
+    let [c] = interpolate_lanes([point], viewer, cameras, [colors], [main], exponent);
+    c
+}
+
+/// [`interpolate`] for `N` points at once, lane by lane: point `l` with its per-camera colours
+/// `colors[l]` and main colour `main[l]`. Every lane runs the same operations in the same
+/// order as a single point does (this is the one implementation; [`interpolate`] is its one
+/// lane), so the colours are the same bits; written as fixed-length loops over the lanes, a
+/// caller compiled for 8-wide vectors colours 8 points with each vector operation.
+#[inline(always)]
+#[must_use]
+pub fn interpolate_lanes<const N: usize>(
+    points: [Vec3; N],
+    viewer: Vec3,
+    cameras: &[Vec3],
+    colors: [&[[f32; 3]]; N],
+    main: [[f32; 3]; N],
+    exponent: i32,
+) -> [[f32; 3]; N] {
+    let view_dir = points.map(|p| (viewer - p).normalize_or_zero());
+    let pairs = colors.map(|c| c.len().min(cameras.len()));
+    let mut sum = [[0.0f32; 3]; N];
+    let mut total = [0.0f32; N];
+    for (k, &camera) in cameras.iter().enumerate() {
+        if pairs.iter().all(|&n| n <= k) {
+            break;
+        }
+        let mut cosine = [0.0f32; N];
+        for l in 0..N {
+            cosine[l] = (camera - points[l])
+                .normalize_or_zero()
+                .dot(view_dir[l])
+                .max(0.0);
+        }
+        let w = powi_lanes(cosine, exponent);
+        for l in 0..N {
+            // A lane whose colours have run out adds nothing (not even a zero).
+            if k < pairs[l] {
+                let color = colors[l][k];
+                total[l] += w[l];
+                for c in 0..3 {
+                    sum[l][c] += w[l] * color[c];
+                }
+            }
         }
     }
-    if total <= MIN_TOTAL_WEIGHT {
-        return main;
+    let mut out = main;
+    for l in 0..N {
+        if total[l] <= MIN_TOTAL_WEIGHT {
+            continue;
+        }
+        out[l] = sum[l].map(|s| s / total[l]);
     }
-    [sum[0] / total, sum[1] / total, sum[2] / total]
+    out
 }
 
 /// The weight of one camera from unit directions point→camera and point→viewer.
 #[must_use]
 pub fn weight(to_camera: Vec3, to_viewer: Vec3, exponent: i32) -> f32 {
-    powi(to_camera.dot(to_viewer).max(0.0), exponent)
+    let [w] = powi_lanes([to_camera.dot(to_viewer).max(0.0)], exponent);
+    w
 }
 
-/// `x` to the integer power `n` by repeated squaring, inlined. `f32::powi` with an exponent
-/// known only at run time is a call into the runtime library's `__powisf2` for every camera of
-/// every shaded point (3 % of a paper-scale run's reference views); this is the same
-/// square-and-multiply sequence, so the results are the same bits (tested against `powi`).
-#[inline]
-fn powi(mut x: f32, n: i32) -> f32 {
+/// `x` to the integer power `n` by repeated squaring, lane by lane, inlined. `f32::powi` with
+/// an exponent known only at run time is a call into the runtime library's `__powisf2` for
+/// every camera of every shaded point (3 % of a paper-scale run's reference views); this is the
+/// same square-and-multiply sequence, so the results are the same bits (tested against `powi`).
+#[inline(always)]
+fn powi_lanes<const N: usize>(mut x: [f32; N], n: i32) -> [f32; N] {
     let mut left = n.unsigned_abs();
-    let mut acc = 1.0_f32;
+    let mut acc = [1.0_f32; N];
     loop {
         if left & 1 == 1 {
-            acc *= x;
+            for l in 0..N {
+                acc[l] *= x[l];
+            }
         }
         left >>= 1;
         if left == 0 {
             break;
         }
-        x *= x;
+        for v in &mut x {
+            *v *= *v;
+        }
     }
-    if n < 0 { 1.0 / acc } else { acc }
+    if n < 0 { acc.map(|a| 1.0 / a) } else { acc }
 }
 
 #[cfg(test)]
@@ -78,7 +123,7 @@ mod tests {
         let mut x = 0.0_f32;
         while x <= 1.0 {
             for n in -3..=24 {
-                let (ours, std) = (powi(x, n), x.powi(n));
+                let ([ours], std) = (powi_lanes([x], n), x.powi(n));
                 assert!(
                     ours.to_bits() == std.to_bits() || (ours.is_nan() && std.is_nan()),
                     "{x}^{n}: {ours} against {std}"
@@ -86,8 +131,11 @@ mod tests {
             }
             x += 0.000_37;
         }
-        assert_eq!(powi(0.0, 0), 1.0);
-        assert_eq!(powi(0.5, 10).to_bits(), 0.5_f32.powi(10).to_bits());
+        assert_eq!(powi_lanes([0.0], 0), [1.0]);
+        assert_eq!(
+            powi_lanes([0.5], 10)[0].to_bits(),
+            0.5_f32.powi(10).to_bits()
+        );
     }
 
     #[test]
@@ -157,6 +205,64 @@ mod tests {
             DEFAULT_EXPONENT,
         );
         assert_eq!(c, [0.0, 0.5, 1.0]);
+    }
+
+    #[test]
+    fn lanes_colour_each_point_as_it_alone_is_coloured() {
+        // Eight points in one call, against eight one-point calls: points at a camera and at
+        // the viewer, one facing no camera, and colour lists of different lengths.
+        let cameras: Vec<Vec3> = (0..13)
+            .map(|i| {
+                let a = i as f32 * 0.48;
+                Vec3::new(a.cos() * 3000.0, (i % 3) as f32 * 400.0, a.sin() * 3000.0)
+            })
+            .collect();
+        let colors: Vec<[f32; 3]> = (0..13)
+            .map(|i| {
+                [
+                    i as f32 / 13.0,
+                    1.0 - i as f32 / 26.0,
+                    (i * 7 % 13) as f32 / 13.0,
+                ]
+            })
+            .collect();
+        let viewer = Vec3::new(100.0, 2500.0, -800.0);
+        let points = [
+            Vec3::new(1.0, 2.0, 3.0),
+            Vec3::new(-120.5, 44.25, 300.0),
+            cameras[4],
+            viewer,
+            Vec3::new(0.0, 9000.0, 0.0),
+            Vec3::new(511.0, -3.0, 17.5),
+            Vec3::new(-7.0, 0.0, -250.0),
+            Vec3::new(60.0, 61.0, 62.0),
+        ];
+        let lens = [13, 13, 13, 13, 13, 5, 0, 12];
+        let lists: [&[[f32; 3]]; 8] = std::array::from_fn(|l| &colors[..lens[l]]);
+        let mains: [[f32; 3]; 8] = std::array::from_fn(|l| [0.1 * l as f32, 0.5, 0.25]);
+        let lanes = interpolate_lanes(points, viewer, &cameras, lists, mains, DEFAULT_EXPONENT);
+        for l in 0..8 {
+            let alone = interpolate(points[l], viewer, &cameras, lists[l], mains[l], 10);
+            assert_eq!(
+                lanes[l].map(f32::to_bits),
+                alone.map(f32::to_bits),
+                "lane {l}"
+            );
+        }
+        // And against the formula written out in f64 for an ordinary lane.
+        let (p, v) = (points[1].as_dvec3(), viewer.as_dvec3());
+        let (mut sum, mut total) = ([0.0f64; 3], 0.0f64);
+        for (c, col) in cameras.iter().zip(&colors) {
+            let cos = (c.as_dvec3() - p).normalize().dot((v - p).normalize());
+            let w = cos.max(0.0).powi(10);
+            total += w;
+            for k in 0..3 {
+                sum[k] += w * f64::from(col[k]);
+            }
+        }
+        for k in 0..3 {
+            assert_relative_eq!(f64::from(lanes[1][k]), sum[k] / total, epsilon = 1e-5);
+        }
     }
 
     #[test]

@@ -6,7 +6,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use camera_model::Camera;
 use glam::Vec3;
 use plenoptic_io::PlenopticCloud;
-use plenoptic_io::view_color::interpolate;
+use plenoptic_io::view_color::interpolate_lanes;
 use rayon::prelude::*;
 
 use crate::camera::ViewCamera;
@@ -110,21 +110,18 @@ impl<'a> PreparedCloud<'a> {
             .map(|(rank, _)| (self.order[rank], rank as u32))
             .collect();
         by_index.par_sort_unstable();
-        let viewer = view.center;
-        let shaded: Vec<[f32; 3]> = by_index
-            .par_iter()
-            .map(|&(i, _)| {
-                let i = i as usize;
-                interpolate(
-                    cloud.positions[i],
-                    viewer,
-                    &self.capture,
-                    cloud.camera_colors_of(i),
-                    cloud.colors[i],
-                    opts.exponent,
-                )
-            })
-            .collect();
+        let shader = Shader {
+            cloud,
+            capture: &self.capture,
+            viewer: view.center,
+            exponent: opts.exponent,
+        };
+        let avx2 = has_avx2();
+        let mut shaded = vec![[0.0f32; 3]; by_index.len()];
+        shaded
+            .par_chunks_mut(CHUNK)
+            .zip(by_index.par_chunks(CHUNK))
+            .for_each(|(out, points)| shader.shade(points, out, avx2));
         let mut colours = vec![[0.0f32; 3]; cloud.len()];
         for (&(_, rank), colour) in by_index.iter().zip(shaded) {
             colours[rank as usize] = colour;
@@ -132,6 +129,57 @@ impl<'a> PreparedCloud<'a> {
         Ok(resolve(&view, &zbuf, opts, |rank, _, _| {
             colours[rank as usize]
         }))
+    }
+}
+
+/// What the shading of one view's visible points shares.
+struct Shader<'a> {
+    cloud: &'a PlenopticCloud,
+    capture: &'a [Vec3],
+    viewer: Vec3,
+    exponent: i32,
+}
+
+/// Points [`Shader::shade`] colours at once (one AVX2 vector of f32).
+const SHADE_LANES: usize = 8;
+
+impl Shader<'_> {
+    /// Colours the points `(index in the cloud, rank)` of `points` into `out`, [`SHADE_LANES`]
+    /// at a time: the AVX2 instantiation where the CPU has it, else the portable one (the
+    /// same operations either way, so the same bits).
+    fn shade(&self, points: &[(u32, u32)], out: &mut [[f32; 3]], avx2: bool) {
+        #[cfg(target_arch = "x86_64")]
+        if avx2 {
+            // SAFETY: `avx2` is only true when `has_avx2()` is, so the CPU has AVX2.
+            #[allow(unsafe_code)]
+            return unsafe { self.shade_avx2(points, out) };
+        }
+        let _ = avx2;
+        self.shade_portable(points, out);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn shade_avx2(&self, points: &[(u32, u32)], out: &mut [[f32; 3]]) {
+        self.shade_portable(points, out);
+    }
+
+    #[inline(always)]
+    fn shade_portable(&self, points: &[(u32, u32)], out: &mut [[f32; 3]]) {
+        let cloud = self.cloud;
+        for (group, out) in points.chunks(SHADE_LANES).zip(out.chunks_mut(SHADE_LANES)) {
+            // A short last group repeats its first point in the spare lanes.
+            let index = |l: usize| group.get(l).unwrap_or(&group[0]).0 as usize;
+            let colours = interpolate_lanes(
+                std::array::from_fn::<_, SHADE_LANES, _>(|l| cloud.positions[index(l)]),
+                self.viewer,
+                self.capture,
+                std::array::from_fn(|l| cloud.camera_colors_of(index(l))),
+                std::array::from_fn(|l| cloud.colors[index(l)]),
+                self.exponent,
+            );
+            out.copy_from_slice(&colours[..out.len()]);
+        }
     }
 }
 
