@@ -151,6 +151,85 @@ fn pca_normals_of_a_plane_are_its_normal() {
     }
 }
 
+/// `voxel_subsample` written plainly with hash maps of cell coordinates: the reference for the
+/// sorted-key version.
+fn voxel_subsample_by_hashing(points: &[Vec3], k: usize) -> Vec<usize> {
+    use std::collections::{HashMap, HashSet};
+    let (lo, hi) = crate::bounds(points);
+    let diag = (hi - lo).length().max(f32::MIN_POSITIVE);
+    let cell = |p: Vec3, h: f32| {
+        let c = ((p - lo) / h).floor();
+        [c.x as i32, c.y as i32, c.z as i32]
+    };
+    let (mut small, mut large) = (diag / 1e6, diag);
+    for _ in 0..30 {
+        let mid = (small * large).sqrt();
+        let count = points
+            .iter()
+            .map(|&p| cell(p, mid))
+            .collect::<HashSet<_>>()
+            .len();
+        if count > k {
+            small = mid;
+        } else {
+            large = mid;
+        }
+        if large / small < 1.01 {
+            break;
+        }
+    }
+    let mut cells: HashMap<[i32; 3], Vec<usize>> = HashMap::new();
+    for (i, &p) in points.iter().enumerate() {
+        cells.entry(cell(p, large)).or_default().push(i);
+    }
+    let mut picked: Vec<usize> = cells
+        .into_values()
+        .map(|m| {
+            let mean = m.iter().map(|&i| points[i]).sum::<Vec3>() / m.len() as f32;
+            *m.iter()
+                .min_by(|&&a, &&b| {
+                    points[a]
+                        .distance_squared(mean)
+                        .total_cmp(&points[b].distance_squared(mean))
+                })
+                .unwrap()
+        })
+        .collect();
+    picked.sort_unstable();
+    picked
+}
+
+#[test]
+fn voxel_subsample_picks_what_hashing_the_cells_picks() {
+    // Clustered points of a wide range of densities, a flat sheet and duplicates.
+    let mut pts = Vec::new();
+    let mut x = 0x2545_f491_u32;
+    let mut rnd = || {
+        x ^= x << 13;
+        x ^= x >> 17;
+        x ^= x << 5;
+        x as f32 / u32::MAX as f32
+    };
+    for c in 0..40 {
+        let centre = Vec3::new(rnd(), rnd(), rnd()) * 100.0;
+        let spread = 0.05 + c as f32 * 0.3;
+        for _ in 0..(50 + c * 20) {
+            pts.push(centre + Vec3::new(rnd() - 0.5, rnd() - 0.5, rnd() - 0.5) * spread);
+        }
+    }
+    pts.extend((0..500).map(|i| Vec3::new((i % 25) as f32 * 2.0, (i / 25) as f32 * 2.0, -20.0)));
+    pts.extend_from_slice(&pts[..100].to_vec());
+    for k in [1, 7, 150, 900, 5_000, pts.len() - 1] {
+        let ours = voxel_subsample(&pts, k);
+        assert_eq!(ours, voxel_subsample_by_hashing(&pts, k), "k = {k}");
+        assert!(
+            !ours.is_empty() && ours.len() < pts.len(),
+            "k = {k}: {}",
+            ours.len()
+        );
+    }
+}
+
 #[test]
 fn spacing_and_subsampling() {
     let pts = grid(40);
