@@ -25,12 +25,13 @@ pub fn interpolate(
     main: [f32; 3],
     exponent: i32,
 ) -> [f32; 3] {
-    let [c] = interpolate_lanes([point], viewer, cameras, [colors], [main], exponent);
+    let [c] = interpolate_lanes([point], [viewer], cameras, [colors], [main], exponent);
     c
 }
 
-/// [`interpolate`] for `N` points at once, lane by lane: point `l` with its per-camera colours
-/// `colors[l]` and main colour `main[l]`. Every lane runs the same operations in the same
+/// [`interpolate`] for `N` points at once, lane by lane: point `l` seen from `viewers[l]`, with
+/// its per-camera colours `colors[l]` and main colour `main[l]` (one point from many viewers, or
+/// many points from one). Every lane runs the same operations in the same
 /// order as a single point does (this is the one implementation; [`interpolate`] is its one
 /// lane), so the colours are the same bits; written as fixed-length loops over the lanes, a
 /// caller compiled for 8-wide vectors colours 8 points with each vector operation.
@@ -38,13 +39,13 @@ pub fn interpolate(
 #[must_use]
 pub fn interpolate_lanes<const N: usize>(
     points: [Vec3; N],
-    viewer: Vec3,
+    viewers: [Vec3; N],
     cameras: &[Vec3],
     colors: [&[[f32; 3]]; N],
     main: [[f32; 3]; N],
     exponent: i32,
 ) -> [[f32; 3]; N] {
-    let view_dir = points.map(|p| (viewer - p).normalize_or_zero());
+    let view_dir: [Vec3; N] = std::array::from_fn(|l| (viewers[l] - points[l]).normalize_or_zero());
     let pairs = colors.map(|c| c.len().min(cameras.len()));
     let mut sum = [[0.0f32; 3]; N];
     let mut total = [0.0f32; N];
@@ -210,7 +211,8 @@ mod tests {
     #[test]
     fn lanes_colour_each_point_as_it_alone_is_coloured() {
         // Eight points in one call, against eight one-point calls: points at a camera and at
-        // the viewer, one facing no camera, and colour lists of different lengths.
+        // the viewer, one facing no camera, colour lists of different lengths, and a lane with
+        // a viewer of its own.
         let cameras: Vec<Vec3> = (0..13)
             .map(|i| {
                 let a = i as f32 * 0.48;
@@ -240,9 +242,11 @@ mod tests {
         let lens = [13, 13, 13, 13, 13, 5, 0, 12];
         let lists: [&[[f32; 3]]; 8] = std::array::from_fn(|l| &colors[..lens[l]]);
         let mains: [[f32; 3]; 8] = std::array::from_fn(|l| [0.1 * l as f32, 0.5, 0.25]);
-        let lanes = interpolate_lanes(points, viewer, &cameras, lists, mains, DEFAULT_EXPONENT);
+        let mut viewers = [viewer; 8];
+        viewers[7] = Vec3::new(-3000.0, 10.0, 40.0);
+        let lanes = interpolate_lanes(points, viewers, &cameras, lists, mains, DEFAULT_EXPONENT);
         for l in 0..8 {
-            let alone = interpolate(points[l], viewer, &cameras, lists[l], mains[l], 10);
+            let alone = interpolate(points[l], viewers[l], &cameras, lists[l], mains[l], 10);
             assert_eq!(
                 lanes[l].map(f32::to_bits),
                 alone.map(f32::to_bits),

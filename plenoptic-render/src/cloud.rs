@@ -172,7 +172,7 @@ impl Shader<'_> {
             let index = |l: usize| group.get(l).unwrap_or(&group[0]).0 as usize;
             let colours = interpolate_lanes(
                 std::array::from_fn::<_, SHADE_LANES, _>(|l| cloud.positions[index(l)]),
-                self.viewer,
+                [self.viewer; SHADE_LANES],
                 self.capture,
                 std::array::from_fn(|l| cloud.camera_colors_of(index(l))),
                 std::array::from_fn(|l| cloud.colors[index(l)]),

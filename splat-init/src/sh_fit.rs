@@ -74,21 +74,18 @@ impl ShFit {
         let main = points.colors[i];
         let cams = points.camera_colors_of(i);
         // Targets: colour seen along SH direction d, i.e. from a viewer at p − d, minus SH's +0.5.
-        let targets: Vec<[f32; 3]> = self
-            .dirs
-            .iter()
-            .map(|d| {
-                let c = plenoptic_io::view_color::interpolate(
-                    p,
-                    p - *d,
-                    &points.camera_positions,
-                    cams,
-                    main,
-                    exponent,
-                );
-                [c[0] - 0.5, c[1] - 0.5, c[2] - 0.5]
-            })
-            .collect();
+        let mut targets = vec![[0.0f32; 3]; m];
+        let seen = SeenColour {
+            point: p,
+            cameras: &points.camera_positions,
+            colors: cams,
+            main,
+            exponent,
+        };
+        seen.along(&self.dirs, &mut targets, splat_core::has_avx2());
+        for t in &mut targets {
+            *t = t.map(|c| c - 0.5);
+        }
         let mut coeffs = vec![[0.0f32; 3]; n];
         for (k, coeff) in coeffs.iter_mut().enumerate() {
             let row = &self.solve[k * m..(k + 1) * m];
@@ -167,4 +164,113 @@ pub fn decide_sh_degree(
         ShDegree::Auto => auto_degree(&errors, cfg.sh_tolerance),
     };
     (degree, Some(errors))
+}
+
+/// One point's plenoptic colour seen along many directions.
+struct SeenColour<'a> {
+    point: Vec3,
+    cameras: &'a [Vec3],
+    colors: &'a [[f32; 3]],
+    main: [f32; 3],
+    exponent: i32,
+}
+
+/// Directions [`SeenColour::along`] colours at once (one AVX2 vector of f32).
+const LANES: usize = 8;
+
+impl SeenColour<'_> {
+    /// The colour seen along each of `dirs` (from a viewer at point − d) into `out`,
+    /// [`LANES`] directions at a time: the AVX2 instantiation where the CPU has it, else the
+    /// portable one (the same operations, so the same bits as one call of
+    /// [`plenoptic_io::view_color::interpolate`] a direction).
+    fn along(&self, dirs: &[Vec3], out: &mut [[f32; 3]], avx2: bool) {
+        #[cfg(target_arch = "x86_64")]
+        if avx2 {
+            // SAFETY: `avx2` is only true when `splat_core::has_avx2()` is, so the CPU has AVX2.
+            #[allow(unsafe_code)]
+            return unsafe { self.along_avx2(dirs, out) };
+        }
+        let _ = avx2;
+        self.along_portable(dirs, out);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn along_avx2(&self, dirs: &[Vec3], out: &mut [[f32; 3]]) {
+        self.along_portable(dirs, out);
+    }
+
+    #[inline(always)]
+    fn along_portable(&self, dirs: &[Vec3], out: &mut [[f32; 3]]) {
+        for (group, out) in dirs.chunks(LANES).zip(out.chunks_mut(LANES)) {
+            // A short last group repeats its first direction in the spare lanes.
+            let dir = |l: usize| *group.get(l).unwrap_or(&group[0]);
+            let seen = plenoptic_io::view_color::interpolate_lanes(
+                [self.point; LANES],
+                std::array::from_fn(|l| self.point - dir(l)),
+                self.cameras,
+                [self.colors; LANES],
+                [self.main; LANES],
+                self.exponent,
+            );
+            out.copy_from_slice(&seen[..out.len()]);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn colours_along_directions_are_the_bits_of_one_call_each() {
+        let cameras: Vec<Vec3> = (0..13)
+            .map(|i| {
+                let a = i as f32 * 0.48;
+                Vec3::new(
+                    a.cos() * 3000.0,
+                    (i % 4) as f32 * 300.0 - 400.0,
+                    a.sin() * 3000.0,
+                )
+            })
+            .collect();
+        let colors: Vec<[f32; 3]> = (0..13)
+            .map(|i| [i as f32 / 13.0, 0.25, 1.0 - i as f32 / 13.0])
+            .collect();
+        let point = Vec3::new(12.0, -40.0, 7.5);
+        // 21 directions: two full groups of lanes and a short one, one of them zero.
+        let mut dirs: Vec<Vec3> = (0..21)
+            .map(|j| {
+                let (a, b) = (j as f32 * 0.7, j as f32 * 0.31);
+                Vec3::new(a.cos() * b.sin(), b.cos(), a.sin() * b.sin())
+            })
+            .collect();
+        dirs[9] = Vec3::ZERO;
+        let seen = SeenColour {
+            point,
+            cameras: &cameras,
+            colors: &colors,
+            main: [0.9, 0.8, 0.7],
+            exponent: 10,
+        };
+        for avx2 in [false, splat_core::has_avx2()] {
+            let mut out = vec![[0.0f32; 3]; dirs.len()];
+            seen.along(&dirs, &mut out, avx2);
+            for (d, got) in dirs.iter().zip(&out) {
+                let want = plenoptic_io::view_color::interpolate(
+                    point,
+                    point - *d,
+                    &cameras,
+                    &colors,
+                    [0.9, 0.8, 0.7],
+                    10,
+                );
+                assert_eq!(
+                    got.map(f32::to_bits),
+                    want.map(f32::to_bits),
+                    "{d}, AVX2 {avx2}"
+                );
+            }
+        }
+    }
 }
