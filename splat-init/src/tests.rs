@@ -155,7 +155,7 @@ fn pca_normals_of_a_plane_are_its_normal() {
 /// sorted-key version.
 fn voxel_subsample_by_hashing(points: &[Vec3], k: usize) -> Vec<usize> {
     use std::collections::{HashMap, HashSet};
-    let (lo, hi) = crate::bounds(points);
+    let (lo, hi) = bounds(points);
     let diag = (hi - lo).length().max(f32::MIN_POSITIVE);
     let cell = |p: Vec3, h: f32| {
         let c = ((p - lo) / h).floor();
@@ -218,7 +218,8 @@ fn voxel_subsample_picks_what_hashing_the_cells_picks() {
         }
     }
     pts.extend((0..500).map(|i| Vec3::new((i % 25) as f32 * 2.0, (i / 25) as f32 * 2.0, -20.0)));
-    pts.extend_from_slice(&pts[..100].to_vec());
+    let duplicates = pts[..100].to_vec();
+    pts.extend(duplicates);
     for k in [1, 7, 150, 900, 5_000, pts.len() - 1] {
         let ours = voxel_subsample(&pts, k);
         assert_eq!(ours, voxel_subsample_by_hashing(&pts, k), "k = {k}");
