@@ -25,7 +25,7 @@ const CHUNK: usize = 16_384;
 /// its primitive lies wholly in front of the camera: the cube's camera-space bounding box, or the
 /// ball of the disc's radius. So a point at the camera centre, or within a point size of it, is
 /// not drawn (rather than filling the image, or depending on the rounding of its depth). The colour of a point is
-/// [`interpolate`]d towards the camera centre from its per-camera colours and the capture-camera
+/// [`interpolate`](plenoptic_io::view_color::interpolate)d towards the camera centre from its per-camera colours and the capture-camera
 /// positions (main colour when the cloud has no rig or no camera faces the viewer). The cloud is
 /// drawn in its own (voxel) frame, where the rig positions live.
 pub fn render_cloud(
