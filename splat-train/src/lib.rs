@@ -61,7 +61,7 @@ pub use error::Error;
 pub use eval::{
     ErrorBreakdown, EvalError, EvalOptions, Evaluation, Metrics, RegionError, RenderedView,
     SurfaceDistance, ViewMetrics, ViewScore, evaluate, evaluate_views, evaluate_with,
-    psnr_black_and_white,
+    psnr_black_and_white, psnr_both,
 };
 pub use strategy::{DensifyStrategy, InriaDensify, RefineContext, RefineReport};
 pub use trainer::{

@@ -1193,10 +1193,11 @@ fn choose_bands(
         .bands_tolerance_db
         .min((b.tolerance_db - search.spent_db()).max(0.0));
     let options = cfg.eval_options();
+    // One render a view, as the budget's rounds score: the full evaluation adds a second render,
+    // the SSIMs and the error breakdown to each view, none of which the choice reads.
     let mut psnr = |s: &Splats| -> Result<f64, PipelineError> {
-        Ok(evaluate_views(s, &refs.heldout, None, &options)?
-            .0
-            .psnr_both())
+        let (black, white) = splat_train::psnr_black_and_white(s, &refs.heldout, &options)?;
+        Ok(splat_train::psnr_both(black, white))
     };
     let (splats, choice) =
         splat_train::sh_bands::choose_bands(&splats, tolerance, b.static_sh_rms, &mut psnr)?;

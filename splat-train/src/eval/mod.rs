@@ -316,9 +316,16 @@ impl Metrics {
     /// compare models (the splat budget's rounds, the SH bands) use this so they see both.
     #[must_use]
     pub fn psnr_both(&self) -> f64 {
-        let mse = |psnr: f64| 10f64.powf(-psnr / 10.0);
-        crate::metrics::psnr_from_mse(0.5 * (mse(self.psnr_black) + mse(self.psnr_white)))
+        psnr_both(self.psnr_black, self.psnr_white)
     }
+}
+
+/// The PSNR of the mean of the MSEs behind a black- and a white-background PSNR
+/// ([`Metrics::psnr_both`], for figures from [`psnr_black_and_white`] too).
+#[must_use]
+pub fn psnr_both(psnr_black: f64, psnr_white: f64) -> f64 {
+    let mse = |psnr: f64| 10f64.powf(-psnr / 10.0);
+    crate::metrics::psnr_from_mse(0.5 * (mse(psnr_black) + mse(psnr_white)))
 }
 
 /// The splats' render of one view on black, kept for pictures.
