@@ -12,6 +12,7 @@
 
 use rayon::prelude::*;
 
+use crate::disjoint::DisjointWrites;
 use crate::rasterize::{TileScratch, WeightSink, walk_tile};
 use crate::tiles::LANES;
 use crate::{Error, Rasterizer, RenderCamera, RenderOptions, Splats};
@@ -46,36 +47,41 @@ impl Rasterizer {
         // Projection and tile lists only: the walk below composites each tile itself.
         self.project_and_bin(splats, cam, opts)?;
         let tiles = self.bins.offsets.len().saturating_sub(1);
+        // Each (tile, splat) pair's weight, written by its tile's walk into the tile's own run.
+        let mut weights = std::mem::take(&mut self.pair_weights);
+        weights.resize(self.bins.pairs(), 0.0);
+        let runs = DisjointWrites::new(&mut weights);
         let this = &*self;
-        let per_tile: Vec<Vec<(u32, f64)>> = (0..tiles)
+        (0..tiles)
             .into_par_iter()
-            .map_init(TileScratch::new, |scratch, tile| {
-                let list = &this.bins.list[this.bins.offsets[tile]..this.bins.offsets[tile + 1]];
-                let mut sums = TileSums {
-                    weights: vec![0.0; list.len()],
-                };
-                walk_tile(this, tile, cam, scratch, &mut sums);
-                list.iter()
-                    .zip(sums.weights)
-                    .filter(|&(_, w)| w > 0.0)
-                    .map(|(&sid, w)| (sid, w))
-                    .collect()
-            })
-            .collect();
-        for (sid, w) in per_tile.into_iter().flatten() {
-            sums[sid as usize] += w;
-        }
+            .for_each_init(TileScratch::new, |scratch, tile| {
+                let (s, e) = (this.bins.offsets[tile], this.bins.offsets[tile + 1]);
+                // SAFETY: [s, e) is this tile's own run of `weights`: the tiles' runs are
+                // disjoint (and `run` checks they end inside the vector).
+                #[allow(unsafe_code)]
+                let weights = unsafe { runs.run(s, e) };
+                weights.fill(0.0);
+                walk_tile(this, tile, cam, scratch, &mut TileSums { weights });
+            });
+        let add = |sum: &mut f64, &w: &f64| {
+            if w > 0.0 {
+                *sum += w;
+            }
+        };
+        self.bins
+            .reduce_per_splat(sums, &weights, add, self.use_avx2());
+        self.pair_weights = weights;
         Ok(())
     }
 }
 
 /// The summed weights of each entry of one tile's list, added pixel by pixel in row-major order
 /// (f64, so a splat's total over many pixels and views stays exact to the last pixel).
-struct TileSums {
-    weights: Vec<f64>,
+struct TileSums<'a> {
+    weights: &'a mut [f64],
 }
 
-impl WeightSink for TileSums {
+impl WeightSink for TileSums<'_> {
     #[inline(always)]
     fn add(&mut self, k: usize, w: &[f32; LANES]) {
         let sum = &mut self.weights[k];

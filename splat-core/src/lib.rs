@@ -39,6 +39,7 @@
 
 mod camera;
 mod contribution;
+mod disjoint;
 mod error;
 pub mod export;
 pub mod frame;

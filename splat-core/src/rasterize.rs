@@ -81,6 +81,8 @@ pub struct Rasterizer {
     pub(crate) last_view: Option<(usize, u32, u32)>,
     pub(crate) pair_grads: Vec<ProjectedGrad>,
     pub(crate) splat_grads: Vec<ProjectedGrad>,
+    /// Per (tile, splat) pair: its summed blending weight (`accumulate_contributions`).
+    pub(crate) pair_weights: Vec<f64>,
     /// Run the portable tile loops even where AVX2 is available (tests compare the two).
     pub(crate) portable_only: bool,
 }

@@ -4,7 +4,8 @@
 //! and SH to its parameters.
 //!
 //! Reproducibility: every pair owns its own gradient slot (so tiles running on different threads
-//! never share an accumulator), and the per-splat sums run over the tile lists in tile order.
+//! never share an accumulator), and the per-splat sums run over the tile lists in tile order
+//! (`Bins::reduce_per_splat`).
 //! Every floating-point sum therefore happens in an order that does not depend on the thread
 //! count or scheduling: gradients are bit-for-bit identical for any number of threads.
 
@@ -13,30 +14,13 @@ use std::time::Instant;
 use rayon::prelude::*;
 
 use crate::constants::{MAX_ALPHA, MIN_ALPHA};
+use crate::disjoint::DisjointWrites;
 use crate::project::{ProjectedGrad, ViewConsts, project_backward};
 use crate::rasterize::{
     DEPTH_MIN_ALPHA, PREFETCH_AHEAD, lanes_mut, prefetch, tile_extent, tile_major_index,
 };
 use crate::tiles::{Falloff, HALF_ROWS, LANES, RowSpans, TILE_PIXELS, TILE_SIZE};
 use crate::{Rasterizer, RenderCamera, RenderOptions, SplatGrads, Splats};
-
-/// A pointer that may be shared across the tile tasks, each writing a disjoint range.
-#[derive(Clone, Copy)]
-struct SharedSlots(*mut ProjectedGrad);
-// SAFETY: each tile task writes only the slots of its own list range
-// `offsets[tile]..offsets[tile + 1]`; these ranges are disjoint.
-#[allow(unsafe_code)]
-unsafe impl Send for SharedSlots {}
-// SAFETY: as for `Send`: the tasks sharing the pointer write disjoint ranges.
-#[allow(unsafe_code)]
-unsafe impl Sync for SharedSlots {}
-
-impl SharedSlots {
-    /// Returns the pointer (a method, so closures capture the whole `Sync` wrapper).
-    fn get(self) -> *mut ProjectedGrad {
-        self.0
-    }
-}
 
 /// Per-pixel loss gradients the tile walk needs, gathered from the row-major inputs.
 struct PixelGrads<'a> {
@@ -100,43 +84,36 @@ impl Rasterizer {
         // passed no gradient), so stale records from the last view are all overwritten.
         self.pair_grads
             .resize(self.bins.pairs(), ProjectedGrad::default());
-        let slots = SharedSlots(self.pair_grads.as_mut_ptr());
+        // Taken out of `self` while the tiles write it, so the walks can borrow the rest.
+        let mut pair_grads = std::mem::take(&mut self.pair_grads);
+        let slots = DisjointWrites::new(&mut pair_grads);
         let n_tiles = (v.tiles_x * v.tiles_y) as usize;
         let this = &*self;
         let avx2 = this.use_avx2();
         (0..n_tiles).into_par_iter().for_each(|tile| {
             let (s, e) = (this.bins.offsets[tile], this.bins.offsets[tile + 1]);
-            // SAFETY: [s, e) is this tile's own range of `pair_grads` (see `SharedSlots`), in
-            // bounds because offsets end at `pairs()`, the vector's length.
+            // SAFETY: [s, e) is this tile's own range of `pair_grads`: the tiles' ranges are
+            // disjoint (and `run` checks they end inside the vector).
             #[allow(unsafe_code)]
-            let out = unsafe { std::slice::from_raw_parts_mut(slots.get().add(s), e - s) };
+            let out = unsafe { slots.run(s, e) };
             this.backward_tile(tile, &this.bins.list[s..e], cam, &pg, out, avx2);
         });
+        self.pair_grads = pair_grads;
 
         let t1 = Instant::now();
-        // Sum the pair records per splat in tile order (deterministic). Each task owns a range
-        // of splats and picks their records out of the whole list, so every splat's sum runs
-        // in the same (tile) order whatever the number of tasks.
+        // Sum the pair records per splat in tile order (deterministic).
         self.splat_grads
             .resize(splats.len(), ProjectedGrad::default());
-        let tasks = rayon::current_num_threads().max(1);
-        let per_task = splats.len().div_ceil(tasks).max(1);
-        let (list, pair_grads) = (&self.bins.list, &self.pair_grads);
         self.splat_grads
-            .par_chunks_mut(per_task)
-            .enumerate()
-            .for_each(|(task, sums)| {
-                let first = task * per_task;
-                sums.fill(ProjectedGrad::default());
-                for (&sid, g) in list.iter().zip(pair_grads) {
-                    if let Some(sum) = (sid as usize)
-                        .checked_sub(first)
-                        .and_then(|j| sums.get_mut(j))
-                    {
-                        sum.add(g);
-                    }
-                }
-            });
+            .par_iter_mut()
+            .for_each(|g| *g = ProjectedGrad::default());
+        let avx2 = self.use_avx2();
+        self.bins.reduce_per_splat(
+            &mut self.splat_grads,
+            &self.pair_grads,
+            ProjectedGrad::add,
+            avx2,
+        );
         let t2 = Instant::now();
         let k = splats.coeffs_per_splat();
         let size = (cam.width, cam.height);

@@ -8,6 +8,7 @@
 
 use rayon::prelude::*;
 
+use crate::disjoint::DisjointWrites;
 use crate::projected::Projected;
 
 /// Side of a square tile in pixels (Inria's `BLOCK_X = BLOCK_Y = 16`).
@@ -18,24 +19,6 @@ pub(crate) const TILE_PIXELS: usize = (TILE_SIZE * TILE_SIZE) as usize;
 /// Slices of the depth-sorted splats that bin in parallel (a constant, so the split does not
 /// depend on the thread count; the output would not either).
 const BIN_SLICES: usize = 16;
-
-/// The tile lists' buffer, written by the slices' tasks at disjoint positions.
-#[derive(Clone, Copy)]
-struct SharedList(*mut u32);
-// SAFETY: the pointer is only written through, by tasks that each write only their own
-// (tile, slice) runs of the list (see `Bins::build`), so sending it to another thread is sound.
-#[allow(unsafe_code)]
-unsafe impl Send for SharedList {}
-// SAFETY: shared use is sound for the same reason: the concurrent writes are to disjoint runs.
-#[allow(unsafe_code)]
-unsafe impl Sync for SharedList {}
-
-impl SharedList {
-    /// Returns the pointer (a method, so closures capture the whole `Sync` wrapper).
-    fn get(self) -> *mut u32 {
-        self.0
-    }
-}
 
 /// Reusable binning buffers.
 #[derive(Debug, Default)]
@@ -61,10 +44,10 @@ impl Bins {
         tiles_y: u32,
     ) {
         let n_tiles = (tiles_x * tiles_y) as usize;
-        self.order.clear();
         // Depths are > 0 (near-plane culled), so their IEEE bits sort like the values.
-        self.order.extend(
-            proj.iter()
+        self.order.clear();
+        self.order.par_extend(
+            proj.par_iter()
                 .zip(visible)
                 .enumerate()
                 .filter(|(_, (_, v))| **v)
@@ -108,9 +91,9 @@ impl Bins {
             }
         }
         self.offsets[n_tiles] = next;
-        self.list.clear();
+        // Not cleared: the scatter below writes every position.
         self.list.resize(next, 0);
-        let list = SharedList(self.list.as_mut_ptr());
+        let list = DisjointWrites::new(&mut self.list);
         self.order
             .par_chunks(slice_len)
             .zip(self.slice_counts.par_chunks_mut(n_tiles))
@@ -123,11 +106,10 @@ impl Bins {
                         for c in &mut cursor[row + x0 as usize..row + x1 as usize] {
                             // SAFETY: slice `sl` writes only its own runs
                             // [start(t, sl), start(t, sl) + count(t, sl)), which are disjoint
-                            // from every other (tile, slice) run and inside `list`, whose
-                            // length is the total count.
+                            // from every other (tile, slice) run.
                             #[allow(unsafe_code)]
                             unsafe {
-                                list.get().add(*c).write(i);
+                                list.write(*c, i);
                             }
                             *c += 1;
                         }
@@ -136,10 +118,82 @@ impl Bins {
             });
     }
 
+    /// Adds each (tile, splat) pair's record `per_pair[p]` (in `list` order) to its splat's
+    /// `per_splat` entry with `add`, splat by splat in tile order: the same order for any
+    /// number of threads, so floating-point sums come out bit-identical.
+    ///
+    /// Each task owns a range of splats and scans the whole list for their entries, testing
+    /// a block of entries at once (vector compares into a bit mask) so that the scans, which
+    /// every task repeats, stay cheap as the tasks multiply.
+    pub fn reduce_per_splat<T: Send, R: Sync>(
+        &self,
+        per_splat: &mut [T],
+        per_pair: &[R],
+        add: impl Fn(&mut T, &R) + Sync,
+        avx2: bool,
+    ) {
+        debug_assert_eq!(per_pair.len(), self.list.len());
+        let tasks = rayon::current_num_threads().max(1);
+        let per_task = per_splat.len().div_ceil(tasks).max(1);
+        per_splat
+            .par_chunks_mut(per_task)
+            .enumerate()
+            .for_each(|(task, owned)| {
+                let first = task * per_task;
+                #[cfg(target_arch = "x86_64")]
+                if avx2 {
+                    // SAFETY: `avx2` is only true when `has_avx2()` is, so the CPU supports
+                    // the enabled features.
+                    #[allow(unsafe_code)]
+                    return unsafe { add_owned_avx2(&self.list, per_pair, owned, first, &add) };
+                }
+                let _ = avx2;
+                add_owned(&self.list, per_pair, owned, first, &add);
+            });
+    }
+
     /// Returns the number of (tile, splat) pairs.
     pub fn pairs(&self) -> usize {
         self.list.len()
     }
+}
+
+/// One task of `Bins::reduce_per_splat`: adds the records of the entries of `list` whose splat
+/// is in `owned` (splats `first..first + owned.len()`), in list order.
+#[inline(always)]
+fn add_owned<T, R>(
+    list: &[u32],
+    per_pair: &[R],
+    owned: &mut [T],
+    first: usize,
+    add: &impl Fn(&mut T, &R),
+) {
+    // Splat indices are u32 (the list's type), so both bounds fit.
+    let (first, count) = (first as u32, owned.len() as u32);
+    for (ids, records) in list.chunks(64).zip(per_pair.chunks(64)) {
+        let mut mask = 0_u64;
+        for (k, &sid) in ids.iter().enumerate() {
+            mask |= u64::from(sid.wrapping_sub(first) < count) << k;
+        }
+        while mask != 0 {
+            let k = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            add(&mut owned[(ids[k] - first) as usize], &records[k]);
+        }
+    }
+}
+
+/// [`add_owned`] compiled with AVX2, so the block's compares run 8 lanes at a time.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn add_owned_avx2<T, R>(
+    list: &[u32],
+    per_pair: &[R],
+    owned: &mut [T],
+    first: usize,
+    add: &impl Fn(&mut T, &R),
+) {
+    add_owned(list, per_pair, owned, first, add);
 }
 
 /// Pixels per inner loop: half a tile row, seen through fixed-size lane views (no per-lane
@@ -315,7 +369,7 @@ pub(crate) fn fast_exp(x: f32) -> f32 {
 mod tests {
     use rand::{RngExt, SeedableRng};
 
-    use super::{HALF_ROWS, LANES, RowSpans, TILE_SIZE, fast_exp};
+    use super::{Bins, HALF_ROWS, LANES, RowSpans, TILE_SIZE, fast_exp};
     use crate::projected::{Projected, quad_bound};
 
     /// The spans only skip work if every pixel they leave out has o·G < 1/255: checked in f64
@@ -384,6 +438,72 @@ mod tests {
             inside > 100_000,
             "the cases must reach many pixels: {inside}"
         );
+    }
+
+    /// The per-splat reduction must add each splat's records in list order, as a plain serial
+    /// scan of the list does, bit for bit and for any number of threads; hidden splats (whose
+    /// stale rectangles must not be listed) get nothing.
+    #[test]
+    fn per_splat_sums_follow_the_list_order_for_any_thread_count() {
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(5);
+        let (tiles_x, tiles_y) = (9_u32, 7_u32);
+        let n = 3_000;
+        let mut proj = vec![Projected::default(); n];
+        let mut rects = vec![[0_u32; 4]; n];
+        let mut visible = vec![false; n];
+        for i in 0..n {
+            proj[i].depth = rng.random_range(0.5..9.0);
+            let (x0, y0) = (rng.random_range(0..tiles_x), rng.random_range(0..tiles_y));
+            rects[i] = [
+                x0,
+                rng.random_range(x0..=tiles_x),
+                y0,
+                rng.random_range(y0..=tiles_y),
+            ];
+            visible[i] = rng.random_range(0..4) != 0;
+        }
+        let mut bins = Bins::default();
+        bins.build(&proj, &rects, &visible, tiles_x, tiles_y);
+        assert!(
+            bins.pairs() > 3 * n,
+            "rectangles must overlap: {}",
+            bins.pairs()
+        );
+        // Values of mixed magnitudes, so that another order of the adds would round otherwise.
+        let records: Vec<f32> = (0..bins.pairs())
+            .map(|_| rng.random_range(-1.0_f32..1.0) * 10f32.powi(rng.random_range(-4..4)))
+            .collect();
+        let mut expected = vec![0.0_f32; n];
+        let mut entries = vec![Vec::new(); n];
+        for (p, &sid) in bins.list.iter().enumerate() {
+            expected[sid as usize] += records[p];
+            entries[sid as usize].push(p);
+        }
+        for threads in [1, 3, 7, 16] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            for avx2 in [false, crate::has_avx2()] {
+                let mut sums = vec![0.0_f32; n];
+                pool.install(|| bins.reduce_per_splat(&mut sums, &records, |s, r| *s += r, avx2));
+                for i in 0..n {
+                    assert_eq!(
+                        sums[i].to_bits(),
+                        expected[i].to_bits(),
+                        "splat {i}, {threads} threads, AVX2 {avx2}"
+                    );
+                }
+            }
+            // Which records reach a splat, and in which order: exactly its own, in list order.
+            let mut seen = vec![Vec::new(); n];
+            let positions: Vec<usize> = (0..bins.pairs()).collect();
+            pool.install(|| bins.reduce_per_splat(&mut seen, &positions, |s, &p| s.push(p), false));
+            assert_eq!(seen, entries, "{threads} threads");
+        }
+        for i in (0..n).filter(|&i| !visible[i]) {
+            assert!(entries[i].is_empty(), "hidden splat {i} is listed");
+        }
     }
 
     #[test]
