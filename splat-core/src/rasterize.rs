@@ -6,6 +6,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use crate::constants::{MAX_ALPHA, MIN_ALPHA, MIN_TRANSMITTANCE};
+use crate::disjoint::DisjointWrites;
 use crate::project::{Chain, Cull, ProjectedGrad, ViewConsts, project};
 use crate::projected::Projected;
 use crate::tiles::{Bins, Falloff, HALF_ROWS, LANES, RowSpans, TILE_PIXELS, TILE_SIZE};
@@ -74,6 +75,9 @@ pub struct Rasterizer {
     px_rgb: Vec<[f32; 3]>,
     /// One past the index (in the tile's list) of the last splat that contributed, tile-major.
     pub(crate) px_last: Vec<u32>,
+    /// Per (tile, splat) pair, in list order: whether the forward pass blended the splat into
+    /// any pixel of the tile. The backward pass skips the others, whose gradients are zero.
+    pub(crate) pair_live: Vec<bool>,
     pub(crate) output: RenderOutput,
     pub(crate) stats: RenderStats,
     pub(crate) phases: RasterPhases,
@@ -93,6 +97,8 @@ struct TileOut<'a> {
     d: &'a mut [f32],
     rgb: &'a mut [[f32; 3]],
     last: &'a mut [u32],
+    /// Per entry of the tile's list: whether the splat was blended into any pixel.
+    live: &'a mut [bool],
 }
 
 /// The pixel extent of tile `tile`: origin and size (partial at the right and bottom edges).
@@ -291,6 +297,9 @@ impl Rasterizer {
         let proj = &self.proj;
         let (w, h) = (cam.width, cam.height);
         let avx2 = self.use_avx2();
+        // Not cleared: each tile's walk writes its whole run.
+        self.pair_live.resize(bins.pairs(), false);
+        let live_runs = DisjointWrites::new(&mut self.pair_live);
         self.px_t
             .par_chunks_mut(TILE_PIXELS)
             .zip(self.px_d.par_chunks_mut(TILE_PIXELS))
@@ -298,9 +307,20 @@ impl Rasterizer {
             .zip(self.px_last.par_chunks_mut(TILE_PIXELS))
             .enumerate()
             .map(|(tile, (((t, d), rgb), last))| {
-                let list = &bins.list[bins.offsets[tile]..bins.offsets[tile + 1]];
+                let (start, end) = (bins.offsets[tile], bins.offsets[tile + 1]);
                 let ext = tile_extent(tile, tiles_x, w, h);
-                let o = TileOut { t, d, rgb, last };
+                // SAFETY: [start, end) is this tile's own run of `pair_live`: the tiles' runs
+                // are disjoint (and `run` checks they end inside the vector).
+                #[allow(unsafe_code)]
+                let live = unsafe { live_runs.run(start, end) };
+                let o = TileOut {
+                    t,
+                    d,
+                    rgb,
+                    last,
+                    live,
+                };
+                let list = &bins.list[start..end];
                 composite_tile(list, proj, ext, o, &mut NoWeights, avx2)
             })
             .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1))
@@ -447,6 +467,7 @@ pub(crate) struct TileScratch {
     d: [f32; TILE_PIXELS],
     rgb: [[f32; 3]; TILE_PIXELS],
     last: [u32; TILE_PIXELS],
+    live: Vec<bool>,
 }
 
 impl TileScratch {
@@ -456,6 +477,7 @@ impl TileScratch {
             d: [0.0; TILE_PIXELS],
             rgb: [[0.0; 3]; TILE_PIXELS],
             last: [0; TILE_PIXELS],
+            live: Vec::new(),
         }
     }
 }
@@ -472,11 +494,13 @@ pub(crate) fn walk_tile<S: WeightSink>(
     let tiles_x = cam.width.div_ceil(TILE_SIZE);
     let list = &r.bins.list[r.bins.offsets[tile]..r.bins.offsets[tile + 1]];
     let ext = tile_extent(tile, tiles_x, cam.width, cam.height);
+    scratch.live.resize(list.len(), false);
     let o = TileOut {
         t: &mut scratch.t,
         d: &mut scratch.d,
         rgb: &mut scratch.rgb,
         last: &mut scratch.last,
+        live: &mut scratch.live[..list.len()],
     };
     composite_tile(list, &r.proj, ext, o, sink, r.use_avx2());
 }
@@ -559,6 +583,8 @@ fn composite_tile_impl<S: WeightSink>(
     let opaque_one = std::hint::black_box(1.0_f32);
     let opaque_zero = std::hint::black_box(0_u32);
     let mut falloff = Falloff::new();
+    // Entries past an early stop (every pixel done) stay not live.
+    o.live.fill(false);
     for (k, &sid) in list.iter().enumerate() {
         if let Some(&ahead) = list.get(k + PREFETCH_AHEAD) {
             prefetch(proj, ahead as usize);
@@ -567,6 +593,7 @@ fn composite_tile_impl<S: WeightSink>(
         let spans = RowSpans::new(p, x0, y0, tw, th);
         let tag = k as u32 + 1;
         evaluations += falloff.compute(p, &spans, spans.mask & !done_rows, x0);
+        let mut blended = 0;
         for (&hr, g) in falloff.hr.iter().zip(&falloff.gauss).take(falloff.n) {
             let hr = usize::from(hr);
             let base = hr * LANES;
@@ -607,12 +634,14 @@ fn composite_tile_impl<S: WeightSink>(
                 contributed += u32::from(add);
             }
             sink.add(k, &weights);
+            blended += contributed;
             contributions += u64::from(contributed);
             done_count[hr] += finished;
             if done_count[hr] == LANES as u32 {
                 done_rows |= 1 << hr;
             }
         }
+        o.live[k] = blended > 0;
         if done_rows == u32::MAX {
             break;
         }

@@ -22,6 +22,13 @@ use crate::rasterize::{
 use crate::tiles::{Falloff, HALF_ROWS, LANES, RowSpans, TILE_PIXELS, TILE_SIZE};
 use crate::{Rasterizer, RenderCamera, RenderOptions, SplatGrads, Splats};
 
+/// One tile's list: its splats front to back, and which of them the forward pass blended.
+#[derive(Clone, Copy)]
+struct Entries<'a> {
+    list: &'a [u32],
+    live: &'a [bool],
+}
+
 /// Per-pixel loss gradients the tile walk needs, gathered from the row-major inputs.
 struct PixelGrads<'a> {
     d_rgb: &'a [f32],
@@ -96,7 +103,11 @@ impl Rasterizer {
             // disjoint (and `run` checks they end inside the vector).
             #[allow(unsafe_code)]
             let out = unsafe { slots.run(s, e) };
-            this.backward_tile(tile, &this.bins.list[s..e], cam, &pg, out, avx2);
+            let entries = Entries {
+                list: &this.bins.list[s..e],
+                live: &this.pair_live[s..e],
+            };
+            this.backward_tile(tile, entries, cam, &pg, out, avx2);
         });
         self.pair_grads = pair_grads;
 
@@ -160,7 +171,7 @@ impl Rasterizer {
     fn backward_tile(
         &self,
         tile: usize,
-        list: &[u32],
+        entries: Entries<'_>,
         cam: &RenderCamera,
         pg: &PixelGrads<'_>,
         out: &mut [ProjectedGrad],
@@ -170,10 +181,10 @@ impl Rasterizer {
         if avx2 {
             // SAFETY: `avx2` is only true when `has_avx2()` is, so the CPU supports the enabled features.
             #[allow(unsafe_code)]
-            return unsafe { self.backward_tile_avx2(tile, list, cam, pg, out) };
+            return unsafe { self.backward_tile_avx2(tile, entries, cam, pg, out) };
         }
         let _ = avx2;
-        self.backward_tile_impl(tile, list, cam, pg, out);
+        self.backward_tile_impl(tile, entries, cam, pg, out);
     }
 
     /// [`Self::backward_tile_impl`] compiled with AVX2 so LLVM vectorises the 8-lane half-rows.
@@ -182,12 +193,12 @@ impl Rasterizer {
     fn backward_tile_avx2(
         &self,
         tile: usize,
-        list: &[u32],
+        entries: Entries<'_>,
         cam: &RenderCamera,
         pg: &PixelGrads<'_>,
         out: &mut [ProjectedGrad],
     ) {
-        self.backward_tile_impl(tile, list, cam, pg, out);
+        self.backward_tile_impl(tile, entries, cam, pg, out);
     }
 
     /// The tile walk: per splat, its falloff over the half-rows it reaches (see
@@ -197,7 +208,7 @@ impl Rasterizer {
     fn backward_tile_impl(
         &self,
         tile: usize,
-        list: &[u32],
+        Entries { list, live }: Entries<'_>,
         cam: &RenderCamera,
         pg: &PixelGrads<'_>,
         out: &mut [ProjectedGrad],
@@ -273,6 +284,13 @@ impl Rasterizer {
             while joined < HALF_ROWS && joins[joined].0 > kk32 {
                 active |= 1 << joins[joined].1;
                 joined += 1;
+            }
+            // A splat the forward pass blended into no pixel of the tile (every pixel it
+            // reaches below 1/255 or already done) passes no gradient and changes no pixel's
+            // running state; a third of the pairs at paper scale.
+            if !live[kk] {
+                out[kk] = ProjectedGrad::default();
+                continue;
             }
             // Per-lane partial sums, added up in a fixed order once the splat is done: of w·∂L/∂c
             // (colour, depth) and, with u = G·∂L/∂α, of u, u·dx, u·dx², u·dy, u·dy², u·dx·dy.
@@ -387,10 +405,26 @@ mod tests {
     /// Renders and differentiates `splats` with either instantiation of the projection and
     /// tile loops.
     fn run(portable: bool, s: &Splats, cam: &RenderCamera, d_rgb: &[f32]) -> (Vec<u32>, Vec<u32>) {
+        run_walking(portable, false, s, cam, d_rgb).0
+    }
+
+    /// As [`run`]; with `every_entry`, the backward walks every entry of the tile lists, also
+    /// those the forward blended nowhere. Also returns how many entries were not blended.
+    fn run_walking(
+        portable: bool,
+        every_entry: bool,
+        s: &Splats,
+        cam: &RenderCamera,
+        d_rgb: &[f32],
+    ) -> ((Vec<u32>, Vec<u32>), usize) {
         let mut r = Rasterizer::new();
         r.portable_only = portable;
         let opts = RenderOptions::default();
         let out = r.forward(s, cam, &opts).clone();
+        let not_blended = r.pair_live.iter().filter(|&&live| !live).count();
+        if every_entry {
+            r.pair_live.fill(true);
+        }
         let n_px = (cam.width * cam.height) as usize;
         let d_alpha: Vec<f32> = (0..n_px).map(|i| (i % 7) as f32 * 1e-2 - 0.03).collect();
         let d_depth: Vec<f32> = (0..n_px).map(|i| (i % 5) as f32 * 1e-2 - 0.02).collect();
@@ -405,17 +439,54 @@ mod tests {
             .chain(g.rotations.iter().flatten().copied())
             .chain(g.opacity_logits.iter().copied())
             .chain(g.sh.iter().flatten().copied());
-        (
+        let bits = (
             img.map(|x| x.to_bits()).collect(),
             grads.map(f32::to_bits).collect(),
-        )
+        );
+        (bits, not_blended)
     }
 
     #[test]
     fn simd_and_portable_tile_loops_agree_bit_for_bit() {
-        // Overlapping splats of many sizes (sub-pixel to several tiles) and opacities, some
-        // reaching the partial tiles at the right and bottom edges of a 70×45 image.
-        let mut rng = rand_pcg::Pcg64::seed_from_u64(7);
+        let (s, cam, d_rgb) = scene(7);
+        let (img_p, grad_p) = run(true, &s, &cam, &d_rgb);
+        let (img_v, grad_v) = run(false, &s, &cam, &d_rgb);
+        assert!(img_p.iter().any(|&b| b != 0), "the scene must cover pixels");
+        assert!(
+            grad_p.iter().any(|&b| b != 0),
+            "the scene must have gradients"
+        );
+        assert_eq!(img_p, img_v);
+        assert_eq!(grad_p, grad_v);
+    }
+
+    /// Skipping the entries the forward blended into no pixel must not change a gradient bit:
+    /// their records are zero and they leave every pixel's running state as it was.
+    #[test]
+    fn skipping_entries_blended_nowhere_changes_no_gradient() {
+        for seed in [7, 8, 9] {
+            let (s, cam, d_rgb) = scene(seed);
+            for portable in [true, false] {
+                let (skipping, not_blended) = run_walking(portable, false, &s, &cam, &d_rgb);
+                let (walking, _) = run_walking(portable, true, &s, &cam, &d_rgb);
+                assert!(
+                    not_blended > 20,
+                    "seed {seed}: {not_blended} entries not blended"
+                );
+                assert!(
+                    skipping.1.iter().any(|&b| b != 0),
+                    "the scene must have gradients"
+                );
+                assert_eq!(skipping, walking, "seed {seed}, portable {portable}");
+            }
+        }
+    }
+
+    /// Overlapping splats of many sizes (sub-pixel to several tiles) and opacities, some
+    /// reaching the partial tiles at the right and bottom edges of a 70×45 image, and a loss
+    /// gradient for its pixels.
+    fn scene(seed: u64) -> (Splats, RenderCamera, Vec<f32>) {
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
         let n = 400;
         let pts: Vec<Vec3> = (0..n)
             .map(|_| {
@@ -459,14 +530,6 @@ mod tests {
         let d_rgb: Vec<f32> = (0..3 * 70 * 45)
             .map(|_| rng.random_range(-1.0..1.0))
             .collect();
-        let (img_p, grad_p) = run(true, &s, &cam, &d_rgb);
-        let (img_v, grad_v) = run(false, &s, &cam, &d_rgb);
-        assert!(img_p.iter().any(|&b| b != 0), "the scene must cover pixels");
-        assert!(
-            grad_p.iter().any(|&b| b != 0),
-            "the scene must have gradients"
-        );
-        assert_eq!(img_p, img_v);
-        assert_eq!(grad_p, grad_v);
+        (s, cam, d_rgb)
     }
 }
