@@ -3,7 +3,8 @@
 //! Conventions follow Inria's `diff-gaussian-rasterization` and gsplat so that models render the
 //! same in their viewers (see `ARCHITECTURE.md`): COLMAP camera axes, pixel (0, 0)'s centre at
 //! (0.5, 0.5), Inria's SH basis and signs, +0.3 px² dilation, alpha = min(0.99, o·G), skip alpha
-//! below 1/255, stop when transmittance falls below 1e-4, 16×16 tiles, 3σ extent.
+//! below 1/255, stop when transmittance falls below 1e-4, 16×16 tiles, 3σ extent (narrowed to the
+//! tiles that pixels above 1/255 can lie in, which changes no image).
 //!
 //! - [`Splats`]: the model in structure-of-arrays form, with activations ([`sigmoid`], [`logit`]).
 //! - [`sh`]: real spherical harmonics of degree 0–3 with their gradients.

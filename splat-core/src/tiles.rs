@@ -1,5 +1,6 @@
 //! Tile geometry and binning: every visible splat is listed in each 16×16 tile its 3σ square
-//! touches, each tile's list front to back; and, per (tile, splat) pair, the row spans and the
+//! touches within the box of its alpha ≥ 1/255 ellipse (`project::within_reach`), each tile's
+//! list front to back; and, per (tile, splat) pair, the row spans and the
 //! Gaussian falloff that both tile loops (forward and backward) work from.
 //!
 //! This is Inria's single sort of (tile, depth) keys done as the two passes of an LSD radix sort:
