@@ -562,7 +562,7 @@ mod tests {
 
     use super::within_reach;
     use crate::TILE_SIZE;
-    use crate::projected::quad_bound;
+    use crate::projected::{quad_bound, random_footprint};
 
     /// Narrowing a splat's tiles must keep every tile holding a pixel with alpha ≥ 1/255
     /// (checked in f64 over a 256² view, around random rotated, stretched splats, some near
@@ -575,14 +575,9 @@ mod tests {
         let (mut reached, mut narrower) = (0, 0);
         let cases = 4_000;
         for case in 0..cases {
-            let (s1, s2): (f64, f64) = (rng.random_range(0.2..30.0), rng.random_range(0.2..30.0));
-            let th: f64 = rng.random_range(0.0..std::f64::consts::PI);
-            let (c, s) = (th.cos(), th.sin());
-            let cxx = c * c * s1 * s1 + s * s * s2 * s2 + 0.3;
-            let cyy = s * s * s1 * s1 + c * c * s2 * s2 + 0.3;
-            let cxy = c * s * (s1 * s1 - s2 * s2);
+            let ([cxx, cyy, cxy], conic) = random_footprint(&mut rng, 30.0);
             let det = cxx * cyy - cxy * cxy;
-            let conic = [cyy / det, -cxy / det, cxx / det].map(|v| v as f32);
+            let conic = conic.map(|v| v as f32);
             let opacity: f32 = rng.random_range(0.004..1.0);
             let xy = [
                 rng.random_range(-40.0..size as f32 + 40.0),

@@ -24,3 +24,22 @@ pub(crate) struct Projected {
 pub(crate) fn quad_bound(opacity: f32) -> f32 {
     2.0 * (255.0 * opacity).ln() * 1.001 + 1e-3
 }
+
+/// A random screen-space footprint for the tests of the tile bounds: axes of 0.2 to `max_axis`
+/// pixels at a random angle, plus the 0.3 px² dilation. Returns the covariance (xx, yy, xy)
+/// and its inverse, the conic (a, b, c), both in f64.
+#[cfg(test)]
+pub(crate) fn random_footprint(rng: &mut impl rand::Rng, max_axis: f64) -> ([f64; 3], [f64; 3]) {
+    use rand::RngExt;
+    let (s1, s2): (f64, f64) = (
+        rng.random_range(0.2..max_axis),
+        rng.random_range(0.2..max_axis),
+    );
+    let th: f64 = rng.random_range(0.0..std::f64::consts::PI);
+    let (c, s) = (th.cos(), th.sin());
+    let cxx = c * c * s1 * s1 + s * s * s2 * s2 + 0.3;
+    let cyy = s * s * s1 * s1 + c * c * s2 * s2 + 0.3;
+    let cxy = c * s * (s1 * s1 - s2 * s2);
+    let det = cxx * cyy - cxy * cxy;
+    ([cxx, cyy, cxy], [cyy / det, -cxy / det, cxx / det])
+}

@@ -371,7 +371,7 @@ mod tests {
     use rand::{RngExt, SeedableRng};
 
     use super::{Bins, HALF_ROWS, LANES, RowSpans, TILE_SIZE, fast_exp};
-    use crate::projected::{Projected, quad_bound};
+    use crate::projected::{Projected, quad_bound, random_footprint};
 
     /// The spans only skip work if every pixel they leave out has o·G < 1/255: checked in f64
     /// against random rotated, stretched splats around full and partial tiles.
@@ -381,15 +381,7 @@ mod tests {
         let ts = TILE_SIZE as i32;
         let mut inside = 0;
         for case in 0..20_000 {
-            // Covariance from random axes (0.2 to 40 px) and angle, plus the 0.3 px² dilation.
-            let (s1, s2): (f64, f64) = (rng.random_range(0.2..40.0), rng.random_range(0.2..40.0));
-            let th: f64 = rng.random_range(0.0..std::f64::consts::PI);
-            let (c, s) = (th.cos(), th.sin());
-            let cxx = c * c * s1 * s1 + s * s * s2 * s2 + 0.3;
-            let cyy = s * s * s1 * s1 + c * c * s2 * s2 + 0.3;
-            let cxy = c * s * (s1 * s1 - s2 * s2);
-            let det = cxx * cyy - cxy * cxy;
-            let conic = [cyy / det, -cxy / det, cxx / det];
+            let (_, conic) = random_footprint(&mut rng, 40.0);
             let opacity: f32 = rng.random_range(0.004..1.0);
             let (x0, y0) = (ts * rng.random_range(0..8), ts * rng.random_range(0..8));
             let centre = [

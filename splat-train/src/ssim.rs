@@ -252,17 +252,13 @@ impl Ssim {
                         [a, b, c, d, e]
                     };
                     for (q, out) in v.iter_mut().enumerate() {
-                        vertical(
-                            &sums[q],
-                            r,
+                        let rows = RowSums {
+                            src: &sums[q],
                             h,
                             row,
-                            span,
-                            &sp.sums,
-                            &mut out[cols.clone()],
-                            taps,
-                            avx2,
-                        );
+                            filled: &sp.sums,
+                        };
+                        vertical(rows, r, span, &mut out[cols.clone()], taps, avx2);
                     }
                     let [mx, my, exx, eyy, exy] = v.each_ref().map(|b| &b[cols.clone()]);
                     for (j, i) in cols.clone().enumerate() {
@@ -334,7 +330,13 @@ impl Ssim {
                         let mut v = [a, b, c];
                         for (q, buf) in v.iter_mut().enumerate() {
                             let dst = &mut buf[cols.clone()];
-                            vertical(&sums[q], r, h, row, span, &sp.partial_sums, dst, taps, avx2);
+                            let rows = RowSums {
+                                src: &sums[q],
+                                h,
+                                row,
+                                filled: &sp.partial_sums,
+                            };
+                            vertical(rows, r, span, dst, taps, avx2);
                         }
                         let [dm, dxx, dxy] = v.each_ref().map(|b| &b[cols.clone()]);
                         for (j, i) in cols.enumerate() {
@@ -419,18 +421,23 @@ fn horizontal_impl(src: &[f32], valid: Span, dst: &mut [f32], out: Span, taps: &
     }
 }
 
-/// Vertical pass for row `r` over the columns of `out`: the weighted sum of the rows of `src`
-/// (H rows of `row` floats) up to `RADIUS` away, each taken as zero outside the image and
-/// outside its own span in `filled` (where its horizontal sums were written). `dst` holds the
-/// span's 3·len floats.
-#[allow(clippy::too_many_arguments)]
-fn vertical(
-    src: &[f32],
-    r: usize,
+/// An image's horizontal window sums, read by the vertical pass: `h` rows of `row` floats, each
+/// written only over its span in `filled` (zero elsewhere).
+#[derive(Clone, Copy)]
+struct RowSums<'a> {
+    src: &'a [f32],
     h: usize,
     row: usize,
+    filled: &'a [Span],
+}
+
+/// Vertical pass for row `r` over the columns of `out`: the weighted sum of the rows of
+/// `sums` up to `RADIUS` away, each taken as zero outside the image and outside its own span.
+/// `dst` holds the span's 3·len floats.
+fn vertical(
+    sums: RowSums<'_>,
+    r: usize,
     out: Span,
-    filled: &[Span],
     dst: &mut [f32],
     taps: &[f32; TAPS],
     avx2: bool,
@@ -439,41 +446,27 @@ fn vertical(
     if avx2 {
         // SAFETY: `avx2` is only true when `has_avx2()` is, so the CPU supports the enabled features.
         #[allow(unsafe_code)]
-        return unsafe { vertical_avx2(src, r, h, row, out, filled, dst, taps) };
+        return unsafe { vertical_avx2(sums, r, out, dst, taps) };
     }
     let _ = avx2;
-    vertical_impl(src, r, h, row, out, filled, dst, taps);
+    vertical_impl(sums, r, out, dst, taps);
 }
 
 /// [`vertical_impl`] compiled with AVX2 (as [`horizontal_avx2`]).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-#[allow(clippy::too_many_arguments)]
-fn vertical_avx2(
-    src: &[f32],
-    r: usize,
-    h: usize,
-    row: usize,
-    out: Span,
-    filled: &[Span],
-    dst: &mut [f32],
-    taps: &[f32; TAPS],
-) {
-    vertical_impl(src, r, h, row, out, filled, dst, taps);
+fn vertical_avx2(sums: RowSums<'_>, r: usize, out: Span, dst: &mut [f32], taps: &[f32; TAPS]) {
+    vertical_impl(sums, r, out, dst, taps);
 }
 
 #[inline(always)]
-#[allow(clippy::too_many_arguments)]
-fn vertical_impl(
-    src: &[f32],
-    r: usize,
-    h: usize,
-    row: usize,
-    out: Span,
-    filled: &[Span],
-    dst: &mut [f32],
-    taps: &[f32; TAPS],
-) {
+fn vertical_impl(sums: RowSums<'_>, r: usize, out: Span, dst: &mut [f32], taps: &[f32; TAPS]) {
+    let RowSums {
+        src,
+        h,
+        row,
+        filled,
+    } = sums;
     dst.fill(0.0);
     for (t, &g) in taps.iter().enumerate() {
         let Some(rr) = (r + t).checked_sub(RADIUS).filter(|&rr| rr < h) else {
@@ -584,7 +577,13 @@ mod tests {
             let mut down = vec![0.0_f32; 3 * out.len()];
             let mut all = Vec::new();
             for r in 0..h {
-                vertical(&across, r, h, row, out, &filled, &mut down, &taps, avx2);
+                let rows = RowSums {
+                    src: &across,
+                    h,
+                    row,
+                    filled: &filled,
+                };
+                vertical(rows, r, out, &mut down, &taps, avx2);
                 all.extend(down.iter().map(|v| v.to_bits()));
             }
             (across.iter().map(|v| v.to_bits()).collect::<Vec<_>>(), all)
