@@ -62,7 +62,7 @@ pub use rasterize::{MAX_PIXELS, RasterPhases, Rasterizer, RenderStats, has_avx2}
 pub use render::{RenderOptions, RenderOutput, SplatGrads};
 pub use sh::num_sh_coeffs;
 pub use splats::{
-    MIN_QUAT_NORM, Splats, logit, normalize_quat, rgb_to_sh_dc, sh_dc_to_rgb, sigmoid,
+    MIN_QUAT_NORM, Splats, all_finite, logit, normalize_quat, rgb_to_sh_dc, sh_dc_to_rgb, sigmoid,
 };
 pub use tiles::TILE_SIZE;
 

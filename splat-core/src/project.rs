@@ -6,7 +6,9 @@ use glam::{Mat3, Quat, Vec2, Vec3};
 
 use crate::constants::{DILATION, EXTENT_SIGMAS, FOV_CLAMP_MARGIN, MIN_ALPHA, NEAR_PLANE};
 use crate::projected::{Projected, quad_bound};
-use crate::{RenderCamera, RenderOptions, Splats, normalize_quat, num_sh_coeffs, sh, sigmoid};
+use crate::{
+    RenderCamera, RenderOptions, Splats, all_finite, normalize_quat, num_sh_coeffs, sh, sigmoid,
+};
 
 /// Why a splat was not drawn.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -217,7 +219,7 @@ pub(crate) fn project(splats: &Splats, i: usize, v: &ViewConsts) -> Result<Inter
     let inputs_finite = finite3(mean)
         && finite3(ls)
         && [qw, qx, qy, qz, logit].iter().all(|x| x.is_finite())
-        && coeffs.iter().all(|c| c.iter().all(|x| x.is_finite()));
+        && all_finite(coeffs.as_flattened());
     if !inputs_finite {
         return Err(Cull::NonFinite);
     }
