@@ -4,9 +4,8 @@
 //! Gaussian falloff that both tile loops (forward and backward) work from.
 //!
 //! This is Inria's single sort of (tile, depth) keys done as the two passes of an LSD radix sort:
-//! one stable sort of the visible splats (listed in index order) by depth, so the order is by
-//! (depth, index), then a stable counting sort by tile. That order is total, so binning is
-//! identical for any thread count.
+//! one sort of the visible splats by (depth, index), then a stable counting sort by tile. The
+//! index in the key makes the order total, so binning is identical for any thread count.
 
 use rayon::prelude::*;
 
@@ -55,10 +54,7 @@ impl Bins {
                 .filter(|(_, (_, v))| **v)
                 .map(|(i, (p, _))| (u64::from(p.depth.to_bits()) << 32) | i as u64),
         );
-        // A stable radix sort on the depth bits keeps equal depths in index order: the order of
-        // (depth, index), in fewer passes over the keys than a comparison sort of them takes
-        // (`radsort` is serial; the counting sort below is parallel).
-        radsort::sort_by_key(&mut self.order, |k| (k >> 32) as u32);
+        self.order.par_sort_unstable();
 
         // The counting sort runs in parallel over a fixed number of slices of `order`: each
         // slice counts its pairs per tile, every (tile, slice) gets the next run of its tile's
