@@ -28,6 +28,9 @@ pub(crate) struct Bins {
     order: Vec<u64>,
     /// Start of each tile's list in `list`; `offsets[t + 1] − offsets[t]` is its length.
     pub offsets: Vec<usize>,
+    /// The tile rectangle of each splat of `order`, in that order, so that the counting and
+    /// scattering passes read them forwards (through `order` they are scattered over memory).
+    sorted_rects: Vec<[u32; 4]>,
     /// Per (slice of `order`, tile): pair count, then the next write position.
     slice_counts: Vec<usize>,
     /// Splat indices, tile-major, front to back within a tile.
@@ -55,6 +58,12 @@ impl Bins {
                 .map(|(i, (p, _))| (u64::from(p.depth.to_bits()) << 32) | i as u64),
         );
         self.order.par_sort_unstable();
+        self.sorted_rects.clear();
+        self.sorted_rects.par_extend(
+            self.order
+                .par_iter()
+                .map(|&key| rects[(key & 0xffff_ffff) as usize]),
+        );
 
         // The counting sort runs in parallel over a fixed number of slices of `order`: each
         // slice counts its pairs per tile, every (tile, slice) gets the next run of its tile's
@@ -64,12 +73,11 @@ impl Bins {
         let n_slices = self.order.len().div_ceil(slice_len);
         self.slice_counts.clear();
         self.slice_counts.resize(n_slices * n_tiles, 0);
-        self.order
+        self.sorted_rects
             .par_chunks(slice_len)
             .zip(self.slice_counts.par_chunks_mut(n_tiles))
-            .for_each(|(keys, counts)| {
-                for &key in keys {
-                    let [x0, x1, y0, y1] = rects[(key & 0xffff_ffff) as usize];
+            .for_each(|(slice_rects, counts)| {
+                for &[x0, x1, y0, y1] in slice_rects {
                     for ty in y0..y1 {
                         let row = (ty * tiles_x) as usize;
                         for c in &mut counts[row + x0 as usize..row + x1 as usize] {
@@ -97,11 +105,11 @@ impl Bins {
         let list = DisjointWrites::new(&mut self.list);
         self.order
             .par_chunks(slice_len)
+            .zip(self.sorted_rects.par_chunks(slice_len))
             .zip(self.slice_counts.par_chunks_mut(n_tiles))
-            .for_each(|(keys, cursor)| {
-                for &key in keys {
+            .for_each(|((keys, slice_rects), cursor)| {
+                for (&key, &[x0, x1, y0, y1]) in keys.iter().zip(slice_rects) {
                     let i = (key & 0xffff_ffff) as u32;
-                    let [x0, x1, y0, y1] = rects[i as usize];
                     for ty in y0..y1 {
                         let row = (ty * tiles_x) as usize;
                         for c in &mut cursor[row + x0 as usize..row + x1 as usize] {
