@@ -229,6 +229,14 @@ pub(crate) const LANES: usize = TILE_SIZE as usize / 2;
 /// `row·16 + half·8 ..+ 8` of the tile-major per-tile buffers.
 pub(crate) const HALF_ROWS: usize = 2 * TILE_SIZE as usize;
 
+/// How far beyond the exact solution of its row a span reaches, in pixels: room for the
+/// rounding of the row's solution and of the tile loops' own falloff (it was one to two
+/// pixels, which around the small splats of a paper-scale frame drew many lanes and half-rows
+/// that could not pass the alpha test).
+/// `spans_hold_every_pixel_the_lane_test_passes` finds 0.1 px too little for splats thousands
+/// of pixels long and 0.3 px enough.
+const SPAN_MARGIN: f32 = 0.5;
+
 /// Where one splat can reach alpha ≥ 1/255 in one tile, for all 16 rows at once: each row's
 /// x range (tile local, inclusive, as floats) and the half-rows that range touches.
 ///
@@ -261,16 +269,23 @@ impl RowSpans {
         let mut lo = [0.0_f32; N];
         let mut hi = [0.0_f32; N];
         let mut dy = [0.0_f32; N];
+        // The conic's determinant a·c − b², from the f32 entries in f64 (their products are
+        // exact there): for a long thin splat it is far below the rounding of a·c in f32, so
+        // b²·d² − a·c·d² came out wrong by more than itself and rows the splat crosses were
+        // found empty.
+        let det = (f64::from(a) * f64::from(c) - f64::from(b) * f64::from(b)) as f32;
+        let a_q = a * q_max;
         for r in 0..N {
             let d = p.xy[1] - (y0f + r as f32);
-            // Solve a·dx² + 2b·dy·dx + c·dy² ≤ q_max for dx (a > 0 for any projected splat).
-            let disc = b * b * d * d - a * (c * d * d - q_max);
+            // Solve a·dx² + 2b·dy·dx + c·dy² ≤ q_max for dx (a > 0 for any projected splat):
+            // the discriminant (over 4) is b²·d² − a·(c·d² − q_max) = a·q_max − d²·(a·c − b²).
+            let disc = a_q - d * d * det;
             let root = disc.max(0.0).sqrt();
             let dx_lo = (-b * d - root) / a;
             let dx_hi = (-b * d + root) / a;
-            // dx = x − px, so x ∈ [px − dx_hi, px − dx_lo], widened by a pixel for rounding.
-            let l = ((p.xy[0] - dx_hi).floor() - 1.0 - x0f).max(0.0);
-            let h = ((p.xy[0] - dx_lo).ceil() + 1.0 - x0f).min(last_x);
+            // dx = px − x, so x ∈ [px − dx_hi, px − dx_lo], widened by `SPAN_MARGIN`.
+            let l = ((p.xy[0] - dx_hi - SPAN_MARGIN).ceil() - x0f).max(0.0);
+            let h = ((p.xy[0] - dx_lo + SPAN_MARGIN).floor() - x0f).min(last_x);
             // A row without real solutions (or past the tile's real rows) gets an empty span.
             let empty = disc.is_nan() | (disc < 0.0) | (r as i32 >= th);
             lo[r] = l;
@@ -453,6 +468,100 @@ mod tests {
         assert!(
             inside > 100_000,
             "the cases must reach many pixels: {inside}"
+        );
+    }
+
+    /// The spans leave out only pixels where the tile loops' own f32 test, o·G ≥ 1/255 with G
+    /// from `fast_exp`, fails (or passes on rounding noise alone, below): so the half-pixel
+    /// margin the spans keep is enough for the images. Splats from a fifth of a pixel to
+    /// thousands of pixels across (long thin ones at every angle), centred inside and far
+    /// outside the tile.
+    #[test]
+    fn spans_hold_every_pixel_the_lane_test_passes() {
+        use super::falloff_power;
+        use crate::constants::{MAX_ALPHA, MIN_ALPHA};
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(23);
+        let ts = TILE_SIZE as i32;
+        let mut passed = 0_u64;
+        for case in 0..400_000 {
+            let axis =
+                |rng: &mut rand_pcg::Pcg64| 0.2 * 25_000.0_f64.powf(rng.random_range(0.0..1.0));
+            let (s1, s2) = (axis(&mut rng), axis(&mut rng));
+            let th: f64 = rng.random_range(0.0..std::f64::consts::PI);
+            let (c, s) = (th.cos(), th.sin());
+            let cxx = c * c * s1 * s1 + s * s * s2 * s2 + 0.3;
+            let cyy = s * s * s1 * s1 + c * c * s2 * s2 + 0.3;
+            let cxy = c * s * (s1 * s1 - s2 * s2);
+            let det = cxx * cyy - cxy * cxy;
+            let conic64 = [cyy / det, -cxy / det, cxx / det];
+            let conic = conic64.map(|v| v as f32);
+            let opacity: f32 = rng.random_range(0.004..1.0);
+            let (x0, y0) = (ts * rng.random_range(0..64), ts * rng.random_range(0..64));
+            let reach = 3.0 * s1.max(s2) as f32;
+            let centre = [
+                x0 as f32 + rng.random_range(-reach..reach + 16.0),
+                y0 as f32 + rng.random_range(-reach..reach + 16.0),
+            ];
+            let (tw, th) = if case % 10 == 0 {
+                (rng.random_range(1..=ts), rng.random_range(1..=ts))
+            } else {
+                (ts, ts)
+            };
+            let p = Projected {
+                xy: centre,
+                conic,
+                opacity,
+                q_max: quad_bound(opacity),
+                ..Projected::default()
+            };
+            let spans = RowSpans::new(&p, x0, y0, tw, th);
+            let [a, b, c] = conic;
+            for ly in 0..th {
+                for lx in 0..tw {
+                    // The tile loops' arithmetic: dx from the half-row's origin, dy per row.
+                    let first = (lx as usize / LANES * LANES) as f32;
+                    let xb = p.xy[0] - (x0 as f32 + first);
+                    let dx = xb - (lx as f32 - first);
+                    let dy = spans.dy[ly as usize];
+                    let power = falloff_power(a, b, c, dx, dy);
+                    let alpha = (opacity * fast_exp(power)).min(MAX_ALPHA);
+                    // Far out along a splat thousands of pixels long, a·dx², c·dy² and b·dx·dy
+                    // are large and nearly cancel, and the f32 power is rounding noise (it can
+                    // come out 0 where the splat's true alpha is 10⁻⁴); the spans, solved per
+                    // row, rightly leave such pixels out. Required: every pixel whose true
+                    // alpha clears the threshold by 1 %, and on splats up to 100 px across
+                    // (where that noise is far below the margins) every pixel the lane test
+                    // passes.
+                    let [a64, b64, c64] = conic64;
+                    let (dx64, dy64) = (
+                        f64::from(centre[0]) - f64::from(x0 + lx),
+                        f64::from(centre[1]) - f64::from(y0 + ly),
+                    );
+                    let q = a64 * dx64 * dx64 + 2.0 * b64 * dx64 * dy64 + c64 * dy64 * dy64;
+                    let true_alpha = f64::from(opacity) * (-0.5 * q).exp();
+                    let lane_passes = power <= 0.0 && alpha >= MIN_ALPHA;
+                    let required =
+                        true_alpha >= 1.01 / 255.0 || (lane_passes && s1.max(s2) <= 100.0);
+                    if !required {
+                        continue;
+                    }
+                    passed += 1;
+                    let (row, x) = (ly as usize, lx as f32);
+                    assert!(
+                        spans.lo[row] <= x && x <= spans.hi[row],
+                        "case {case}: axes {s1:.1} × {s2:.1} px, pixel ({lx}, {ly}) with alpha \
+                         {alpha} (true {true_alpha}) outside the span [{}, {}]",
+                        spans.lo[row],
+                        spans.hi[row]
+                    );
+                    let bit = 2 * row + lx as usize / LANES;
+                    assert!(spans.mask & (1 << bit) != 0);
+                }
+            }
+        }
+        assert!(
+            passed > 500_000,
+            "the cases must reach many pixels: {passed}"
         );
     }
 
