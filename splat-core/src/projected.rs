@@ -31,12 +31,18 @@ pub(crate) fn quad_bound(opacity: f32) -> f32 {
 #[cfg(test)]
 pub(crate) fn random_footprint(rng: &mut impl rand::Rng, max_axis: f64) -> ([f64; 3], [f64; 3]) {
     use rand::RngExt;
-    let (s1, s2): (f64, f64) = (
+    let axes = [
         rng.random_range(0.2..max_axis),
         rng.random_range(0.2..max_axis),
-    );
-    let th: f64 = rng.random_range(0.0..std::f64::consts::PI);
-    let (c, s) = (th.cos(), th.sin());
+    ];
+    footprint(axes, rng.random_range(0.0..std::f64::consts::PI))
+}
+
+/// The footprint with standard deviations `axes` (pixels), the first along angle `theta`,
+/// plus the 0.3 px² dilation: covariance (xx, yy, xy) and conic (a, b, c), in f64.
+#[cfg(test)]
+pub(crate) fn footprint([s1, s2]: [f64; 2], theta: f64) -> ([f64; 3], [f64; 3]) {
+    let (c, s) = (theta.cos(), theta.sin());
     let cxx = c * c * s1 * s1 + s * s * s2 * s2 + 0.3;
     let cyy = s * s * s1 * s1 + c * c * s2 * s2 + 0.3;
     let cxy = c * s * (s1 * s1 - s2 * s2);

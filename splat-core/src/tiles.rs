@@ -409,7 +409,7 @@ mod tests {
     use rand::{RngExt, SeedableRng};
 
     use super::{Bins, HALF_ROWS, LANES, RowSpans, TILE_SIZE, fast_exp};
-    use crate::projected::{Projected, quad_bound, random_footprint};
+    use crate::projected::{Projected, footprint, quad_bound, random_footprint};
 
     /// The spans only skip work if every pixel they leave out has o·G < 1/255: checked in f64
     /// against random rotated, stretched splats around full and partial tiles.
@@ -487,13 +487,7 @@ mod tests {
             let axis =
                 |rng: &mut rand_pcg::Pcg64| 0.2 * 25_000.0_f64.powf(rng.random_range(0.0..1.0));
             let (s1, s2) = (axis(&mut rng), axis(&mut rng));
-            let th: f64 = rng.random_range(0.0..std::f64::consts::PI);
-            let (c, s) = (th.cos(), th.sin());
-            let cxx = c * c * s1 * s1 + s * s * s2 * s2 + 0.3;
-            let cyy = s * s * s1 * s1 + c * c * s2 * s2 + 0.3;
-            let cxy = c * s * (s1 * s1 - s2 * s2);
-            let det = cxx * cyy - cxy * cxy;
-            let conic64 = [cyy / det, -cxy / det, cxx / det];
+            let (_, conic64) = footprint([s1, s2], rng.random_range(0.0..std::f64::consts::PI));
             let conic = conic64.map(|v| v as f32);
             let opacity: f32 = rng.random_range(0.004..1.0);
             let (x0, y0) = (ts * rng.random_range(0..64), ts * rng.random_range(0..64));
@@ -565,19 +559,19 @@ mod tests {
         );
     }
 
-    /// The per-splat reduction must add each splat's records in list order, as a plain serial
-    /// scan of the list does, bit for bit and for any number of threads; hidden splats (whose
-    /// stale rectangles must not be listed) get nothing.
-    #[test]
-    fn per_splat_sums_follow_the_list_order_for_any_thread_count() {
-        let mut rng = rand_pcg::Pcg64::seed_from_u64(5);
-        let (tiles_x, tiles_y) = (9_u32, 7_u32);
-        let n = 3_000;
+    /// `n` splats to bin: depths from `depth`, random tile rectangles (some reaching the
+    /// grid's edges), three in four visible.
+    fn random_splats_to_bin(
+        rng: &mut rand_pcg::Pcg64,
+        n: usize,
+        [tiles_x, tiles_y]: [u32; 2],
+        depth: impl Fn(&mut rand_pcg::Pcg64) -> f32,
+    ) -> (Vec<Projected>, Vec<[u32; 4]>, Vec<bool>) {
         let mut proj = vec![Projected::default(); n];
         let mut rects = vec![[0_u32; 4]; n];
         let mut visible = vec![false; n];
         for i in 0..n {
-            proj[i].depth = rng.random_range(0.5..9.0);
+            proj[i].depth = depth(rng);
             let (x0, y0) = (rng.random_range(0..tiles_x), rng.random_range(0..tiles_y));
             rects[i] = [
                 x0,
@@ -587,6 +581,20 @@ mod tests {
             ];
             visible[i] = rng.random_range(0..4) != 0;
         }
+        (proj, rects, visible)
+    }
+
+    /// The per-splat reduction must add each splat's records in list order, as a plain serial
+    /// scan of the list does, bit for bit and for any number of threads; hidden splats (whose
+    /// stale rectangles must not be listed) get nothing.
+    #[test]
+    fn per_splat_sums_follow_the_list_order_for_any_thread_count() {
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(5);
+        let (tiles_x, tiles_y) = (9_u32, 7_u32);
+        let n = 3_000;
+        let (proj, rects, visible) = random_splats_to_bin(&mut rng, n, [tiles_x, tiles_y], |rng| {
+            rng.random_range(0.5..9.0)
+        });
         let mut bins = Bins::default();
         bins.build(&proj, &rects, &visible, tiles_x, tiles_y);
         assert!(
@@ -639,20 +647,9 @@ mod tests {
         let mut rng = rand_pcg::Pcg64::seed_from_u64(17);
         let (tiles_x, tiles_y) = (11_u32, 6_u32);
         let n = 4_000;
-        let mut proj = vec![Projected::default(); n];
-        let mut rects = vec![[0_u32; 4]; n];
-        let mut visible = vec![false; n];
-        for i in 0..n {
-            proj[i].depth = [0.5_f32, 1.0, 1.0 + f32::EPSILON, 2.5, 7.0][rng.random_range(0..5)];
-            let (x0, y0) = (rng.random_range(0..tiles_x), rng.random_range(0..tiles_y));
-            rects[i] = [
-                x0,
-                rng.random_range(x0..=tiles_x),
-                y0,
-                rng.random_range(y0..=tiles_y),
-            ];
-            visible[i] = rng.random_range(0..5) != 0;
-        }
+        let (proj, rects, visible) = random_splats_to_bin(&mut rng, n, [tiles_x, tiles_y], |rng| {
+            [0.5_f32, 1.0, 1.0 + f32::EPSILON, 2.5, 7.0][rng.random_range(0..5)]
+        });
         let mut expected = Vec::new();
         for t in 0..tiles_x * tiles_y {
             let (tx, ty) = (t % tiles_x, t / tiles_x);
