@@ -74,7 +74,7 @@ impl Rasterizer {
         if self.last_view != Some((splats.len(), cam.width, cam.height)) {
             self.forward(splats, cam, opts);
         }
-        if grads.means.len() != splats.len() || grads.sh.len() != splats.sh.len() {
+        if !grads.fits(splats) {
             grads.reset(splats);
         }
         let v = ViewConsts::new(cam, opts, splats);

@@ -73,6 +73,18 @@ impl SplatGrads {
         g
     }
 
+    /// Whether these gradients are shaped like `splats` (as many splats and SH coefficients).
+    #[must_use]
+    pub fn fits(&self, splats: &Splats) -> bool {
+        let n = splats.len();
+        self.means.len() == n
+            && self.log_scales.len() == n
+            && self.rotations.len() == n
+            && self.opacity_logits.len() == n
+            && self.sh.len() == splats.sh.len()
+            && self.screen_grad_norm.len() == n
+    }
+
     /// Resizes to `splats` and sets every gradient to zero, reusing the allocations (zeroed in
     /// parallel: at 250 k splats of degree 3 these are 60 MB, rewritten before every backward).
     pub fn reset(&mut self, splats: &Splats) {

@@ -84,20 +84,10 @@ impl Moments {
             params.len() == grads.len() && params.len() == self.m.len(),
             "Adam size mismatch"
         );
-        let t = i32::try_from(step.max(1)).unwrap_or(i32::MAX);
-        // Bias corrections in f64 (β^t underflows gracefully), the per-value update in f32 as
-        // PyTorch does.
-        let k = Kernel {
-            b1: hp.beta1,
-            b2: hp.beta2,
-            eps: hp.eps,
-            inv_bc1: (1.0 / (1.0 - f64::from(hp.beta1).powi(t))) as f32,
-            inv_bc2_sqrt: (1.0 / (1.0 - f64::from(hp.beta2).powi(t)).sqrt()) as f32,
-        };
+        let k = AdamStep::new(hp, step);
         let stride = rates.stride();
         // About 8k values a chunk, in whole records so each chunk starts at a record.
         let chunk = (8192 / stride).max(1) * stride;
-        let avx2 = splat_core::has_avx2();
         params
             .par_chunks_mut(chunk)
             .zip(grads.par_chunks(chunk))
@@ -106,7 +96,7 @@ impl Moments {
                     .par_chunks_mut(chunk)
                     .zip(self.v.par_chunks_mut(chunk)),
             )
-            .for_each(|((p, g), (m, v))| k.chunk(p, g, m, v, rates, avx2));
+            .for_each(|((p, g), (m, v))| k.update(p, g, m, v, rates));
     }
 }
 
@@ -159,29 +149,45 @@ impl Rates {
     }
 }
 
-/// One step's constants.
+/// One Adam step's constants, shared by every value it updates.
 #[derive(Clone, Copy)]
-struct Kernel {
+pub(crate) struct AdamStep {
     b1: f32,
     b2: f32,
     eps: f32,
     inv_bc1: f32,
     inv_bc2_sqrt: f32,
+    avx2: bool,
 }
 
-impl Kernel {
-    /// Updates a chunk of whole records: the AVX2 instantiation where the CPU has it.
-    fn chunk(
+impl AdamStep {
+    /// The constants of 1-based step `step`.
+    pub(crate) fn new(hp: &AdamParams, step: u64) -> Self {
+        let t = i32::try_from(step.max(1)).unwrap_or(i32::MAX);
+        // Bias corrections in f64 (β^t underflows gracefully), the per-value update in f32 as
+        // PyTorch does.
+        Self {
+            b1: hp.beta1,
+            b2: hp.beta2,
+            eps: hp.eps,
+            inv_bc1: (1.0 / (1.0 - f64::from(hp.beta1).powi(t))) as f32,
+            inv_bc2_sqrt: (1.0 / (1.0 - f64::from(hp.beta2).powi(t)).sqrt()) as f32,
+            avx2: splat_core::has_avx2(),
+        }
+    }
+
+    /// Updates `p` (with its moments `m`, `v`) by the gradients `g`: whole records of
+    /// `rates` (the slices start at a record), the AVX2 instantiation where the CPU has it.
+    pub(crate) fn update(
         &self,
         p: &mut [f32],
         g: &[f32],
         m: &mut [f32],
         v: &mut [f32],
         rates: Rates,
-        avx2: bool,
     ) {
         #[cfg(target_arch = "x86_64")]
-        if avx2 {
+        if self.avx2 {
             // SAFETY: `avx2` is only true when the CPU reports AVX2 (`splat_core::has_avx2`).
             #[allow(unsafe_code)]
             unsafe {
@@ -189,7 +195,6 @@ impl Kernel {
             }
             return;
         }
-        let _ = avx2;
         self.chunk_impl(p, g, m, v, rates);
     }
 

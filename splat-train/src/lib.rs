@@ -50,6 +50,7 @@ pub mod ssim;
 pub mod state;
 pub mod strategy;
 mod trainer;
+mod update;
 mod view;
 
 pub use budget::{

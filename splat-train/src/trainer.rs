@@ -10,7 +10,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use splat_core::{Rasterizer, RenderCamera, RenderOptions, SplatGrads, Splats, logit};
 
-use crate::adam::Rates;
+use crate::adam::{AdamStep, Rates};
 use crate::config::{Background, TrainConfig};
 use crate::error::Error;
 use crate::loss::{Loss, alpha_l1};
@@ -18,6 +18,7 @@ use crate::metrics::psnr_from_mse;
 use crate::schedule::{Pace, camera_extent, exponential_lr, scale_steps, sh_degree_at};
 use crate::state::ParamState;
 use crate::strategy::{DensifyStrategy, InriaDensify, RefineContext, RefineReport};
+use crate::update::{UpdatePlan, update};
 use crate::view::{View, composite_in_place, composite_into};
 
 /// Log-scale range a splat is clamped to, relative to the scene extent: from a millionth of the
@@ -174,6 +175,8 @@ pub struct Trainer {
     pub(crate) strategy: Option<Box<dyn DensifyStrategy>>,
     pub(crate) run: RunState,
     grads: SplatGrads,
+    /// Whether `grads` is all zero (the update leaves it so for the next backward pass).
+    grads_zeroed: bool,
     rasterizer: Rasterizer,
     loss: Option<Loss>,
     composite: Vec<f32>,
@@ -288,6 +291,7 @@ impl Trainer {
         };
         let mut t = Self {
             grads: SplatGrads::zeros_like(&splats),
+            grads_zeroed: false,
             state: ParamState::new(splats),
             levels: vec![Level::new(views)?],
             config,
@@ -512,7 +516,12 @@ impl Trainer {
 
         let mut refine = RefineReport::default();
         if total.is_finite() {
-            self.grads.reset(&self.state.splats);
+            // The last update left the gradients zero; they need it again only if the model has
+            // changed shape since (refinement, repair) or no update has run yet.
+            if !(self.grads_zeroed && self.grads.fits(&self.state.splats)) {
+                self.grads.reset(&self.state.splats);
+            }
+            self.grads_zeroed = false;
             let d_alpha = if use_alpha {
                 Some(&self.d_alpha[..])
             } else {
@@ -529,12 +538,20 @@ impl Trainer {
             );
             let t3 = Instant::now();
             self.timings.backward += t3 - t2;
-            self.run.non_finite.zeroed_gradients += zero_non_finite_grads(&mut self.grads);
+            // With a strategy observing the gradients, the check runs before it; otherwise the
+            // update does it chunk by chunk.
+            let observed = self.strategy.is_some();
             if let Some(s) = self.strategy.as_mut() {
+                self.run.non_finite.zeroed_gradients += zero_non_finite_grads(&mut self.grads);
                 s.observe(iteration, &self.grads, self.rasterizer.radii());
             }
-            self.adam_step(iteration);
-            self.sanitize();
+            let plan = self.update_plan(iteration, !observed);
+            let outcome = update(&plan, &mut self.state, &mut self.grads);
+            self.grads_zeroed = true;
+            self.run.non_finite.zeroed_gradients += outcome.zeroed_gradients;
+            if outcome.non_finite_parameters {
+                self.sanitize();
+            }
             let t4 = Instant::now();
             self.timings.adam += t4 - t3;
             if let Some(s) = self.strategy.as_mut() {
@@ -575,85 +592,56 @@ impl Trainer {
         stats
     }
 
-    /// Adam on every group that is not frozen, at this step's rates.
-    fn adam_step(&mut self, iteration: u32) {
-        let horizon = self.horizon();
+    /// This step's update: Adam's rates for every group that is not frozen, and the clamps.
+    fn update_plan(&self, iteration: u32, check_gradients: bool) -> UpdatePlan {
         let c = &self.config;
-        let hp = c.adam;
-        let t = u64::from(iteration);
-        let st = &mut self.state;
-        let g = &self.grads;
         let f = c.frozen;
-        if !f.positions {
-            let max_steps = c.lr.position_max_steps.unwrap_or(horizon);
-            let lr = exponential_lr(
+        let position_lr = {
+            let max_steps = c.lr.position_max_steps.unwrap_or(self.horizon());
+            exponential_lr(
                 c.lr.position_init,
                 c.lr.position_final,
                 iteration - 1,
                 max_steps,
-            ) * self.extent;
-            st.moments.means.step(
-                &hp,
-                t,
-                bytemuck::cast_slice_mut(&mut st.splats.means),
-                bytemuck::cast_slice(&g.means),
-                Rates::All(lr),
-            );
+            ) * self.extent
+        };
+        let k = self.state.splats.coeffs_per_splat();
+        let sh = Rates::Split {
+            stride: 3 * k,
+            head: 3,
+            head_rate: c.lr.sh_dc,
+            tail_rate: c.lr.sh_dc / c.lr.sh_rest_divisor,
+        };
+        let unless = |frozen: bool, r: Rates| (!frozen).then_some(r);
+        let (lo, hi) = self.log_scale_bounds();
+        UpdatePlan {
+            adam: AdamStep::new(&c.adam, u64::from(iteration)),
+            rates: [
+                unless(f.positions, Rates::All(position_lr)),
+                unless(f.scales, Rates::All(c.lr.scale)),
+                unless(f.rotations, Rates::All(c.lr.rotation)),
+                unless(f.opacities, Rates::All(c.lr.opacity)),
+                unless(f.colors, sh),
+            ],
+            check_gradients,
+            log_scale_bounds: (!f.scales).then_some((lo, hi)),
+            opacity_logit_bound: (!f.opacities).then_some(MAX_OPACITY_LOGIT),
         }
-        if !f.scales {
-            let lr = c.lr.scale;
-            st.moments.log_scales.step(
-                &hp,
-                t,
-                bytemuck::cast_slice_mut(&mut st.splats.log_scales),
-                bytemuck::cast_slice(&g.log_scales),
-                Rates::All(lr),
-            );
-        }
-        if !f.rotations {
-            let lr = c.lr.rotation;
-            st.moments.rotations.step(
-                &hp,
-                t,
-                st.splats.rotations.as_flattened_mut(),
-                g.rotations.as_flattened(),
-                Rates::All(lr),
-            );
-        }
-        if !f.opacities {
-            let lr = c.lr.opacity;
-            st.moments.opacity_logits.step(
-                &hp,
-                t,
-                &mut st.splats.opacity_logits,
-                &g.opacity_logits,
-                Rates::All(lr),
-            );
-        }
-        if !f.colors {
-            let k = st.splats.coeffs_per_splat();
-            let (dc, rest) = (c.lr.sh_dc, c.lr.sh_dc / c.lr.sh_rest_divisor);
-            st.moments.sh.step(
-                &hp,
-                t,
-                st.splats.sh.as_flattened_mut(),
-                g.sh.as_flattened(),
-                Rates::Split {
-                    stride: 3 * k,
-                    head: 3,
-                    head_rate: dc,
-                    tail_rate: rest,
-                },
-            );
-        }
+    }
+
+    /// The log-scales' clamp: a fixed share of the scene's extent either way.
+    fn log_scale_bounds(&self) -> (f32, f32) {
+        (
+            (MIN_SCALE_OF_EXTENT * self.extent).ln(),
+            (MAX_SCALE_OF_EXTENT * self.extent).ln(),
+        )
     }
 
     /// Resets or removes splats whose parameters are no longer finite, then clamps scales and
     /// opacities to sane ranges.
     fn sanitize(&mut self) {
         self.handle_non_finite();
-        let lo = (MIN_SCALE_OF_EXTENT * self.extent).ln();
-        let hi = (MAX_SCALE_OF_EXTENT * self.extent).ln();
+        let (lo, hi) = self.log_scale_bounds();
         let s = &mut self.state.splats;
         if !self.config.frozen.scales {
             s.log_scales
@@ -984,7 +972,7 @@ fn first_non_finite(s: &Splats) -> Option<usize> {
 }
 
 /// Zeroes the gradients of splats with any non-finite gradient; returns how many.
-fn zero_non_finite_grads(g: &mut SplatGrads) -> u64 {
+pub(crate) fn zero_non_finite_grads(g: &mut SplatGrads) -> u64 {
     let n = g.means.len();
     let k = g.sh.len().checked_div(n).unwrap_or(0);
     if all_finite(&[
