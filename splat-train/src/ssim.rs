@@ -208,11 +208,13 @@ impl Ssim {
                     let need = out.widen(RADIUS, w);
                     let (pxx, rest) = products.split_at_mut(row);
                     let (pyy, pxy) = rest.split_at_mut(row);
-                    for i in 3 * need.lo..3 * need.hi {
-                        pxx[i] = xr[i] * xr[i];
-                        pyy[i] = yr[i] * yr[i];
-                        pxy[i] = xr[i] * yr[i];
-                    }
+                    let cols = 3 * need.lo..3 * need.hi;
+                    let dst = [
+                        &mut pxx[cols.clone()],
+                        &mut pyy[cols.clone()],
+                        &mut pxy[cols.clone()],
+                    ];
+                    square_products(&xr[cols.clone()], &yr[cols], dst, avx2);
                     let whole = Span { lo: 0, hi: w };
                     horizontal(xr, whole, ox, out, taps, avx2);
                     horizontal(yr, whole, oy, out, taps, avx2);
@@ -239,7 +241,7 @@ impl Ssim {
                 |scratch, (r, ((d_mu, d_xx), d_xy))| {
                     let span = sp.map[r];
                     // Every pixel outside the span has SSIM exactly 1.
-                    let mut s = (3 * (w - span.len())) as f64;
+                    let s = (3 * (w - span.len())) as f64;
                     if span.is_empty() {
                         return s;
                     }
@@ -260,29 +262,15 @@ impl Ssim {
                         };
                         vertical(rows, r, span, &mut out[cols.clone()], taps, avx2);
                     }
-                    let [mx, my, exx, eyy, exy] = v.each_ref().map(|b| &b[cols.clone()]);
-                    for (j, i) in cols.clone().enumerate() {
-                        let (mu_x, mu_y) = (mx[j], my[j]);
-                        let sxx = exx[j] - mu_x * mu_x;
-                        let syy = eyy[j] - mu_y * mu_y;
-                        let sxy = exy[j] - mu_x * mu_y;
-                        let a1 = 2.0 * mu_x * mu_y + C1;
-                        let a2 = 2.0 * sxy + C2;
-                        let b1 = mu_x * mu_x + mu_y * mu_y + C1;
-                        let b2 = sxx + syy + C2;
-                        let map = (a1 * a2) / (b1 * b2);
-                        s += f64::from(map);
-                        if want_grad {
-                            let inv = 1.0 / (b1 * b2);
-                            let g_sxx = -map / b2;
-                            let g_sxy = 2.0 * a1 * inv;
-                            let g_mu = 2.0 * mu_y * a2 * inv - map * 2.0 * mu_x / b1;
-                            d_mu[i] = g_mu - 2.0 * mu_x * g_sxx - mu_y * g_sxy;
-                            d_xx[i] = g_sxx;
-                            d_xy[i] = g_sxy;
-                        }
-                    }
-                    s
+                    let means = v.each_ref().map(|b| &b[cols.clone()]);
+                    let grads = want_grad.then(|| {
+                        [
+                            &mut d_mu[cols.clone()],
+                            &mut d_xx[cols.clone()],
+                            &mut d_xy[cols.clone()],
+                        ]
+                    });
+                    s + map_row(means, grads, avx2)
                 },
             )
             .collect_into_vec(&mut self.row_sums);
@@ -338,10 +326,9 @@ impl Ssim {
                             };
                             vertical(rows, r, span, dst, taps, avx2);
                         }
-                        let [dm, dxx, dxy] = v.each_ref().map(|b| &b[cols.clone()]);
-                        for (j, i) in cols.enumerate() {
-                            o[i] += k * (dm[j] + 2.0 * xr[i] * dxx[j] + yr[i] * dxy[j]);
-                        }
+                        let partials = v.each_ref().map(|b| &b[cols.clone()]);
+                        let images = [&xr[cols.clone()], &yr[cols.clone()]];
+                        add_gradient_row(&mut o[cols], images, partials, k, avx2);
                     },
                 );
         }
@@ -371,6 +358,184 @@ impl Ssim {
         sp.partial_sums
             .extend(sp.map.iter().map(|s| s.widen(RADIUS, w)));
         spread(&sp.partial_sums, 0, w, &mut sp.grad);
+    }
+}
+
+/// Lanes of the per-row sums of the SSIM map.
+const LANES: usize = 8;
+
+/// The products x², y², xy of one row's values, into `dst`. The AVX2 instantiation where the
+/// CPU has it (as each kernel here: the same operations, so the same values).
+fn square_products(x: &[f32], y: &[f32], dst: [&mut [f32]; 3], avx2: bool) {
+    #[cfg(target_arch = "x86_64")]
+    if avx2 {
+        // SAFETY: `avx2` is only true when `has_avx2()` is, so the CPU supports the enabled features.
+        #[allow(unsafe_code)]
+        return unsafe { square_products_avx2(x, y, dst) };
+    }
+    let _ = avx2;
+    square_products_impl(x, y, dst);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn square_products_avx2(x: &[f32], y: &[f32], dst: [&mut [f32]; 3]) {
+    square_products_impl(x, y, dst);
+}
+
+#[inline(always)]
+fn square_products_impl(x: &[f32], y: &[f32], [xx, yy, xy]: [&mut [f32]; 3]) {
+    for ((((xx, yy), xy), &x), &y) in xx.iter_mut().zip(yy).zip(xy).zip(x).zip(y) {
+        *xx = x * x;
+        *yy = y * y;
+        *xy = x * y;
+    }
+}
+
+/// The SSIM map over one row's span from its window means `[μx, μy, E[x²], E[y²], E[xy]]`;
+/// with `grads`, also writes the map's partials ∂/∂μx (with the chain through σx² and σxy),
+/// ∂/∂E[x²] and ∂/∂E[xy]. Returns the map's sum in f64, kept per lane and the lanes added in
+/// order (one running sum was a chain of dependent additions that kept the loop scalar).
+fn map_row(means: [&[f32]; 5], grads: Option<[&mut [f32]; 3]>, avx2: bool) -> f64 {
+    #[cfg(target_arch = "x86_64")]
+    if avx2 {
+        // SAFETY: `avx2` is only true when `has_avx2()` is, so the CPU supports the enabled features.
+        #[allow(unsafe_code)]
+        return unsafe { map_row_avx2(means, grads) };
+    }
+    let _ = avx2;
+    map_row_impl(means, grads)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn map_row_avx2(means: [&[f32]; 5], grads: Option<[&mut [f32]; 3]>) -> f64 {
+    map_row_impl(means, grads)
+}
+
+#[inline(always)]
+fn map_row_impl(means: [&[f32]; 5], mut grads: Option<[&mut [f32]; 3]>) -> f64 {
+    let n = means.iter().map(|m| m.len()).min().unwrap_or(0);
+    let mut lanes = [0.0_f64; LANES];
+    // Whole groups of lanes through fixed-size copies (vectorised), then the rest one by one.
+    let mut j0 = 0;
+    while j0 < n {
+        let len = LANES.min(n - j0);
+        let mut m = [[0.0_f32; LANES]; 5];
+        for (m, src) in m.iter_mut().zip(&means) {
+            m[..len].copy_from_slice(&src[j0..j0 + len]);
+        }
+        let mut map = [0.0_f32; LANES];
+        let mut partials = [[0.0_f32; LANES]; 3];
+        for l in 0..LANES {
+            let t = MapTerms::new([m[0][l], m[1][l], m[2][l], m[3][l], m[4][l]]);
+            map[l] = t.map;
+            [partials[0][l], partials[1][l], partials[2][l]] = t.partials();
+        }
+        for l in 0..len {
+            lanes[l] += f64::from(map[l]);
+        }
+        if let Some(grads) = grads.as_mut() {
+            for (g, p) in grads.iter_mut().zip(&partials) {
+                g[j0..j0 + len].copy_from_slice(&p[..len]);
+            }
+        }
+        j0 += LANES;
+    }
+    lanes.iter().sum()
+}
+
+/// The terms of the SSIM map at one value: SSIM = A1·A2 / (B1·B2) with A1 = 2μxμy + C1,
+/// A2 = 2σxy + C2, B1 = μx² + μy² + C1, B2 = σx² + σy² + C2, σx² = E[x²] − μx²,
+/// σxy = E[xy] − μxμy.
+struct MapTerms {
+    mu_x: f32,
+    mu_y: f32,
+    a1: f32,
+    a2: f32,
+    b1: f32,
+    b2: f32,
+    map: f32,
+}
+
+impl MapTerms {
+    /// The terms from the window means `[μx, μy, E[x²], E[y²], E[xy]]`.
+    #[inline(always)]
+    fn new([mu_x, mu_y, exx, eyy, exy]: [f32; 5]) -> Self {
+        let sxx = exx - mu_x * mu_x;
+        let syy = eyy - mu_y * mu_y;
+        let sxy = exy - mu_x * mu_y;
+        let a1 = 2.0 * mu_x * mu_y + C1;
+        let a2 = 2.0 * sxy + C2;
+        let b1 = mu_x * mu_x + mu_y * mu_y + C1;
+        let b2 = sxx + syy + C2;
+        Self {
+            mu_x,
+            mu_y,
+            a1,
+            a2,
+            b1,
+            b2,
+            map: (a1 * a2) / (b1 * b2),
+        }
+    }
+
+    /// The map's partials ∂/∂μx (with the chain through σx² and σxy), ∂/∂E[x²], ∂/∂E[xy].
+    #[inline(always)]
+    fn partials(&self) -> [f32; 3] {
+        let Self {
+            mu_x,
+            mu_y,
+            a1,
+            a2,
+            b1,
+            b2,
+            map,
+        } = *self;
+        let inv = 1.0 / (b1 * b2);
+        let g_sxx = -map / b2;
+        let g_sxy = 2.0 * a1 * inv;
+        let g_mu = 2.0 * mu_y * a2 * inv - map * 2.0 * mu_x / b1;
+        [g_mu - 2.0 * mu_x * g_sxx - mu_y * g_sxy, g_sxx, g_sxy]
+    }
+}
+
+/// Adds `k` times the gradient of one row's span into `out`: from the blurred partials
+/// `[∂/∂μx, ∂/∂E[x²], ∂/∂E[xy]]` and the images `[x, y]`.
+fn add_gradient_row(
+    out: &mut [f32],
+    images: [&[f32]; 2],
+    partials: [&[f32]; 3],
+    k: f32,
+    avx2: bool,
+) {
+    #[cfg(target_arch = "x86_64")]
+    if avx2 {
+        // SAFETY: `avx2` is only true when `has_avx2()` is, so the CPU supports the enabled features.
+        #[allow(unsafe_code)]
+        return unsafe { add_gradient_row_avx2(out, images, partials, k) };
+    }
+    let _ = avx2;
+    add_gradient_row_impl(out, images, partials, k);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn add_gradient_row_avx2(out: &mut [f32], images: [&[f32]; 2], partials: [&[f32]; 3], k: f32) {
+    add_gradient_row_impl(out, images, partials, k);
+}
+
+#[inline(always)]
+fn add_gradient_row_impl(
+    out: &mut [f32],
+    [x, y]: [&[f32]; 2],
+    [dm, dxx, dxy]: [&[f32]; 3],
+    k: f32,
+) {
+    for (((((o, &x), &y), &dm), &dxx), &dxy) in
+        out.iter_mut().zip(x).zip(y).zip(dm).zip(dxx).zip(dxy)
+    {
+        *o += k * (dm + 2.0 * x * dxx + y * dxy);
     }
 }
 
@@ -406,18 +571,101 @@ fn horizontal_avx2(src: &[f32], valid: Span, dst: &mut [f32], out: Span, taps: &
 
 #[inline(always)]
 fn horizontal_impl(src: &[f32], valid: Span, dst: &mut [f32], out: Span, taps: &[f32; TAPS]) {
-    dst[3 * out.lo..3 * out.hi].fill(0.0);
-    for (t, &g) in taps.iter().enumerate() {
-        // Output column c reads source column c + t − R, which must lie in `valid`.
-        let lo = out.lo.max((valid.lo + RADIUS).saturating_sub(t));
-        let hi = out.hi.min((valid.hi + RADIUS).saturating_sub(t));
-        if lo >= hi {
-            continue;
+    // Output value q (of the span's 3·len) reads source value 3·out.lo + q + 3(t − R), which
+    // must lie in `valid`.
+    let first = 3 * out.lo as isize;
+    let rows = std::array::from_fn(|t| {
+        let shift = first + 3 * (t as isize - RADIUS as isize);
+        TapRow {
+            src,
+            shift,
+            lo: (3 * valid.lo as isize - shift).max(0) as usize,
+            hi: (3 * valid.hi as isize - shift).max(0) as usize,
+            weight: taps[t],
         }
-        let (s_lo, s_hi) = (lo + t - RADIUS, hi + t - RADIUS);
-        for (o, &v) in dst[3 * lo..3 * hi].iter_mut().zip(&src[3 * s_lo..3 * s_hi]) {
-            *o += g * v;
+    });
+    weighted_sums(&mut dst[3 * out.lo..3 * out.hi], &rows);
+}
+
+/// One tap of [`weighted_sums`]: output value `q` adds `weight · src[q + shift]` where
+/// `lo ≤ q < hi` (the source is taken as zero elsewhere).
+#[derive(Clone, Copy)]
+struct TapRow<'a> {
+    src: &'a [f32],
+    shift: isize,
+    lo: usize,
+    hi: usize,
+    weight: f32,
+}
+
+/// Values of `weighted_sums`'s blocks: four AVX2 registers, so four independent chains of
+/// additions per tap.
+const BLOCK: usize = 32;
+
+/// `dst[q] = Σₜ` (tap t's term at q), the taps added in order for each value, as a loop over
+/// taps each adding into the whole of `dst` would; but a block of `dst` stays in registers over
+/// all the taps instead of being loaded, added to and stored once per tap.
+#[inline(always)]
+fn weighted_sums(dst: &mut [f32], rows: &[TapRow<'_>; TAPS]) {
+    let n = dst.len();
+    let whole = n - n % BLOCK;
+    for (b, out) in dst[..whole].chunks_exact_mut(BLOCK).enumerate() {
+        let q0 = b * BLOCK;
+        let mut acc = [0.0_f32; BLOCK];
+        for row in rows {
+            let (lo, hi) = (row.lo.max(q0), row.hi.min(q0 + BLOCK));
+            if lo >= hi {
+                continue;
+            }
+            if lo == q0 && hi == q0 + BLOCK {
+                add_block(&mut acc, row.weight, row.block(q0));
+            } else {
+                add_block(&mut acc, row.weight, &row.part(q0, lo, hi));
+            }
         }
+        out.copy_from_slice(&acc);
+    }
+    // The last values one by one, the taps in the same order.
+    for (q, out) in dst.iter_mut().enumerate().skip(whole) {
+        let mut acc = 0.0_f32;
+        for row in rows.iter().filter(|r| (r.lo..r.hi).contains(&q)) {
+            acc += row.weight * row.src[row.at(q)];
+        }
+        *out = acc;
+    }
+}
+
+/// `acc += w · s`, lane by lane.
+#[inline(always)]
+fn add_block(acc: &mut [f32; BLOCK], w: f32, s: &[f32; BLOCK]) {
+    for (a, &v) in acc.iter_mut().zip(s) {
+        *a += w * v;
+    }
+}
+
+impl TapRow<'_> {
+    /// Position in `src` of output value `q`.
+    #[inline(always)]
+    fn at(&self, q: usize) -> usize {
+        (q as isize + self.shift) as usize
+    }
+
+    /// The source of the block of outputs at `q0`, all inside the tap's range.
+    #[inline(always)]
+    fn block(&self, q0: usize) -> &[f32; BLOCK] {
+        self.src[self.at(q0)..self.at(q0) + BLOCK]
+            .try_into()
+            .expect("a block's length")
+    }
+
+    /// The source of the block at `q0` where only `lo..hi` is inside the tap's range, zero
+    /// elsewhere: adding w·0 = +0 leaves a sum as it was (a sum that starts at +0 is never −0),
+    /// so the block gives the sums that skipping those values would.
+    #[inline(always)]
+    fn part(&self, q0: usize, lo: usize, hi: usize) -> [f32; BLOCK] {
+        let mut part = [0.0_f32; BLOCK];
+        part[lo - q0..hi - q0].copy_from_slice(&self.src[self.at(lo)..self.at(hi)]);
+        part
     }
 }
 
@@ -467,21 +715,26 @@ fn vertical_impl(sums: RowSums<'_>, r: usize, out: Span, dst: &mut [f32], taps: 
         row,
         filled,
     } = sums;
-    dst.fill(0.0);
-    for (t, &g) in taps.iter().enumerate() {
-        let Some(rr) = (r + t).checked_sub(RADIUS).filter(|&rr| rr < h) else {
-            continue;
+    let rows = std::array::from_fn(|t| {
+        // Rows outside the image, and columns outside a row's span, read as zero.
+        let (rr, cols) = match (r + t).checked_sub(RADIUS).filter(|&rr| rr < h) {
+            Some(rr) => (rr, out.intersect(filled[rr])),
+            None => (0, Span::EMPTY),
         };
-        let cols = out.intersect(filled[rr]);
-        if cols.is_empty() {
-            continue;
+        let first = rr * row + 3 * out.lo;
+        TapRow {
+            src,
+            shift: first as isize,
+            lo: 3 * cols.lo.saturating_sub(out.lo),
+            hi: if cols.is_empty() {
+                0
+            } else {
+                3 * (cols.hi - out.lo)
+            },
+            weight: taps[t],
         }
-        let s = &src[rr * row + 3 * cols.lo..rr * row + 3 * cols.hi];
-        let d = &mut dst[3 * (cols.lo - out.lo)..3 * (cols.hi - out.lo)];
-        for (o, &v) in d.iter_mut().zip(s) {
-            *o += g * v;
-        }
-    }
+    });
+    weighted_sums(dst, &rows);
 }
 
 #[cfg(test)]
@@ -594,6 +847,87 @@ mod tests {
             "the passes must produce sums"
         );
         assert_eq!(portable, run(splat_core::has_avx2()));
+    }
+
+    /// The window passes keep a block of sums in registers over all the taps; each sum must
+    /// still be the taps' products added in tap order, skipping the taps outside the source's
+    /// span, bit for bit: checked against that loop written out, with spans that start and
+    /// end inside blocks, reach the row's ends, or are empty.
+    #[test]
+    fn window_passes_add_the_taps_in_order_bit_for_bit() {
+        let (w, h) = (90, 12);
+        let row = 3 * w;
+        let (x, _) = random_pair(w, h, 9);
+        let taps = gaussian_taps();
+        let spans = [
+            (0, 90),
+            (3, 61),
+            (11, 12),
+            (40, 40),
+            (0, 7),
+            (85, 90),
+            (29, 77),
+        ];
+        let sum_of = |terms: &mut dyn Iterator<Item = (f32, f32)>| {
+            terms.fold(0.0_f32, |acc, (g, v)| acc + g * v)
+        };
+        for avx2 in [false, splat_core::has_avx2()] {
+            for &(vlo, vhi) in &spans {
+                for &(olo, ohi) in &spans {
+                    let (valid, out) = (Span { lo: vlo, hi: vhi }, Span { lo: olo, hi: ohi });
+                    let mut dst = vec![f32::NAN; row];
+                    horizontal(&x[..row], valid, &mut dst, out, &taps, avx2);
+                    for c in out.lo..out.hi {
+                        for ch in 0..3 {
+                            let want = sum_of(&mut (0..TAPS).filter_map(|t| {
+                                let sc = (c + t).checked_sub(RADIUS)?;
+                                (valid.lo..valid.hi)
+                                    .contains(&sc)
+                                    .then(|| (taps[t], x[3 * sc + ch]))
+                            }));
+                            assert_eq!(
+                                dst[3 * c + ch].to_bits(),
+                                want.to_bits(),
+                                "{valid:?} {out:?}"
+                            );
+                        }
+                    }
+                }
+            }
+            // Rows with spans of their own, some empty, read through the vertical pass.
+            let filled: Vec<Span> = (0..h)
+                .map(|r| {
+                    let (lo, hi) = spans[r % spans.len()];
+                    Span { lo, hi }
+                })
+                .collect();
+            for &(olo, ohi) in &spans {
+                let out = Span { lo: olo, hi: ohi };
+                let mut dst = vec![f32::NAN; 3 * out.len()];
+                for r in 0..h {
+                    let rows = RowSums {
+                        src: &x,
+                        h,
+                        row,
+                        filled: &filled,
+                    };
+                    vertical(rows, r, out, &mut dst, &taps, avx2);
+                    for c in out.lo..out.hi {
+                        for ch in 0..3 {
+                            let want = sum_of(&mut (0..TAPS).filter_map(|t| {
+                                let rr = (r + t).checked_sub(RADIUS).filter(|&rr| rr < h)?;
+                                let span = filled[rr];
+                                (span.lo..span.hi)
+                                    .contains(&c)
+                                    .then(|| (taps[t], x[rr * row + 3 * c + ch]))
+                            }));
+                            let got = dst[3 * (c - out.lo) + ch];
+                            assert_eq!(got.to_bits(), want.to_bits(), "row {r}, {out:?}");
+                        }
+                    }
+                }
+            }
+        }
     }
 
     #[test]
