@@ -829,13 +829,13 @@ mod tests {
             let filled = vec![out; h];
             let mut down = vec![0.0_f32; 3 * out.len()];
             let mut all = Vec::new();
+            let rows = RowSums {
+                src: &across,
+                h,
+                row,
+                filled: &filled,
+            };
             for r in 0..h {
-                let rows = RowSums {
-                    src: &across,
-                    h,
-                    row,
-                    filled: &filled,
-                };
                 vertical(rows, r, out, &mut down, &taps, avx2);
                 all.extend(down.iter().map(|v| v.to_bits()));
             }
@@ -904,13 +904,13 @@ mod tests {
             for &(olo, ohi) in &spans {
                 let out = Span { lo: olo, hi: ohi };
                 let mut dst = vec![f32::NAN; 3 * out.len()];
+                let rows = RowSums {
+                    src: &x,
+                    h,
+                    row,
+                    filled: &filled,
+                };
                 for r in 0..h {
-                    let rows = RowSums {
-                        src: &x,
-                        h,
-                        row,
-                        filled: &filled,
-                    };
                     vertical(rows, r, out, &mut dst, &taps, avx2);
                     for c in out.lo..out.hi {
                         for ch in 0..3 {
