@@ -1165,11 +1165,17 @@ struct HeldoutProbe<'a> {
 
 impl HeldoutProbe<'_> {
     /// Adds the point of the trainer's current step when one is due: at step 0, every `every`
-    /// steps and at the last step (`last`).
+    /// steps and at the last step (`last`). A multiple of `every` that a splat budget round
+    /// trained past (its two branches train between two calls) is taken at the first step
+    /// after the round, so the curve has a point in every `every` steps.
     fn take(&mut self, trainer: &Trainer, elapsed_s: f64, last: bool) -> Result<(), PipelineError> {
         let it = trainer.iteration();
-        let due = self.every > 0 && (it.is_multiple_of(self.every) || last);
-        if !due || self.curve.last().is_some_and(|p| p.iteration >= it) {
+        let previous = self.curve.last().map(|p| p.iteration);
+        if self.every == 0 || previous.is_some_and(|p| p >= it) {
+            return Ok(());
+        }
+        let passed = previous.is_some_and(|p| it / self.every > p / self.every);
+        if !(it.is_multiple_of(self.every) || last || passed) {
             return Ok(());
         }
         let (metrics, _) = evaluate_views(trainer.splats(), self.views, None, &self.options)?;

@@ -227,7 +227,8 @@ fn a_run_killed_at_random_moments_resumes_to_the_same_model() {
     let report: serde_json::Value =
         serde_json::from_slice(&std::fs::read(killed.join("report/report.json")).unwrap()).unwrap();
     assert_eq!(report["runs"][0]["iterations"], 160);
-    // The budget's rounds ran, merged, and were redone identically after kills mid-round.
+    // The budget's rounds ran, at least two merged, and all were redone identically after
+    // kills mid-round.
     let rounds = |r: &serde_json::Value| -> Vec<(u64, u64, bool)> {
         r["runs"][0]["budget"]["rounds"]
             .as_array()
@@ -243,13 +244,10 @@ fn a_run_killed_at_random_moments_resumes_to_the_same_model() {
             .collect()
     };
     let merged = rounds(&report);
-    assert!(
-        merged.len() >= 2 && merged.iter().all(|r| r.2),
-        "{merged:?}"
-    );
+    assert!(merged.iter().filter(|r| r.2).count() >= 2, "{merged:?}");
     assert_eq!(
         report["runs"][0]["metrics"]["splats"].as_u64(),
-        merged.last().map(|r| r.1)
+        merged.iter().rev().find(|r| r.2).map(|r| r.1)
     );
     let html = std::fs::read_to_string(killed.join("report/report.html")).unwrap();
     assert!(html.contains("Splat budget: held-out PSNR against splats and size"));
@@ -273,8 +271,14 @@ fn a_run_killed_at_random_moments_resumes_to_the_same_model() {
             .collect()
     };
     for k in 0..2 {
+        // Every 40 steps; a multiple a budget round trained past (it trains both branches) is
+        // taken at the first step after the round, inside its 13-step trial.
         let steps: Vec<u64> = scores(&whole_report, k).iter().map(|p| p.0).collect();
-        assert_eq!(steps, [0, 40, 80, 120, 160], "run {k}");
+        assert_eq!(steps.len(), 5, "run {k}: {steps:?}");
+        for (i, s) in (0..).zip(&steps) {
+            assert!(*s >= 40 * i && *s <= 40 * i + 13, "run {k}: {steps:?}");
+        }
+        assert_eq!(steps.last(), Some(&160), "run {k}");
         assert_eq!(scores(&report, k), scores(&whole_report, k), "run {k}");
     }
 
