@@ -1,7 +1,9 @@
 //! Surface init: flat splats on the input's surface points, SH fitted to their colours.
 
 use glam::Vec3;
+use rayon::prelude::*;
 use splat_core::Splats;
+use splat_train::init::PointIndex;
 
 use crate::config::{InitConfig, InitMode};
 use crate::neighbours::{pca_normals, point_spacing};
@@ -28,7 +30,11 @@ pub fn surface_init(
     let thin = cfg.thin_ratio.ln();
     let scales: Vec<Vec3> = sigma
         .iter()
-        .map(|s| Vec3::new(s.x, s.y, s.z + thin).exp())
+        .zip(scale_ratios(points, cfg))
+        .map(|(s, r)| {
+            let along = r.ln();
+            (*s + Vec3::new(along, along, along + thin)).exp()
+        })
         .collect();
     let mut splats = Splats::from_points(
         &points.positions,
@@ -54,4 +60,37 @@ pub fn surface_init(
         warm_start: None,
     };
     Ok((splats, summary))
+}
+
+/// Neighbours (besides the point itself) whose colours decide whether a point is on a texture
+/// edge.
+const EDGE_NEIGHBOURS: usize = 8;
+
+/// Each point's in-plane σ as a share of its local spacing: `cfg.scale_ratio` where its colour
+/// matches its [`EDGE_NEIGHBOURS`] nearest neighbours', `cfg.edge_scale_ratio` where one of
+/// them differs by `cfg.edge_contrast` or more in some channel, linear in between. Small discs
+/// at texture edges keep the edge as sharp as the points draw it; large ones elsewhere cover
+/// the surface without gaps.
+#[must_use]
+pub(crate) fn scale_ratios(points: &SurfacePoints, cfg: &InitConfig) -> Vec<f32> {
+    let Some(index) = PointIndex::new(&points.positions) else {
+        return vec![cfg.scale_ratio; points.len()];
+    };
+    points
+        .positions
+        .par_iter()
+        .zip(&points.colors)
+        .map(|(&p, c)| {
+            let contrast = index
+                .nearest_n(p, EDGE_NEIGHBOURS + 1)
+                .into_iter()
+                .map(|j| {
+                    let d = points.colors[j];
+                    (0..3).map(|k| (d[k] - c[k]).abs()).fold(0.0_f32, f32::max)
+                })
+                .fold(0.0_f32, f32::max);
+            let t = (contrast / cfg.edge_contrast).min(1.0);
+            cfg.scale_ratio + (cfg.edge_scale_ratio - cfg.scale_ratio) * t
+        })
+        .collect()
 }

@@ -261,18 +261,95 @@ fn surface_init_makes_flat_discs_on_the_points() {
         colors: vec![[0.2, 0.4, 0.6]; pts.len()],
         ..SurfacePoints::default()
     };
-    let (s, summary) = surface_init(&sp, &InitConfig::default(), 10).unwrap();
+    let cfg = InitConfig {
+        scale_ratio: 0.5,
+        ..InitConfig::default()
+    };
+    let (s, summary) = surface_init(&sp, &cfg, 10).unwrap();
     assert_eq!(s.means, pts);
     assert_eq!(summary.sh_degree, 0);
     assert_eq!(summary.normals, "pca");
     for i in 0..s.len() {
         let scale = s.scale(i);
-        // Spacing 1: in-plane σ = √(mean of 3-NN squared distances) ∈ [1, √2], normal σ a tenth.
-        assert!(scale.x >= 0.99 && scale.x <= 1.42 && (scale.z / scale.x - 0.1).abs() < 1e-4);
+        // Spacing 1: √(mean of 3-NN squared distances) ∈ [1, √2], in-plane σ half of it,
+        // normal σ a tenth of that.
+        assert!(scale.x >= 0.495 && scale.x <= 0.71 && (scale.z / scale.x - 0.1).abs() < 1e-4);
+        assert!((scale.y / scale.x - 1.0).abs() < 1e-5);
         let normal = s.rotation(i) * Vec3::Z;
         assert!((normal.z.abs() - 1.0).abs() < 1e-4);
         let rgb = splat_core::sh_dc_to_rgb(s.sh_of(i)[0]);
         assert!((rgb[2] - 0.6).abs() < 1e-5);
+    }
+}
+
+/// A grid whose left half is dark and right half light: points whose 8 nearest neighbours
+/// reach across the boundary take the edge ratio, the rest the even ratio; a half-strength
+/// contrast takes the ratio half-way; the discs' σ follows.
+#[test]
+fn texture_edges_get_the_edge_scale_ratio() {
+    let n = 12;
+    let pts = grid(n);
+    let dark = |p: &Vec3| p.x < 6.0;
+    let colors = |light: f32| -> Vec<[f32; 3]> {
+        pts.iter()
+            .map(|p| if dark(p) { [0.1; 3] } else { [light; 3] })
+            .collect()
+    };
+    let cfg = InitConfig {
+        scale_ratio: 0.9,
+        edge_scale_ratio: 0.5,
+        edge_contrast: 0.2,
+        ..InitConfig::default()
+    };
+    let sp = SurfacePoints {
+        positions: pts.clone(),
+        colors: colors(0.8),
+        ..SurfacePoints::default()
+    };
+    let ratios = surface::scale_ratios(&sp, &cfg);
+    let (splats, _) = surface_init(&sp, &cfg, 10).unwrap();
+    let plain = surface_init(
+        &sp,
+        &InitConfig {
+            scale_ratio: 1.0,
+            edge_scale_ratio: 1.0,
+            ..cfg.clone()
+        },
+        10,
+    )
+    .unwrap()
+    .0;
+    // Truth by brute force: whether the point and its 8 nearest straddle the boundary (points
+    // whose 8th and 9th nearest tie, at the grid's border, could go either way: skipped).
+    let straddles = |p: &Vec3| -> Option<bool> {
+        let mut by_distance: Vec<&Vec3> = pts.iter().collect();
+        by_distance.sort_by(|a, b| a.distance(*p).total_cmp(&b.distance(*p)));
+        let cut = |k: usize| by_distance[k].distance(*p);
+        (cut(8) < cut(9)).then(|| by_distance[..9].iter().any(|q| dark(q) != dark(p)))
+    };
+    let mut checked = [0; 2];
+    for (i, p) in pts.iter().enumerate() {
+        let Some(edge) = straddles(p) else { continue };
+        checked[usize::from(edge)] += 1;
+        let want = if edge { 0.5 } else { 0.9 };
+        assert!((ratios[i] - want).abs() < 1e-6, "{p}: {}", ratios[i]);
+        let got = splats.scale(i) / plain.scale(i);
+        assert!(
+            (got - Vec3::splat(want)).abs().max_element() < 1e-5,
+            "{p}: {got}"
+        );
+    }
+    assert!(checked[0] >= 60 && checked[1] >= 20, "{checked:?}");
+    // Contrast 0.1 of the 0.2 that takes the full step: half-way.
+    let half = SurfacePoints {
+        colors: colors(0.2),
+        ..sp
+    };
+    for (r, p) in surface::scale_ratios(&half, &cfg).iter().zip(&pts) {
+        if let Some(edge) = straddles(p) {
+            let want = if edge { 0.7 } else { 0.9 };
+            assert!((r - want).abs() < 1e-6, "{p}: {r}");
+        }
     }
 }
 

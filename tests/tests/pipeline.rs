@@ -123,14 +123,20 @@ fn pipeline_on_a_small_plenoptic_cloud() {
         "{mse} {per_view_mse}"
     );
     // Step 0: the least-squares colour solve starts above the per-camera fit on both
-    // backgrounds (measured: 26.5 → 27.6 dB on black, 22.2 → 22.6 dB on white).
+    // backgrounds (measured: 32.81 → 33.16 dB on black, 29.08 → 29.20 dB on white; with
+    // Inria's disc size everywhere, before session 19, the fit started at 26.5 / 22.2 dB and
+    // the solve gained 1.1 / 0.4 dB).
     let z = main.step_zero.as_ref().unwrap();
     let solved = z.solved.unwrap();
     eprintln!(
         "step 0: fit {:.2} / {:.2} dB, solve {:.2} / {:.2} dB",
         z.fit.psnr_black, z.fit.psnr_white, solved.psnr_black, solved.psnr_white
     );
-    assert!(solved.psnr_black > z.fit.psnr_black + 0.5, "{z:?}");
+    assert!(
+        z.fit.psnr_black > 31.0,
+        "the init's discs blur the texture again: {z:?}"
+    );
+    assert!(solved.psnr_black > z.fit.psnr_black + 0.2, "{z:?}");
     assert!(solved.psnr_white > z.fit.psnr_white, "{z:?}");
     // The held-out curve: scored at step 0 (the solved colours training starts from), every 100
     // steps and at the end, where it is the end's evaluation itself.

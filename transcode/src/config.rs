@@ -142,6 +142,7 @@ pub struct EvalConfig {
     pub report_views: usize,
     /// Score the held-out views every this many training steps (and at step 0 and the last
     /// step) for the report's held-out curve; 0: only at the end. Scoring is not training time.
+    /// A multiple that a splat budget round trains past is scored at the first step after it.
     pub every: u32,
 }
 
@@ -284,14 +285,27 @@ impl Config {
 
     /// Reads a TOML file; missing keys keep their defaults.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        Self::load_over(path, &Self::default())
+    }
+
+    /// Reads a TOML file over `base`: the keys the file sets replace `base`'s, the others keep
+    /// `base`'s values (so `transcode demo --config` keeps the demo's own settings for every key
+    /// the file leaves out).
+    pub fn load_over(path: &Path, base: &Self) -> Result<Self, ConfigError> {
         let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
             path: path.to_path_buf(),
             source,
         })?;
-        let config = Self::from_toml(&text).map_err(|message| ConfigError::Parse {
+        let parse = |message| ConfigError::Parse {
             path: path.to_path_buf(),
             message,
-        })?;
+        };
+        // Parsed alone first, so that a bad key or value is reported with its line.
+        Self::from_toml(&text).map_err(parse)?;
+        let file: toml::Table = toml::from_str(&text).map_err(|e| parse(e.to_string()))?;
+        let mut merged = toml::Table::try_from(base).map_err(|e| parse(e.to_string()))?;
+        merge_tables(&mut merged, file);
+        let config = Self::deserialize(merged).map_err(|e| parse(e.to_string()))?;
         config.validate().map_err(|e| match e {
             ConfigError::Invalid { key, problem, .. } => ConfigError::Invalid {
                 path: Some(path.to_path_buf()),
@@ -410,6 +424,20 @@ impl Config {
                 format!("must be at least 3, got {}", i.normal_neighbours),
             );
         }
+        for (key, r) in [
+            ("init.scale_ratio", i.scale_ratio),
+            ("init.edge_scale_ratio", i.edge_scale_ratio),
+        ] {
+            if !(r > 0.0 && r <= 10.0) {
+                return bad(key, format!("must be in (0, 10], got {r}"));
+            }
+        }
+        if !(i.edge_contrast > 0.0 && i.edge_contrast <= 1.0) {
+            return bad(
+                "init.edge_contrast",
+                format!("must be in (0, 1], got {}", i.edge_contrast),
+            );
+        }
         if !(i.thin_ratio > 0.0 && i.thin_ratio <= 1.0) {
             return bad(
                 "init.thin_ratio",
@@ -450,6 +478,18 @@ impl Config {
             );
         }
         Ok(())
+    }
+}
+
+/// Puts every key of `over` into `base`, descending into tables both have.
+fn merge_tables(base: &mut toml::Table, over: toml::Table) {
+    for (key, value) in over {
+        match (base.get_mut(&key), value) {
+            (Some(toml::Value::Table(b)), toml::Value::Table(o)) => merge_tables(b, o),
+            (_, value) => {
+                base.insert(key, value);
+            }
+        }
     }
 }
 
@@ -542,6 +582,39 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("missing.toml"), "{e}");
+    }
+
+    /// A file read over another configuration (the demo's) replaces only the keys it sets,
+    /// in nested tables too, and still reports a misspelt key with its line.
+    #[test]
+    fn a_file_over_a_base_changes_only_its_own_keys() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("c.toml");
+        let mut base = Config::default();
+        base.rig.width = 256;
+        base.training.time_budget_s = Some(60.0);
+        base.training.lr.opacity = 0.03;
+        std::fs::write(
+            &p,
+            "[init]\nscale_ratio = 1.0\n[training.lr]\nscale = 0.004\n",
+        )
+        .unwrap();
+        let c = Config::load_over(&p, &base).unwrap();
+        let mut want = base.clone();
+        want.init.scale_ratio = 1.0;
+        want.training.lr.scale = 0.004;
+        assert_eq!(c, want);
+        // Over the defaults it is `load`.
+        assert_eq!(
+            Config::load(&p).unwrap().rig.width,
+            Config::default().rig.width
+        );
+        std::fs::write(&p, "[init]\nscale_ration = 1.0\n").unwrap();
+        let e = Config::load_over(&p, &base).unwrap_err().to_string();
+        assert!(
+            e.contains("c.toml") && e.contains("scale_ration") && e.contains("line 2"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -113,7 +113,7 @@ impl Overrides {
     /// The configuration: `base` (or the `--config` file) with the flags applied, validated.
     pub fn resolve(&self, base: Config) -> anyhow::Result<Config> {
         let mut c = match &self.config {
-            Some(path) => Config::load(path).map_err(flat)?,
+            Some(path) => Config::load_over(path, &base).map_err(flat)?,
             None => base,
         };
         let o = self;
