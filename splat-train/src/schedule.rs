@@ -91,8 +91,10 @@ pub fn scale_densify(d: &DensifyConfig, steps: u32, opacity_lr: f32) -> DensifyC
 ///
 /// `timed` is the time `timed_steps` steps took (after an untimed warm-up step), `spent` the whole
 /// time the probe took (it comes out of the budget) and `setup` the part of it spent setting up,
-/// which the real run spends again. Returns the steps that fit in what is left of `budget` at the
-/// timed speed, at most `iterations` and at least 1, and what is left of the budget.
+/// which the real run spends again. With a coarse warm-up, `coarse` holds its share of the steps
+/// and the seconds one of its steps took ([`steps_fitting`]). Returns the steps that fit in what
+/// is left of `budget` at the timed speeds, at most `iterations` and at least 1, and what is left
+/// of the budget.
 #[must_use]
 pub fn steps_in_budget(
     iterations: u32,
@@ -101,10 +103,16 @@ pub fn steps_in_budget(
     setup: Duration,
     timed: Duration,
     timed_steps: u32,
+    coarse: Option<(f64, f64)>,
 ) -> (u32, Duration) {
     let per_step = timed.as_secs_f64() / f64::from(timed_steps);
     let left = budget.saturating_sub(spent);
-    let fit = (left.saturating_sub(setup).as_secs_f64() / per_step.max(1e-9)).floor();
+    let fit = steps_fitting(
+        0,
+        left.saturating_sub(setup).as_secs_f64(),
+        per_step,
+        coarse,
+    );
     (
         iterations.min(fit.min(f64::from(u32::MAX)) as u32).max(1),
         left,
@@ -124,38 +132,104 @@ pub const PACE_SMOOTHING: f64 = 0.1;
 /// are re-estimated after every step from the smoothed step time and the time left, so a run
 /// that slows down (a busy machine, a budget round's discarded branch) ends its schedule sooner
 /// and one that speeds up later; the run then ends within about a step of its budget.
+///
+/// A coarse warm-up's steps (reduced views) cost a fraction of a full step, so the two are
+/// averaged apart and the horizon counts the warm-up's share of it at the coarse speed
+/// ([`steps_fitting`]).
 #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Pace {
-    /// Exponential moving average of the seconds a step takes ([`PACE_SMOOTHING`]), once one
-    /// step has been timed.
+    /// Exponential moving average of the seconds a full-resolution step takes
+    /// ([`PACE_SMOOTHING`]), once one has been timed.
     pub step_s: Option<f64>,
+    /// The same for the warm-up's steps on reduced views.
+    #[serde(default)]
+    pub coarse_step_s: Option<f64>,
+}
+
+/// A warm-up as the [`Pace`] sees it: the share of the schedule's steps it spans and how much
+/// its views are reduced.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WarmupShare {
+    /// Warm-up steps over the schedule's steps, in [0, 1].
+    pub share: f64,
+    /// Reduction factor of the image sides (≥ 2).
+    pub factor: u32,
 }
 
 impl Pace {
-    /// Takes one more step's time into the average.
-    pub fn observe(&mut self, step_s: f64) {
+    /// Takes one more step's time into the average of its kind (`coarse`: a warm-up step).
+    pub fn observe(&mut self, step_s: f64, coarse: bool) {
         if !(step_s.is_finite() && step_s >= 0.0) {
             return;
         }
-        self.step_s = Some(match self.step_s {
+        let avg = if coarse {
+            &mut self.coarse_step_s
+        } else {
+            &mut self.step_s
+        };
+        *avg = Some(match *avg {
             Some(avg) => avg + PACE_SMOOTHING * (step_s - avg),
             None => step_s,
         });
     }
 
     /// The steps the run's schedule spans: `done` plus the steps that fit in what is left of
-    /// `budget_s` after `elapsed_s` at the average step time, at most `iterations`; `iterations`
+    /// `budget_s` after `elapsed_s` ([`steps_fitting`]), at most `iterations`; `iterations`
     /// until a step has been timed.
+    ///
+    /// With a `warmup` still to finish, a speed not yet timed is guessed from the other: a
+    /// full step as the coarse one times the factor² pixels (more than it costs, since the
+    /// per-splat work does not shrink with the views, so the guess errs short), a coarse step
+    /// as a full one.
     #[must_use]
-    pub fn horizon(&self, iterations: u32, done: u32, elapsed_s: f64, budget_s: f64) -> u32 {
-        let Some(step_s) = self.step_s else {
-            return iterations;
+    pub fn horizon(
+        &self,
+        iterations: u32,
+        done: u32,
+        elapsed_s: f64,
+        budget_s: f64,
+        warmup: Option<WarmupShare>,
+    ) -> u32 {
+        let (full_s, coarse) = match (self.step_s, warmup) {
+            (None, None) => return iterations,
+            (Some(f), None) => (f, None),
+            (f, Some(w)) => {
+                let pixels = f64::from(w.factor).powi(2);
+                let (full_s, coarse_s) = match (f, self.coarse_step_s) {
+                    (None, None) => return iterations,
+                    (Some(f), None) => (f, f),
+                    (None, Some(c)) => (c * pixels, c),
+                    (Some(f), Some(c)) => (f, c),
+                };
+                (full_s, Some((w.share, coarse_s)))
+            }
         };
         let left = (budget_s - elapsed_s).max(0.0);
-        let fit = (left / step_s.max(1e-9)).floor().min(f64::from(u32::MAX));
-        iterations
-            .min(done.saturating_add(fit as u32))
-            .max(done.min(iterations))
+        let fit = steps_fitting(done, left, full_s, coarse).min(f64::from(u32::MAX));
+        iterations.min(fit as u32).max(done.min(iterations))
+    }
+}
+
+/// The most steps H a run that has done `done` can plan when `left_s` seconds remain, a
+/// full-resolution step takes `full_s` and, with `coarse = Some((share, coarse_s))`, the first
+/// `share`·H steps are a warm-up at `coarse_s` a step (floored).
+///
+/// While the warm-up is not over (`done` < share·H) the time left pays for share·H − `done`
+/// coarse steps and (1 − share)·H full ones: H = (left + done·coarse) / (share·coarse +
+/// (1 − share)·full). Once it is over, every step left is a full one: H = done + left / full.
+#[must_use]
+pub fn steps_fitting(done: u32, left_s: f64, full_s: f64, coarse: Option<(f64, f64)>) -> f64 {
+    let d = f64::from(done);
+    let after_warmup = d + left_s / full_s.max(1e-9);
+    let Some((share, coarse_s)) = coarse else {
+        return after_warmup.floor();
+    };
+    let per_step = share * coarse_s + (1.0 - share) * full_s;
+    let during = (left_s + d * coarse_s) / per_step.max(1e-9);
+    if share * during > d {
+        during.floor()
+    } else {
+        after_warmup.floor()
     }
 }
 
@@ -188,31 +262,43 @@ mod tests {
     fn pace_averages_step_times_and_ignores_nonsense() {
         let mut p = Pace::default();
         assert_eq!(
-            p.horizon(3000, 0, 0.0, 60.0),
+            p.horizon(3000, 0, 0.0, 60.0, None),
             3000,
             "untimed: the configured count"
         );
-        p.observe(0.05);
+        p.observe(0.05, false);
         assert_eq!(p.step_s, Some(0.05));
-        p.observe(0.15);
+        p.observe(0.15, false);
         assert!((p.step_s.unwrap() - 0.06).abs() < 1e-12);
-        p.observe(f64::NAN);
-        p.observe(-1.0);
+        p.observe(f64::NAN, false);
+        p.observe(-1.0, false);
         assert!((p.step_s.unwrap() - 0.06).abs() < 1e-12);
+        // Warm-up steps have their own average.
+        p.observe(0.01, true);
+        assert_eq!(
+            (p.step_s.map(|s| (s * 1e6).round()), p.coarse_step_s),
+            (Some(60_000.0), Some(0.01))
+        );
     }
 
     #[test]
     fn the_horizon_is_the_steps_that_fit_in_the_time_left() {
-        let p = Pace { step_s: Some(0.05) };
+        let p = Pace {
+            step_s: Some(0.05),
+            coarse_step_s: None,
+        };
         // 50 s left at 0.05 s a step: 1,000 more steps.
-        assert_eq!(p.horizon(3000, 200, 10.0, 60.0), 1200);
+        assert_eq!(p.horizon(3000, 200, 10.0, 60.0, None), 1200);
         // Capped at the configured count.
-        assert_eq!(p.horizon(1000, 200, 10.0, 60.0), 1000);
+        assert_eq!(p.horizon(1000, 200, 10.0, 60.0, None), 1000);
         // Out of time: the schedule ends where the run is.
-        assert_eq!(p.horizon(3000, 700, 61.0, 60.0), 700);
+        assert_eq!(p.horizon(3000, 700, 61.0, 60.0, None), 700);
         // A slower machine shortens it.
-        let slow = Pace { step_s: Some(0.1) };
-        assert_eq!(slow.horizon(3000, 200, 10.0, 60.0), 700);
+        let slow = Pace {
+            step_s: Some(0.1),
+            coarse_step_s: None,
+        };
+        assert_eq!(slow.horizon(3000, 200, 10.0, 60.0, None), 700);
     }
 
     #[test]
@@ -222,11 +308,11 @@ mod tests {
         let (budget, iterations) = (30.0, 100_000);
         let mut pace = Pace::default();
         let (mut t, mut done) = (0.0_f64, 0_u32);
-        while done < pace.horizon(iterations, done, t, budget) && t < budget {
+        while done < pace.horizon(iterations, done, t, budget, None) && t < budget {
             let step = if t < 10.0 { 0.02 } else { 0.06 };
             t += step;
             done += 1;
-            pace.observe(step);
+            pace.observe(step, false);
         }
         assert!(
             (t - budget).abs() <= 0.06 + 1e-9,
@@ -236,6 +322,58 @@ mod tests {
         assert!(
             (done as f64 - (500.0 + 20.0 / 0.06)).abs() <= 2.0,
             "{done} steps"
+        );
+    }
+
+    #[test]
+    fn steps_fitting_counts_the_warmup_at_its_own_speed() {
+        // No warm-up: 50 s at 0.05 s a step after 200 steps.
+        assert_eq!(steps_fitting(200, 50.0, 0.05, None), 1200.0);
+        // A quarter of the steps at 0.01 s, the rest at 0.04 s, 30 s from the start:
+        // 30 / (0.25 · 0.01 + 0.75 · 0.04) = 923.08.
+        assert_eq!(steps_fitting(0, 30.0, 0.04, Some((0.25, 0.01))), 923.0);
+        // 100 coarse steps done (1 s), 29 s left: the same plan.
+        assert_eq!(steps_fitting(100, 29.0, 0.04, Some((0.25, 0.01))), 923.0);
+        // Past the warm-up every step left is a full one: 400 done, 20 s left.
+        assert_eq!(steps_fitting(400, 20.0, 0.04, Some((0.25, 0.01))), 900.0);
+        // All warm-up: the coarse speed alone.
+        assert_eq!(steps_fitting(0, 10.0, 0.04, Some((1.0, 0.01))), 1000.0);
+    }
+
+    #[test]
+    fn a_warmup_run_ends_on_budget_with_its_share_of_coarse_steps() {
+        // Simulated clock: coarse steps 10 ms, full ones 40 ms; a step is coarse while the run
+        // is short of a quarter of its horizon (and never again once a full one has run, as
+        // the trainer does), the horizon re-estimated after each step.
+        let (budget, iterations) = (30.0, 100_000);
+        let warmup = Some(WarmupShare {
+            share: 0.25,
+            factor: 2,
+        });
+        let mut pace = Pace::default();
+        let (mut t, mut done, mut coarse_steps, mut over) = (0.0_f64, 0_u32, 0_u32, false);
+        loop {
+            let horizon = pace.horizon(iterations, done, t, budget, warmup);
+            if done >= horizon || t >= budget {
+                break;
+            }
+            let coarse = !over && f64::from(done + 1) <= 0.25 * f64::from(horizon);
+            over |= !coarse;
+            let step = if coarse { 0.01 } else { 0.04 };
+            t += step;
+            done += 1;
+            coarse_steps += u32::from(coarse);
+            pace.observe(step, coarse);
+        }
+        assert!(
+            (t - budget).abs() <= 0.04 + 1e-9,
+            "ended at {t} s of {budget}"
+        );
+        // The closed form: 30 / (0.25 · 0.01 + 0.75 · 0.04) = 923 steps, 231 of them coarse.
+        assert!((f64::from(done) - 923.0).abs() <= 2.0, "{done} steps");
+        assert!(
+            (f64::from(coarse_steps) - 231.0).abs() <= 2.0,
+            "{coarse_steps} coarse steps"
         );
     }
 
@@ -292,21 +430,26 @@ mod tests {
         // 4 steps in 2 s: 0.5 s a step. 100 s budget, 3 s spent by the probe, 1 s of which was
         // setup: 97 s left, 96 s of it for steps → 192 steps.
         assert_eq!(
-            steps_in_budget(10_000, s(100), s(3), s(1), s(2), 4),
+            steps_in_budget(10_000, s(100), s(3), s(1), s(2), 4, None),
             (192, s(97))
+        );
+        // The first quarter a warm-up at 0.125 s a step: 96 / (0.25 · 0.125 + 0.75 · 0.5) = 236.3.
+        assert_eq!(
+            steps_in_budget(10_000, s(100), s(3), s(1), s(2), 4, Some((0.25, 0.125))),
+            (236, s(97))
         );
         // Never more than asked for, never fewer than one.
         assert_eq!(
-            steps_in_budget(50, s(100), s(3), s(1), s(2), 4),
+            steps_in_budget(50, s(100), s(3), s(1), s(2), 4, None),
             (50, s(97))
         );
         assert_eq!(
-            steps_in_budget(50, s(1), s(3), s(1), s(2), 4),
+            steps_in_budget(50, s(1), s(3), s(1), s(2), 4, None),
             (1, Duration::ZERO)
         );
         // Steps too fast to time still give a finite count, capped at `iterations`.
         assert_eq!(
-            steps_in_budget(u32::MAX, s(10), ms(1), ms(0), Duration::ZERO, 4).0,
+            steps_in_budget(u32::MAX, s(10), ms(1), ms(0), Duration::ZERO, 4, None).0,
             u32::MAX
         );
     }

@@ -15,7 +15,9 @@ use crate::config::{Background, TrainConfig};
 use crate::error::Error;
 use crate::loss::{Loss, alpha_l1};
 use crate::metrics::psnr_from_mse;
-use crate::schedule::{Pace, camera_extent, exponential_lr, scale_steps, sh_degree_at};
+use crate::schedule::{
+    Pace, WarmupShare, camera_extent, exponential_lr, scale_steps, sh_degree_at,
+};
 use crate::state::ParamState;
 use crate::strategy::{DensifyStrategy, InriaDensify, RefineContext, RefineReport};
 use crate::update::{UpdatePlan, update};
@@ -47,6 +49,8 @@ pub struct StepStats {
     pub splats: usize,
     /// What the refinement strategy did at this step.
     pub refine: RefineReport,
+    /// Whether the step trained on the coarse warm-up's reduced views.
+    pub coarse: bool,
 }
 
 /// One line of the training history.
@@ -163,6 +167,10 @@ pub(crate) struct RunState {
     /// a band away again.
     #[serde(default)]
     pub sh_reached: u32,
+    /// Whether a full-resolution step has run after the warm-up: a re-estimated (longer)
+    /// schedule never takes the run back to the reduced views.
+    #[serde(default)]
+    pub warmup_over: bool,
 }
 
 /// A CPU trainer of splats on posed images.
@@ -184,9 +192,9 @@ pub struct Trainer {
     extent: f32,
     max_sh_degree: u32,
     timings: Timings,
-    /// Whether a step has run in this process: the first allocates the loss buffers and is
-    /// left out of the [`Pace`].
-    warm: bool,
+    /// Whether a step has run in this process at each view size (full, then the warm-up's
+    /// reduced views): the first allocates the loss buffers and is left out of the [`Pace`].
+    warm: [bool; 2],
 }
 
 impl Trainer {
@@ -288,6 +296,7 @@ impl Trainer {
             reset_log_scale,
             pace: Pace::default(),
             sh_reached: 0,
+            warmup_over: false,
         };
         let mut t = Self {
             grads: SplatGrads::zeros_like(&splats),
@@ -304,7 +313,7 @@ impl Trainer {
             extent,
             max_sh_degree,
             timings: Timings::default(),
-            warm: false,
+            warm: [false; 2],
         };
         t.composite_fixed_background();
         if let Some(w) = t.config.warmup {
@@ -421,9 +430,36 @@ impl Trainer {
                 self.run.iteration,
                 self.run.elapsed_s,
                 b.as_secs_f64(),
+                self.warmup_share(),
             ),
             None => c.iterations,
         }
+    }
+
+    /// Starts the run's speed estimate from `pace` (step times timed on a probe before the run)
+    /// instead of from its own first steps; the run's steps then take over as they come.
+    pub fn start_pace(&mut self, pace: Pace) {
+        self.run.pace = pace;
+    }
+
+    /// The warm-up's share of the schedule, while it is not over.
+    fn warmup_share(&self) -> Option<WarmupShare> {
+        let w = self.config.warmup.filter(|_| !self.run.warmup_over)?;
+        Some(WarmupShare {
+            share: (f64::from(w.until) / f64::from(self.config.iterations.max(1))).min(1.0),
+            factor: w.factor,
+        })
+    }
+
+    /// Whether the next step trains on the warm-up's reduced views.
+    fn next_step_is_coarse(&self) -> bool {
+        let iteration = self.run.iteration + 1;
+        self.levels.len() > 1
+            && !self.run.warmup_over
+            && self
+                .config
+                .warmup
+                .is_some_and(|w| iteration <= self.scheduled(w.until))
     }
 
     /// `steps` of the configured schedule stretched over [`Trainer::horizon`].
@@ -459,11 +495,9 @@ impl Trainer {
         let bg = self.background();
         let opts = self.render_options(bg);
         self.run.sh_reached = opts.active_sh_degree;
-        let coarse = self
-            .config
-            .warmup
-            .is_some_and(|w| iteration <= self.scheduled(w.until));
-        let li = usize::from(coarse && self.levels.len() > 1);
+        let coarse = self.next_step_is_coarse();
+        self.run.warmup_over |= !coarse && self.config.warmup.is_some();
+        let li = usize::from(coarse);
         let level = &self.levels[li];
         let cam = level.cameras[vi];
         let (w, h) = (cam.width, cam.height);
@@ -578,6 +612,7 @@ impl Trainer {
             psnr: psnr_from_mse(value.mse),
             splats: self.state.len(),
             refine,
+            coarse,
         };
         if iteration.is_multiple_of(self.config.history_every) || iteration >= self.horizon() {
             // Elapsed time is filled in by `run`, which owns the clock.
@@ -732,14 +767,16 @@ impl Trainer {
                 break;
             }
             // Only the step is timed: the callback (progress display, evaluation) is not training.
+            let coarse = self.next_step_is_coarse();
             let start = Instant::now();
             let s = self.step();
             let took = start.elapsed().as_secs_f64();
             self.run.elapsed_s += took;
-            if self.warm {
-                self.run.pace.observe(took);
+            let warm = &mut self.warm[usize::from(coarse)];
+            if *warm {
+                self.run.pace.observe(took, coarse);
             }
-            self.warm = true;
+            *warm = true;
             let elapsed = self.run.elapsed_s;
             if let Some(h) = self.run.history.last_mut()
                 && h.iteration == s.iteration

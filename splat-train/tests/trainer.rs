@@ -10,7 +10,7 @@ use rand_pcg::Pcg64;
 use splat_core::{Rasterizer, RenderCamera, RenderOptions, Splats, logit, rgb_to_sh_dc};
 use splat_train::{
     Background, BudgetConfig, BudgetPlan, BudgetSearch, DensifyConfig, DensifyStrategy,
-    InriaDensify, RefineContext, RefineReport, TrainConfig, Trainer, View, evaluate,
+    InriaDensify, RefineContext, RefineReport, TrainConfig, Trainer, View, Warmup, evaluate,
 };
 
 /// A random model of `n` splats in a ball of radius 1 with SH degree 1.
@@ -172,6 +172,47 @@ fn a_time_budget_ends_with_its_schedule_complete() {
     assert_eq!(
         report.history.last().map(|h| h.iteration),
         Some(report.iterations)
+    );
+}
+
+#[test]
+fn a_time_budget_counts_the_warmup_at_its_own_speed() {
+    // A quarter of a 10-million-step schedule on views reduced twofold, a 1.5 s budget: the
+    // warm-up runs first and ends (it never comes back once a full step has run, however the
+    // horizon moves), and the run ends with its schedule complete, as without a warm-up.
+    let truth = random_model(60, 3);
+    let train = render_views(&truth, &cameras(12, 48, 36, 0.0), "v");
+    let init = initial_model(&truth, 0.02, 4);
+    let budget = 1.5;
+    let mut cfg = base_config(10_000_000);
+    cfg.sh_degree_interval = 5_000_000;
+    cfg.time_budget = Some(std::time::Duration::from_secs_f64(budget));
+    cfg.warmup = Some(Warmup {
+        factor: 2,
+        until: 2_500_000,
+    });
+    let mut t = Trainer::new(init, train, cfg).unwrap();
+    let mut coarse = Vec::new();
+    let report = t.run(|p| coarse.push(p.step.coarse));
+    assert!(report.stopped_by_budget);
+    assert_eq!(coarse.len() as u32, report.iterations);
+    let warm = coarse.iter().take_while(|&&c| c).count();
+    assert!(warm > 0, "no warm-up step");
+    assert!(
+        coarse[warm..].iter().all(|&c| !c),
+        "the warm-up came back after step {warm}"
+    );
+    assert!(
+        warm < coarse.len() / 2,
+        "{warm} of {} steps were warm-up",
+        coarse.len()
+    );
+    assert_eq!(t.horizon(), report.iterations);
+    assert_eq!(t.active_sh_degree(), 1, "every SH band was reached");
+    assert!(
+        report.elapsed_s > 0.5 * budget && report.elapsed_s < budget + 1.0,
+        "trained {:.2} s of a {budget} s budget",
+        report.elapsed_s
     );
 }
 

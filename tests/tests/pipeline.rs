@@ -301,6 +301,45 @@ fn pipeline_on_a_small_plenoptic_cloud() {
     );
 }
 
+/// Under a time budget the probe times the warm-up's reduced steps and the full ones apart
+/// and the run lays its schedule over the steps that fit: it ends on its budget with a step
+/// estimate in the report.
+#[test]
+fn a_time_budget_with_a_warmup_ends_on_budget() {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = small_demo(tmp.path());
+    let out = tmp.path().join("out");
+    let mut cfg = small_config();
+    cfg.training.iterations = 1_000_000;
+    cfg.training.time_budget_s = Some(4.0);
+    assert_eq!(
+        (cfg.training.warmup_factor, cfg.training.warmup_share),
+        (2, 0.5),
+        "the default warm-up"
+    );
+    let outcome =
+        transcode::pipeline::run(&input, &out, &cfg, &transcode::progress::ignore).unwrap();
+    let run = &outcome.report.runs[0];
+    eprintln!(
+        "{} steps in {:.2} s, probe estimate {:?} s a step; {:.2} / {:.2} dB",
+        run.iterations,
+        run.train_seconds,
+        run.step_estimate_s,
+        run.metrics.psnr_black,
+        run.metrics.psnr_white
+    );
+    assert!(run.stopped_by_budget);
+    assert!(run.iterations > 20 && run.iterations < 1_000_000);
+    // Not a timing figure: only that it neither quits early nor runs on.
+    assert!(
+        run.train_seconds > 2.0 && run.train_seconds < 5.0,
+        "trained {:.2} s of 4",
+        run.train_seconds
+    );
+    assert!(run.step_estimate_s.is_some_and(|s| s > 0.0 && s < 4.0));
+    assert!(run.metrics.psnr_black > 24.0, "{}", run.metrics.psnr_black);
+}
+
 #[test]
 fn bad_input_fails_clearly_and_leaves_no_complete_looking_output() {
     let tmp = tempfile::tempdir().unwrap();

@@ -20,6 +20,7 @@ use glam::Vec3;
 use plenoptic_io::Model;
 use splat_core::Splats;
 use splat_train::eval::{EvalOptions, Metrics, RenderedView, evaluate_views};
+use splat_train::schedule::Pace;
 use splat_train::{BudgetConfig, BudgetSearch, TrainConfig, Trainer, View};
 
 use crate::config::{Config, InitMode};
@@ -144,30 +145,55 @@ const PROBE_STEPS: u32 = 4;
 /// The number of steps a run will take: its iteration count, or, with a time budget, the steps
 /// that fit in the budget at the speed of [`PROBE_STEPS`] steps timed on a throw-away trainer
 /// after a warm-up step (the probe's time is taken from the budget; the arithmetic is
-/// [`splat_train::schedule::steps_in_budget`]). Returns the steps, the remaining budget and
-/// the probe's seconds a step.
+/// [`splat_train::schedule::steps_in_budget`]). With a coarse warm-up the probe times
+/// [`PROBE_STEPS`] steps on the reduced views first, then as many on the full ones, and the
+/// warm-up's share of the steps counts at its own speed. Returns the steps, the remaining budget
+/// and the speeds timed (the run's [`Pace`] starts from them).
 fn step_budget(
     splats: &Splats,
     views: &Arc<Vec<View>>,
     tc: &TrainConfig,
-) -> Result<(u32, Option<Duration>, Option<f64>), PipelineError> {
+) -> Result<(u32, Option<Duration>, Option<Pace>), PipelineError> {
     let Some(budget) = tc.time_budget else {
         return Ok((tc.iterations, None, None));
     };
+    // One untimed step (buffers, targets), then the timed ones; once per view size.
+    let per_size = PROBE_STEPS + 1;
     let probe_cfg = TrainConfig {
-        iterations: PROBE_STEPS + 1,
+        iterations: if tc.warmup.is_some() {
+            2 * per_size
+        } else {
+            per_size
+        },
         densify: None,
         time_budget: None,
+        warmup: tc.warmup.map(|w| splat_train::Warmup {
+            until: per_size,
+            ..w
+        }),
         ..tc.clone()
     };
     let t0 = Instant::now();
     let mut probe = Trainer::new(splats.clone(), Arc::clone(views), probe_cfg)?;
     let setup = t0.elapsed();
-    // The first step allocates the loss buffers and targets: time the ones after it.
-    probe.run_until(1, |_| {});
-    let t1 = Instant::now();
-    probe.run_until(PROBE_STEPS + 1, |_| {});
-    let timed = t1.elapsed();
+    let time_steps = |probe: &mut Trainer, first: u32| {
+        probe.run_until(first, |_| {});
+        let t = Instant::now();
+        probe.run_until(first + PROBE_STEPS, |_| {});
+        t.elapsed()
+    };
+    let first = time_steps(&mut probe, 1);
+    let (timed, coarse) = match tc.warmup {
+        Some(w) => {
+            let full = time_steps(&mut probe, per_size + 1);
+            let share = (f64::from(w.until) / f64::from(tc.iterations.max(1))).min(1.0);
+            (
+                full,
+                Some((share, first.as_secs_f64() / f64::from(PROBE_STEPS))),
+            )
+        }
+        None => (first, None),
+    };
     let (steps, left) = splat_train::schedule::steps_in_budget(
         tc.iterations,
         budget,
@@ -175,9 +201,13 @@ fn step_budget(
         setup,
         timed,
         PROBE_STEPS,
+        coarse,
     );
-    let step_s = timed.as_secs_f64() / f64::from(PROBE_STEPS);
-    Ok((steps, Some(left), Some(step_s)))
+    let pace = Pace {
+        step_s: Some(timed.as_secs_f64() / f64::from(PROBE_STEPS)),
+        coarse_step_s: coarse.map(|(_, c)| c),
+    };
+    Ok((steps, Some(left), Some(pace)))
 }
 
 /// What a finished run produced.
@@ -1070,7 +1100,13 @@ fn train(
         )));
     }
     let mut trainer = match fresh {
-        Some(splats) => Trainer::new(splats, Arc::clone(&refs.train), tc)?,
+        Some(splats) => {
+            let mut t = Trainer::new(splats, Arc::clone(&refs.train), tc)?;
+            if let Some(pace) = schedule.pace {
+                t.start_pace(pace);
+            }
+            t
+        }
         None => Trainer::resume(&ckpt, Arc::clone(&refs.train), tc).map_err(|e| {
             ResumeError::Checkpoint {
                 path: ckpt.clone(),
@@ -1395,16 +1431,28 @@ fn plan(
 ) -> Result<Schedule, PipelineError> {
     let scaled = scale_schedule && tc.densify.is_some();
     // Rounds are placed at shares of the run's steps: under a time budget, the probe's estimate.
-    let (steps, time_budget, step_estimate_s) = if scaled || budget.is_some() {
+    let (steps, time_budget, pace) = if scaled || budget.is_some() {
         step_budget(splats, views, tc)?
     } else {
         (tc.iterations, tc.time_budget, None)
     };
+    // The mean step of the planned run: its warm-up and full steps in their shares.
+    let step_estimate_s = pace.and_then(|p| {
+        let full = p.step_s?;
+        Some(match (tc.warmup, p.coarse_step_s) {
+            (Some(w), Some(c)) => {
+                let share = (f64::from(w.until) / f64::from(tc.iterations.max(1))).min(1.0);
+                share * c + (1.0 - share) * full
+            }
+            _ => full,
+        })
+    });
     Ok(Schedule {
         densify_steps: scaled.then_some(steps),
         time_budget: time_budget.or(tc.time_budget),
         budget: budget.and_then(|b| b.plan(steps)),
         step_estimate_s,
+        pace,
     })
 }
 

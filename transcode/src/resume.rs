@@ -81,6 +81,9 @@ pub struct Schedule {
     /// re-estimates as it goes: `splat_train::schedule::Pace`).
     #[serde(default)]
     pub step_estimate_s: Option<f64>,
+    /// The speeds the probe timed, from which the run's own estimate starts.
+    #[serde(default)]
+    pub pace: Option<splat_train::schedule::Pace>,
 }
 
 /// What one init mode has done.

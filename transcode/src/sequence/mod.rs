@@ -236,7 +236,9 @@ pub fn warm_starts(cfg: &Config) -> bool {
 }
 
 /// The configuration of one frame: the sequence's, with the fixed sphere, and for a warm start
-/// the shorter schedule (`sequence.warm_share` of the steps and of any time budget).
+/// the shorter schedule (`sequence.warm_share` of the steps and of any time budget) and no
+/// coarse warm-up: a warm start begins with the previous frame's detail, which steps on
+/// reduced views would blur before the full ones fit it again.
 #[must_use]
 pub fn frame_config(cfg: &Config, sphere: FramingSphere, warm: bool) -> Config {
     let mut c = cfg.clone();
@@ -246,6 +248,7 @@ pub fn frame_config(cfg: &Config, sphere: FramingSphere, warm: bool) -> Config {
         c.training.iterations =
             ((f64::from(cfg.training.iterations) * share).round() as u32).max(1);
         c.training.time_budget_s = cfg.training.time_budget_s.map(|b| b * share);
+        c.training.warmup_factor = 1;
     }
     c
 }
@@ -510,7 +513,12 @@ mod tests {
         assert_eq!(warm.training.iterations, 600);
         assert_eq!(warm.training.time_budget_s, Some(30.0));
         assert_eq!(warm.rig.sphere, Some(sphere));
+        assert_eq!(
+            warm.training.warmup_factor, 1,
+            "no warm-up from a trained model"
+        );
         let cold = frame_config(&cfg, sphere, false);
         assert_eq!(cold.training.iterations, 2000);
+        assert_eq!(cold.training.warmup_factor, cfg.training.warmup_factor);
     }
 }
