@@ -110,6 +110,14 @@ pub struct Warmup {
     pub until: u32,
 }
 
+impl Warmup {
+    /// The share of a schedule of `iterations` steps it spans, in [0, 1].
+    #[must_use]
+    pub fn share(&self, iterations: u32) -> f64 {
+        (f64::from(self.until) / f64::from(iterations.max(1))).min(1.0)
+    }
+}
+
 /// Background colour composited behind the splats.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub enum Background {

@@ -210,6 +210,15 @@ impl Pace {
     }
 }
 
+/// The mean seconds a step of a run whose steps take `full_s`, or with `coarse = Some((share,
+/// coarse_s))` whose first `share` of the steps are a warm-up at `coarse_s` a step.
+#[must_use]
+pub fn mean_step_s(full_s: f64, coarse: Option<(f64, f64)>) -> f64 {
+    coarse.map_or(full_s, |(share, coarse_s)| {
+        share * coarse_s + (1.0 - share) * full_s
+    })
+}
+
 /// The most steps H a run that has done `done` can plan when `left_s` seconds remain, a
 /// full-resolution step takes `full_s` and, with `coarse = Some((share, coarse_s))`, the first
 /// `share`·H steps are a warm-up at `coarse_s` a step (floored).
@@ -224,7 +233,7 @@ pub fn steps_fitting(done: u32, left_s: f64, full_s: f64, coarse: Option<(f64, f
     let Some((share, coarse_s)) = coarse else {
         return after_warmup.floor();
     };
-    let per_step = share * coarse_s + (1.0 - share) * full_s;
+    let per_step = mean_step_s(full_s, Some((share, coarse_s)));
     let during = (left_s + d * coarse_s) / per_step.max(1e-9);
     if share * during > d {
         during.floor()

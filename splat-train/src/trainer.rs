@@ -446,7 +446,7 @@ impl Trainer {
     fn warmup_share(&self) -> Option<WarmupShare> {
         let w = self.config.warmup.filter(|_| !self.run.warmup_over)?;
         Some(WarmupShare {
-            share: (f64::from(w.until) / f64::from(self.config.iterations.max(1))).min(1.0),
+            share: w.share(self.config.iterations),
             factor: w.factor,
         })
     }

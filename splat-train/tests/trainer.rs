@@ -137,19 +137,28 @@ fn recovers_held_out_views_of_a_known_model() {
     assert_eq!(report.non_finite.skipped_steps, 0);
 }
 
+/// The time budgets' runs: seconds of budget.
+const BUDGET_S: f64 = 1.5;
+
+/// A run configured for far more steps (10 million) than fit in `budget_s`, its one SH band
+/// coming at half the schedule: the model to start from, the views and the configuration.
+fn budgeted_run(budget_s: f64) -> (Splats, Vec<View>, TrainConfig) {
+    let truth = random_model(60, 3);
+    let train = render_views(&truth, &cameras(12, 48, 36, 0.0), "v");
+    let init = initial_model(&truth, 0.02, 4);
+    let mut cfg = base_config(10_000_000);
+    cfg.sh_degree_interval = 5_000_000;
+    cfg.time_budget = Some(std::time::Duration::from_secs_f64(budget_s));
+    (init, train, cfg)
+}
+
 #[test]
 fn a_time_budget_ends_with_its_schedule_complete() {
     // Configured for far more steps than fit: the SH bands and the position decay are laid out
     // over the steps the budget allows (re-estimated every step), so the run ends with all
     // bands on and the horizon where it stopped, close to the budget.
-    let truth = random_model(60, 3);
-    let train = render_views(&truth, &cameras(12, 48, 36, 0.0), "v");
-    let init = initial_model(&truth, 0.02, 4);
-    let budget = 1.5;
-    let mut cfg = base_config(10_000_000);
-    // The band comes at half the schedule.
-    cfg.sh_degree_interval = 5_000_000;
-    cfg.time_budget = Some(std::time::Duration::from_secs_f64(budget));
+    let (init, train, cfg) = budgeted_run(BUDGET_S);
+    let budget = BUDGET_S;
     let mut t = Trainer::new(init, train, cfg).unwrap();
     assert_eq!(t.active_sh_degree(), 0);
     let report = t.run(|_| {});
@@ -180,13 +189,8 @@ fn a_time_budget_counts_the_warmup_at_its_own_speed() {
     // A quarter of a 10-million-step schedule on views reduced twofold, a 1.5 s budget: the
     // warm-up runs first and ends (it never comes back once a full step has run, however the
     // horizon moves), and the run ends with its schedule complete, as without a warm-up.
-    let truth = random_model(60, 3);
-    let train = render_views(&truth, &cameras(12, 48, 36, 0.0), "v");
-    let init = initial_model(&truth, 0.02, 4);
-    let budget = 1.5;
-    let mut cfg = base_config(10_000_000);
-    cfg.sh_degree_interval = 5_000_000;
-    cfg.time_budget = Some(std::time::Duration::from_secs_f64(budget));
+    let (init, train, mut cfg) = budgeted_run(BUDGET_S);
+    let budget = BUDGET_S;
     cfg.warmup = Some(Warmup {
         factor: 2,
         until: 2_500_000,

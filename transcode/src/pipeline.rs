@@ -1438,14 +1438,11 @@ fn plan(
     };
     // The mean step of the planned run: its warm-up and full steps in their shares.
     let step_estimate_s = pace.and_then(|p| {
-        let full = p.step_s?;
-        Some(match (tc.warmup, p.coarse_step_s) {
-            (Some(w), Some(c)) => {
-                let share = (f64::from(w.until) / f64::from(tc.iterations.max(1))).min(1.0);
-                share * c + (1.0 - share) * full
-            }
-            _ => full,
-        })
+        let coarse = tc.warmup.zip(p.coarse_step_s);
+        Some(splat_train::schedule::mean_step_s(
+            p.step_s?,
+            coarse.map(|(w, c)| (w.share(tc.iterations), c)),
+        ))
     });
     Ok(Schedule {
         densify_steps: scaled.then_some(steps),
