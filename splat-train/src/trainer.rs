@@ -767,14 +767,13 @@ impl Trainer {
                 break;
             }
             // Only the step is timed: the callback (progress display, evaluation) is not training.
-            let coarse = self.next_step_is_coarse();
             let start = Instant::now();
             let s = self.step();
             let took = start.elapsed().as_secs_f64();
             self.run.elapsed_s += took;
-            let warm = &mut self.warm[usize::from(coarse)];
+            let warm = &mut self.warm[usize::from(s.coarse)];
             if *warm {
-                self.run.pace.observe(took, coarse);
+                self.run.pace.observe(took, s.coarse);
             }
             *warm = true;
             let elapsed = self.run.elapsed_s;
