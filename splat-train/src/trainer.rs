@@ -96,6 +96,37 @@ pub struct Timings {
     pub refine: Duration,
     /// Steps timed.
     pub steps: u64,
+    /// Wall time of the steps run through [`Trainer::run_until`], each whole (as the time
+    /// budget counts it), including those of branches a splat-budget round threw away.
+    #[serde(default)]
+    pub step_wall: Duration,
+    /// The part of `step_wall` spent in steps of the coarse warm-up.
+    #[serde(default)]
+    pub coarse_wall: Duration,
+    /// Steps of the coarse warm-up counted in `coarse_wall`.
+    #[serde(default)]
+    pub coarse_steps: u64,
+    /// Steps counted in `step_wall`.
+    #[serde(default)]
+    pub walled_steps: u64,
+}
+
+impl Timings {
+    /// The mean wall seconds of the full-size steps and of the warm-up's steps run so far, as
+    /// a [`Pace`] (a kind is `None` until one of its steps has run): what a probe's estimate
+    /// is to be compared with.
+    #[must_use]
+    pub fn mean_pace(&self) -> Pace {
+        let mean =
+            |wall: Duration, steps: u64| (steps > 0).then(|| wall.as_secs_f64() / steps as f64);
+        Pace {
+            step_s: mean(
+                self.step_wall.saturating_sub(self.coarse_wall),
+                self.walled_steps - self.coarse_steps.min(self.walled_steps),
+            ),
+            coarse_step_s: mean(self.coarse_wall, self.coarse_steps),
+        }
+    }
 }
 
 /// Progress reported to a callback after each step.
@@ -442,6 +473,12 @@ impl Trainer {
         self.run.pace = pace;
     }
 
+    /// Ends the coarse warm-up now: the next steps train on the full views (a probe that has
+    /// timed enough warm-up steps goes on to time full ones).
+    pub fn end_warmup(&mut self) {
+        self.run.warmup_over = true;
+    }
+
     /// The warm-up's share of the schedule, while it is not over.
     fn warmup_share(&self) -> Option<WarmupShare> {
         let w = self.config.warmup.filter(|_| !self.run.warmup_over)?;
@@ -769,8 +806,15 @@ impl Trainer {
             // Only the step is timed: the callback (progress display, evaluation) is not training.
             let start = Instant::now();
             let s = self.step();
-            let took = start.elapsed().as_secs_f64();
+            let wall = start.elapsed();
+            let took = wall.as_secs_f64();
             self.run.elapsed_s += took;
+            self.timings.step_wall += wall;
+            self.timings.walled_steps += 1;
+            if s.coarse {
+                self.timings.coarse_wall += wall;
+                self.timings.coarse_steps += 1;
+            }
             let warm = &mut self.warm[usize::from(s.coarse)];
             if *warm {
                 self.run.pace.observe(took, s.coarse);

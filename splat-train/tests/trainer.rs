@@ -218,6 +218,44 @@ fn a_time_budget_counts_the_warmup_at_its_own_speed() {
         "trained {:.2} s of a {budget} s budget",
         report.elapsed_s
     );
+    // Every step's wall time is counted by kind (what a probe's estimate is set beside), and
+    // the two means weigh back to the run's training time.
+    let tm = report.timings;
+    assert_eq!(tm.walled_steps, u64::from(report.iterations));
+    assert_eq!(tm.coarse_steps, warm as u64);
+    let pace = tm.mean_pace();
+    let (full_s, coarse_s) = (pace.step_s.unwrap(), pace.coarse_step_s.unwrap());
+    let weighed = full_s * (coarse.len() - warm) as f64 + coarse_s * warm as f64;
+    assert!(
+        (weighed - report.elapsed_s).abs() < 1e-6 * report.elapsed_s.max(1.0),
+        "{weighed} against {}",
+        report.elapsed_s
+    );
+}
+
+#[test]
+fn steps_of_a_thrown_away_branch_stay_counted_and_a_warmup_can_end_early() {
+    let (init, train, mut cfg) = budgeted_run(BUDGET_S);
+    cfg.time_budget = None;
+    cfg.iterations = 40;
+    cfg.warmup = Some(Warmup {
+        factor: 2,
+        until: 20,
+    });
+    let mut t = Trainer::new(init, train, cfg).unwrap();
+    let mut coarse = Vec::new();
+    t.run_until(5, |p| coarse.push(p.step.coarse));
+    let branch = t.snapshot();
+    t.run_until(9, |p| coarse.push(p.step.coarse));
+    t.restore_snapshot(branch).unwrap();
+    assert_eq!(t.iteration(), 5);
+    // The warm-up's steps were all coarse; once ended, the steps are full-size.
+    t.end_warmup();
+    let report = t.run_until(8, |p| coarse.push(p.step.coarse));
+    assert_eq!(coarse, [[true; 9].as_slice(), &[false; 3]].concat());
+    let tm = report.timings;
+    assert_eq!((tm.walled_steps, tm.coarse_steps), (12, 9));
+    assert!(tm.mean_pace().step_s.is_some_and(|s| s > 0.0));
 }
 
 #[test]

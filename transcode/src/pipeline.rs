@@ -138,17 +138,25 @@ pub fn training_view(name: String, camera: Camera, image: ViewImage) -> View {
     View::from_premultiplied(name, camera, &image.rgb, image.alpha)
 }
 
-/// Steps timed (after one untimed warm-up step) to estimate a time-budgeted run's length before
-/// its densification is scheduled.
+/// Fewest steps of each size timed (after one untimed step) to estimate a time-budgeted run's
+/// length before its schedule is laid out.
 const PROBE_STEPS: u32 = 4;
 
+/// Most steps of each size the probe times: on small views a step takes milliseconds, and a
+/// few of them measured the demo's steps 10-40 % off.
+const PROBE_MAX_STEPS: u32 = 48;
+
+/// The probe times more than [`PROBE_STEPS`] steps of a size until they have taken this share
+/// of the time budget (or [`PROBE_MAX_STEPS`] are timed).
+const PROBE_BUDGET_SHARE: f64 = 0.005;
+
 /// The number of steps a run will take: its iteration count, or, with a time budget, the steps
-/// that fit in the budget at the speed of [`PROBE_STEPS`] steps timed on a throw-away trainer
-/// after a warm-up step (the probe's time is taken from the budget; the arithmetic is
-/// [`splat_train::schedule::steps_in_budget`]). With a coarse warm-up the probe times
-/// [`PROBE_STEPS`] steps on the reduced views first, then as many on the full ones, and the
-/// warm-up's share of the steps counts at its own speed. Returns the steps, the remaining budget
-/// and the speeds timed (the run's [`Pace`] starts from them).
+/// that fit in the budget at the speed of steps timed on a throw-away trainer after an untimed
+/// one ([`PROBE_STEPS`] of them, more on fast steps: [`PROBE_BUDGET_SHARE`]; the probe's time
+/// is taken from the budget; the arithmetic is [`splat_train::schedule::steps_in_budget`]).
+/// With a coarse warm-up the probe times steps on the reduced views first, then on the full
+/// ones, and the warm-up's share of the steps counts at its own speed. Returns the steps, the
+/// remaining budget and the speeds timed (the run's [`Pace`] starts from them).
 fn step_budget(
     splats: &Splats,
     views: &Arc<Vec<View>>,
@@ -158,7 +166,7 @@ fn step_budget(
         return Ok((tc.iterations, None, None));
     };
     // One untimed step (buffers, targets), then the timed ones; once per view size.
-    let per_size = PROBE_STEPS + 1;
+    let per_size = PROBE_MAX_STEPS + 1;
     let probe_cfg = TrainConfig {
         iterations: if tc.warmup.is_some() {
             2 * per_size
@@ -173,24 +181,29 @@ fn step_budget(
         }),
         ..tc.clone()
     };
+    let enough = budget.mul_f64(PROBE_BUDGET_SHARE);
     let t0 = Instant::now();
     let mut probe = Trainer::new(splats.clone(), Arc::clone(views), probe_cfg)?;
     let setup = t0.elapsed();
-    let time_steps = |probe: &mut Trainer, first: u32| {
-        probe.run_until(first, |_| {});
+    // One untimed step, then steps timed until there are enough; returns their time and count.
+    let time_steps = |probe: &mut Trainer| {
+        probe.run_until(probe.iteration() + 1, |_| {});
         let t = Instant::now();
-        probe.run_until(first + PROBE_STEPS, |_| {});
-        t.elapsed()
+        let mut timed = 0;
+        while timed < PROBE_MAX_STEPS && (timed < PROBE_STEPS || t.elapsed() < enough) {
+            probe.run_until(probe.iteration() + 1, |_| {});
+            timed += 1;
+        }
+        (t.elapsed(), timed)
     };
-    let first = time_steps(&mut probe, 1);
-    let (timed, coarse) = match tc.warmup {
+    let first = time_steps(&mut probe);
+    let ((timed, timed_steps), coarse) = match tc.warmup {
         Some(w) => {
-            let full = time_steps(&mut probe, per_size + 1);
+            probe.end_warmup();
+            let full = time_steps(&mut probe);
             let share = (f64::from(w.until) / f64::from(tc.iterations.max(1))).min(1.0);
-            (
-                full,
-                Some((share, first.as_secs_f64() / f64::from(PROBE_STEPS))),
-            )
+            let coarse_s = first.0.as_secs_f64() / f64::from(first.1);
+            (full, Some((share, coarse_s)))
         }
         None => (first, None),
     };
@@ -200,11 +213,11 @@ fn step_budget(
         t0.elapsed(),
         setup,
         timed,
-        PROBE_STEPS,
+        timed_steps,
         coarse,
     );
     let pace = Pace {
-        step_s: Some(timed.as_secs_f64() / f64::from(PROBE_STEPS)),
+        step_s: Some(timed.as_secs_f64() / f64::from(timed_steps)),
         coarse_step_s: coarse.map(|(_, c)| c),
     };
     Ok((steps, Some(left), Some(pace)))
@@ -799,6 +812,8 @@ fn init_train_eval(
         train_seconds: train_report.elapsed_s,
         stopped_by_budget: train_report.stopped_by_budget,
         step_estimate_s: init.schedule.step_estimate_s,
+        probe_pace: init.schedule.pace,
+        run_pace: train_report.timings.mean_pace(),
         step_zero: init.step_zero,
         curve: train_report
             .history
@@ -1541,10 +1556,16 @@ fn train_to_end(
             budget_round(trainer, &mut budget, probe, &mut advance, observer)?;
         }
         let r = trainer.run_until(trainer.iteration() + 1, &mut advance);
-        let last = r.iterations >= total || r.stopped_by_budget;
+        // The horizon as it stands now: under a time budget it is re-estimated every step, and
+        // it grows when the steps get faster (a budget round's merge), so the length estimated
+        // before the first step would end the schedule early, with budget left.
+        let last = r.iterations >= trainer.horizon() || r.stopped_by_budget;
         probe.take(trainer, r.elapsed_s, last)?;
         if last {
-            break r;
+            // A time budget that laid the schedule over fewer steps than configured stopped it.
+            let cut = trainer.config().time_budget.is_some()
+                && r.iterations < trainer.config().iterations;
+            break trainer.report(r.stopped_by_budget || cut);
         }
         if saved_at.elapsed() >= saving.every {
             saving.save(trainer, &probe.curve, budget.search)?;

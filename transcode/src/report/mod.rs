@@ -143,10 +143,17 @@ pub struct RunReport {
     pub train_seconds: f64,
     /// True when the time budget stopped training.
     pub stopped_by_budget: bool,
-    /// Seconds a step took on the probe before training (under a time budget or a splat
-    /// budget); compare with `train_seconds / iterations`.
+    /// The mean step of the planned run by the probe before training (under a time budget):
+    /// its warm-up and full-size steps in their planned shares.
     #[serde(default)]
     pub step_estimate_s: Option<f64>,
+    /// The seconds a full-size step and a warm-up step took on that probe.
+    #[serde(default)]
+    pub probe_pace: Option<splat_train::schedule::Pace>,
+    /// The mean seconds of the full-size and warm-up steps the run then took (all of them,
+    /// the budget rounds' thrown-away branches too): what the probe's figures are compared with.
+    #[serde(default)]
+    pub run_pace: splat_train::schedule::Pace,
     /// Held-out scores before training (absent when training continued from a checkpoint made
     /// by an older version).
     pub step_zero: Option<StepZero>,
@@ -384,16 +391,31 @@ fn metrics_table(h: &mut String, report: &Report, names: &[String]) {
         ("floater opacity share", |r| surface(r, |s| s.floater_share)),
         ("iterations", |r| r.iterations.to_string()),
         ("training time (s)", |r| format!("{:.1}", r.train_seconds)),
-        ("step time: probe estimate / run (ms)", |r| {
-            let run = r.train_seconds / f64::from(r.iterations.max(1));
-            r.step_estimate_s.map_or("–".into(), |e| {
-                format!(
-                    "{:.1} / {:.1} ({:+.0} %)",
-                    1e3 * e,
-                    1e3 * run,
-                    100.0 * (e / run - 1.0)
-                )
-            })
+        ("step time, probe / run (ms)", |r| {
+            let Some(probe) = r.probe_pace else {
+                return "–".into();
+            };
+            let kinds = [
+                ("full size", probe.step_s, r.run_pace.step_s),
+                ("warm-up", probe.coarse_step_s, r.run_pace.coarse_step_s),
+            ];
+            let shown: Vec<String> = kinds
+                .iter()
+                .filter_map(|&(kind, p, run)| {
+                    let (p, run) = (p?, run?);
+                    Some(format!(
+                        "{kind} {:.1} / {:.1} ({:+.0} %)",
+                        1e3 * p,
+                        1e3 * run,
+                        100.0 * (p / run - 1.0)
+                    ))
+                })
+                .collect();
+            if shown.is_empty() {
+                "–".into()
+            } else {
+                shown.join("; ")
+            }
         }),
         ("model file", |r| human_bytes(r.model_bytes)),
         ("compact files", |r| {
