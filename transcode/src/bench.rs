@@ -5,7 +5,8 @@
 //! the reference views of the rig (in memory); surface initialisation capped at a splat count;
 //! the rasteriser's forward and forward + backward passes on one training view (medians of
 //! repeats, at each thread count asked for, so the scaling and the serial fraction come out of
-//! the same run); and training steps with the trainer's own split of time per phase. Medians
+//! the same run); training steps with the trainer's own split of time per phase; and, with two
+//! or more thread counts, the training step at each count, timed in rounds in turn. Medians
 //! are quoted for repeated figures; everything else is one measurement. The peak resident
 //! memory is read from the operating system where it says (Linux).
 
@@ -34,11 +35,13 @@ pub struct BenchOptions {
     pub resolution: u32,
     /// Splats the surface initialisation is capped at.
     pub splats: usize,
-    /// Repeats of each rasteriser figure and of the read (medians quoted).
+    /// Repeats of each rasteriser figure and of the read, and rounds of the training step by
+    /// thread count (medians quoted).
     pub repeats: usize,
     /// Training steps timed (after one warm-up step).
     pub steps: u32,
-    /// Thread counts the rasteriser is timed at (the machine's own count when empty).
+    /// Thread counts the rasteriser (and, with two or more, the training step) is timed at
+    /// (the machine's own count when empty).
     pub threads: Vec<usize>,
 }
 
@@ -111,6 +114,17 @@ pub struct StepPhases {
     pub step_ms: f64,
 }
 
+/// A training step at one thread count, timed in rounds interleaved with the other counts'.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StepAtThreads {
+    /// Threads of the pool the steps ran in.
+    pub threads: usize,
+    /// Median over the rounds of each round's mean step, ms.
+    pub step_ms: f64,
+    /// Each round's mean step, ms, in order.
+    pub rounds_ms: Vec<f64>,
+}
+
 /// Everything `transcode bench` measured.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct BenchReport {
@@ -143,6 +157,10 @@ pub struct BenchReport {
     pub serial_fraction: Option<f64>,
     /// A training step's phases at the machine's thread count.
     pub step: StepPhases,
+    /// The training step at each thread count asked for (with two or more), timed round by
+    /// round in turn, so that a machine whose speed drifts moves every count's figure alike.
+    #[serde(default)]
+    pub step_threads: Vec<StepAtThreads>,
     /// Peak resident memory of the process, bytes, where the OS reports it.
     pub peak_rss_bytes: Option<u64>,
     /// Threads of the machine's default pool.
@@ -281,8 +299,16 @@ pub fn run_bench(
 
     progress(&format!("timing {} training steps", opts.steps));
     let tc = cfg.train_config(InitMode::Surface, summary.sh_degree);
+    // Room for the steps timed at each thread count after the plain figure (`per_round` plus
+    // one untimed, per count and round).
+    let per_round = (opts.steps / 4).max(3);
+    let by_threads = if thread_counts.len() > 1 {
+        repeats as u32 * thread_counts.len() as u32 * (per_round + 1)
+    } else {
+        0
+    };
     let tc = splat_train::TrainConfig {
-        iterations: opts.steps + 1,
+        iterations: opts.steps + 1 + by_threads,
         time_budget: None,
         densify: None,
         ..tc
@@ -304,6 +330,15 @@ pub fn run_bench(
         refine_ms: per(after.refine, before.refine),
         step_ms: 1e3 * (report.elapsed_s - started_s) / steps as f64,
     };
+    let step_threads = if thread_counts.len() > 1 {
+        progress(&format!(
+            "timing training steps at {thread_counts:?} threads in turn, {repeats} rounds"
+        ));
+        time_steps_by_threads(&mut trainer, &thread_counts, repeats, per_round)
+            .map_err(|e| stage(&e))?
+    } else {
+        Vec::new()
+    };
 
     Ok(BenchReport {
         points,
@@ -320,6 +355,7 @@ pub fn run_bench(
         raster,
         serial_fraction,
         step,
+        step_threads,
         peak_rss_bytes: peak_rss_bytes(),
         machine_threads,
         avx2,
@@ -389,6 +425,50 @@ fn time_raster(
         contributions: ms(median(&mut contributions)),
     };
     (median(&mut fwd), median(&mut both), stats, phase_times)
+}
+
+/// Times `trainer`'s steps at each of `thread_counts` in turn: `rounds` rounds, each running
+/// `per_round` steps at every count in its own pool, after one untimed step there (the trainer
+/// must have that many steps left). The model trains on through the rounds, so each count sees
+/// the same mix of early and later steps.
+fn time_steps_by_threads(
+    trainer: &mut Trainer,
+    thread_counts: &[usize],
+    rounds: usize,
+    per_round: u32,
+) -> Result<Vec<StepAtThreads>, rayon::ThreadPoolBuildError> {
+    let pools = thread_counts
+        .iter()
+        .map(|&t| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(t.max(1))
+                .build()
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let mut rounds_ms = vec![Vec::with_capacity(rounds); thread_counts.len()];
+    for _ in 0..rounds {
+        for (pool, times) in pools.iter().zip(&mut rounds_ms) {
+            pool.install(|| {
+                trainer.run_until(trainer.iteration() + 1, |_| {});
+                let before = trainer.report(false).elapsed_s;
+                let report = trainer.run_until(trainer.iteration() + per_round, |_| {});
+                times.push(1e3 * (report.elapsed_s - before) / f64::from(per_round));
+            });
+        }
+    }
+    Ok(thread_counts
+        .iter()
+        .zip(rounds_ms)
+        .map(|(&threads, rounds_ms)| {
+            let mut sorted = rounds_ms.clone();
+            sorted.sort_by(f64::total_cmp);
+            StepAtThreads {
+                threads,
+                step_ms: sorted[sorted.len() / 2],
+                rounds_ms,
+            }
+        })
+        .collect())
 }
 
 fn median(d: &mut [Duration]) -> Duration {

@@ -66,6 +66,15 @@ fn bench_measures_a_generated_frame_and_an_existing_one() {
         r.step
     );
     assert!(r.read_s > 0.0 && r.views_s > 0.0 && r.init_s > 0.0);
+    // The step at each thread count, rounds in turn: one figure a round, the median quoted.
+    let counts: Vec<usize> = r.step_threads.iter().map(|t| t.threads).collect();
+    assert_eq!(counts, [1, 2]);
+    for t in &r.step_threads {
+        assert_eq!(t.rounds_ms.len(), 2);
+        assert!(t.rounds_ms.iter().all(|&ms| ms > 0.0 && ms.is_finite()));
+        assert!(t.rounds_ms.contains(&t.step_ms), "{t:?}");
+    }
+    assert!(text.contains("training step by thread count"), "{text}");
 
     // The same frame again through --input: the same frame measured.
     let again = Command::new(BIN)

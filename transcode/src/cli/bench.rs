@@ -35,14 +35,16 @@ pub struct Args {
     /// Splats the initialisation is capped at.
     #[arg(long, default_value_t = BenchOptions::default().splats)]
     splats: usize,
-    /// Repeats of each rasteriser figure (medians quoted).
+    /// Repeats of each rasteriser figure, and rounds of the training step by thread count
+    /// (medians quoted).
     #[arg(long, default_value_t = BenchOptions::default().repeats)]
     repeats: usize,
-    /// Training steps timed.
+    /// Training steps timed (and a quarter of them, at least 3, per round and thread count).
     #[arg(long, default_value_t = BenchOptions::default().steps)]
     steps: u32,
-    /// Thread counts to time the rasteriser at, comma-separated (default: 1 and all of the
-    /// machine's, which gives the serial fraction).
+    /// Thread counts to time the rasteriser and the training step at, comma-separated (default:
+    /// 1 and all of the machine's, which gives the serial fraction); the step is timed at each
+    /// count in rounds, the counts in turn.
     #[arg(long, value_delimiter = ',')]
     threads: Vec<usize>,
     /// Keep the generated frame at this path (default: a temporary file, removed after).
@@ -196,6 +198,21 @@ fn print_report(r: &BenchReport, opts: &BenchOptions) {
         s.refine_ms,
         s.step_ms - (s.forward_ms + s.loss_ms + s.backward_ms + s.adam_ms + s.refine_ms)
     );
+    if let (Some(few), Some(most)) = (r.step_threads.first(), r.step_threads.last()) {
+        let counts: Vec<String> = r
+            .step_threads
+            .iter()
+            .map(|t| format!("{} threads {:.1} ms", t.threads, t.step_ms))
+            .collect();
+        println!(
+            "training step by thread count ({} rounds in turn, medians): {}; {} → {} threads {:.2}×",
+            few.rounds_ms.len(),
+            counts.join(", "),
+            few.threads,
+            most.threads,
+            few.step_ms / most.step_ms
+        );
+    }
     if let Some(b) = r.peak_rss_bytes {
         println!("peak resident memory: {:.2} GB", b as f64 / 1e9);
     }
