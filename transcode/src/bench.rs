@@ -445,28 +445,25 @@ fn time_steps_by_threads(
                 .build()
         })
         .collect::<Result<Vec<_>, _>>()?;
-    let mut rounds_ms = vec![Vec::with_capacity(rounds); thread_counts.len()];
+    let mut round_steps = vec![Vec::with_capacity(rounds); thread_counts.len()];
     for _ in 0..rounds {
-        for (pool, times) in pools.iter().zip(&mut rounds_ms) {
+        for (pool, times) in pools.iter().zip(&mut round_steps) {
             pool.install(|| {
                 trainer.run_until(trainer.iteration() + 1, |_| {});
                 let before = trainer.report(false).elapsed_s;
                 let report = trainer.run_until(trainer.iteration() + per_round, |_| {});
-                times.push(1e3 * (report.elapsed_s - before) / f64::from(per_round));
+                let mean_s = (report.elapsed_s - before) / f64::from(per_round);
+                times.push(Duration::from_secs_f64(mean_s.max(0.0)));
             });
         }
     }
     Ok(thread_counts
         .iter()
-        .zip(rounds_ms)
-        .map(|(&threads, rounds_ms)| {
-            let mut sorted = rounds_ms.clone();
-            sorted.sort_by(f64::total_cmp);
-            StepAtThreads {
-                threads,
-                step_ms: sorted[sorted.len() / 2],
-                rounds_ms,
-            }
+        .zip(round_steps)
+        .map(|(&threads, mut steps)| StepAtThreads {
+            threads,
+            rounds_ms: steps.iter().copied().map(ms).collect(),
+            step_ms: ms(median(&mut steps)),
         })
         .collect())
 }
