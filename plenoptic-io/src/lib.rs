@@ -5,6 +5,7 @@
 //! - [`read_mesh`]: OBJ (tobj), glTF 2.0 / GLB (gltf) and PLY meshes.
 //! - [`load`]: either of the above, chosen from the file.
 //! - [`view_color`]: the PccAppRenderer view-dependent colour interpolation.
+//! - [`morton_order`]: points in Morton (Z-curve) order, near in space near in the order.
 //! - [`summary`]: counts, bounds, rig and colour statistics of a model (`transcode info`).
 //!
 //! Formats, conventions and error policy: `docs/formats-input.md`.
@@ -38,6 +39,7 @@ mod cloud;
 mod error;
 mod gltf_mesh;
 mod mesh;
+mod morton;
 mod obj;
 pub mod ply;
 pub mod summary;
@@ -46,6 +48,7 @@ pub mod view_color;
 pub use cloud::{CaptureCamera, ExtraProperty, PlenopticCloud, PlyLayout};
 pub use error::Error;
 pub use mesh::{Material, Mesh, Texture, barycentric_mix};
+pub use morton::morton_order;
 pub use ply::{PlyFormat, ScalarType};
 
 use std::path::Path;

@@ -58,7 +58,7 @@ impl<'a> PreparedCloud<'a> {
     pub(crate) fn new(cloud: &'a PlenopticCloud, opts: &ViewOptions) -> Result<Self, Error> {
         opts.validate()?;
         check_cloud(cloud)?;
-        let order = crate::morton::morton_order(&cloud.positions);
+        let order = plenoptic_io::morton_order(&cloud.positions);
         let positions = order
             .par_iter()
             .map(|&i| cloud.positions[i as usize])

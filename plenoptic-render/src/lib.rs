@@ -50,7 +50,6 @@ pub mod degenerate;
 mod error;
 mod image;
 mod mesh;
-mod morton;
 mod options;
 pub mod output;
 mod pixels;

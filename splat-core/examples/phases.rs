@@ -102,12 +102,13 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
     }
     let stats = r.stats();
     println!(
-        "{} splats, {} visible, {} (tile, splat) pairs, {} evaluated (pixel, splat) pairs; {} \
-         thread(s), {} repeats; ms, minimum / median:",
+        "{} splats, {} visible, {} (tile, splat) pairs, {} evaluated (pixel, splat) pairs of \
+         which {} contributed; {} thread(s), {} repeats; ms, minimum / median:",
         splats.len(),
         stats.visible,
         stats.pairs,
         stats.pixel_evaluations,
+        stats.contributions,
         threads,
         times.len()
     );

@@ -156,6 +156,29 @@ impl Splats {
             .extend((0..k).map(|j| sh.get(j).copied().unwrap_or([0.0; 3])));
     }
 
+    /// The splats at the indices of `order`, in that order: a permutation reorders the model, a
+    /// shorter list selects from it.
+    ///
+    /// # Panics
+    /// If an index is out of range (a caller bug).
+    #[must_use]
+    pub fn gather(&self, order: &[u32]) -> Self {
+        let k = self.coeffs_per_splat();
+        let pick = |i: &u32| *i as usize;
+        Self {
+            means: order.iter().map(|i| self.means[pick(i)]).collect(),
+            log_scales: order.iter().map(|i| self.log_scales[pick(i)]).collect(),
+            rotations: order.iter().map(|i| self.rotations[pick(i)]).collect(),
+            opacity_logits: order.iter().map(|i| self.opacity_logits[pick(i)]).collect(),
+            sh_degree: self.sh_degree,
+            sh: order
+                .iter()
+                .flat_map(|i| &self.sh[pick(i) * k..(pick(i) + 1) * k])
+                .copied()
+                .collect(),
+        }
+    }
+
     /// Builds splats at `points` with colours `colors` (rendered as such from every direction),
     /// per-axis standard deviations `scales` in each splat's own frame, and opacity `opacity`.
     /// With `normals`, each splat's local z axis is turned onto its normal, so a scale with a small
@@ -289,5 +312,39 @@ mod tests {
         assert!((s.opacity(0) - 0.5).abs() < 1e-6);
         assert_eq!(s.sh.len(), 4);
         assert!(Splats::from_points(&[Vec3::ZERO], &[], &[], None, 0.5, 0).is_err());
+    }
+
+    /// Gathering moves every attribute of a splat together: each gathered splat is, field by
+    /// field, the splat its index names (checked through `push`, which builds the same record).
+    #[test]
+    fn gather_moves_whole_splats() {
+        let mut s = Splats::new(1);
+        for i in 0..5 {
+            let f = i as f32;
+            let sh: Vec<[f32; 3]> = (0..4).map(|k| [f, k as f32, -f]).collect();
+            s.push(
+                Vec3::splat(f),
+                Vec3::splat(-f),
+                [1.0, f, 0.0, 0.0],
+                0.1 * f,
+                &sh,
+            );
+        }
+        let order = [3, 0, 4, 4, 1];
+        let g = s.gather(&order);
+        g.validate().unwrap();
+        let mut expected = Splats::new(1);
+        for &i in &order {
+            let i = i as usize;
+            expected.push(
+                s.means[i],
+                s.log_scales[i],
+                s.rotations[i],
+                s.opacity_logits[i],
+                s.sh_of(i),
+            );
+        }
+        assert_eq!(g, expected);
+        assert_eq!(s.gather(&[]).len(), 0);
     }
 }

@@ -444,3 +444,42 @@ fn sparse_random_init_fills_the_bounds() {
             .all(|m| m.x >= 0.0 && m.x <= 9.0 && m.z == 0.0)
     );
 }
+
+/// `initialise` hands out surface init's splats unchanged, laid out in Morton order: the same
+/// records as a set, and an order that Morton-sorting leaves as it is.
+#[test]
+fn initialise_lays_the_splats_out_in_morton_order() {
+    // A 12 × 12 grid listed in a scrambled order, with a colour per point to tell them apart.
+    let n = 12;
+    let positions: Vec<Vec3> = (0..n * n)
+        .map(|i| (i * 97) % (n * n))
+        .map(|j| Vec3::new((j % n) as f32, (j / n) as f32, 0.0))
+        .collect();
+    let colors: Vec<[f32; 3]> = positions
+        .iter()
+        .map(|p| [p.x / n as f32, p.y / n as f32, 0.5])
+        .collect();
+    let sp = SurfacePoints {
+        positions,
+        colors,
+        ..SurfacePoints::default()
+    };
+    let cfg = InitConfig::default();
+    let (plain, _) = surface_init(&choose_points(&sp, &cfg), &cfg, 10).unwrap();
+    let (laid_out, summary) = initialise(&sp, &cfg, 10, 0).unwrap();
+    assert_eq!(summary.splats, plain.len());
+    let order = plenoptic_io::morton_order(&laid_out.means);
+    assert_eq!(order, (0..laid_out.len() as u32).collect::<Vec<_>>());
+    assert_ne!(
+        laid_out.means, plain.means,
+        "the scrambled listing was not reordered"
+    );
+    // Every laid-out splat is, attribute for attribute, the plain splat at the same place.
+    let at = |s: &Splats, m: Vec3| s.means.iter().position(|&q| q == m).unwrap();
+    let back: Vec<u32> = laid_out
+        .means
+        .iter()
+        .map(|&m| at(&plain, m) as u32)
+        .collect();
+    assert_eq!(plain.gather(&back), laid_out);
+}

@@ -1,5 +1,7 @@
-//! Morton (Z-curve) order of points: drawing them in this order writes the z-buffer a
-//! neighbourhood at a time, whatever order the file lists them in.
+//! Morton (Z-curve) order of points: points close in space come close in the order, whatever
+//! order the file lists them in. The reference renderer draws a cloud in this order so it writes
+//! its z-buffer a neighbourhood at a time; initialisation lays splats out in it so a tile's list
+//! of splats reads records that lie near each other in memory.
 
 use glam::Vec3;
 use rayon::prelude::*;
@@ -12,7 +14,7 @@ const BITS: u32 = 21;
 /// depends on the positions alone. A NaN coordinate falls into the first cell, an infinite one
 /// into the first or last.
 #[must_use]
-pub(crate) fn morton_order(positions: &[Vec3]) -> Vec<u32> {
+pub fn morton_order(positions: &[Vec3]) -> Vec<u32> {
     let finite = positions.iter().filter(|p| p.is_finite());
     let lo = finite.clone().fold(Vec3::INFINITY, |a, &p| a.min(p));
     let hi = finite.fold(Vec3::NEG_INFINITY, |a, &p| a.max(p));
