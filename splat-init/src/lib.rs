@@ -15,8 +15,8 @@
 //! - [`SurfacePoints`]: the input's points, normals and colours (cloud points or mesh samples).
 //! - [`sampling`]: which K points carry splats; [`neighbours`]: k-d tree, spacing, PCA normals.
 //! - [`sh_fit`]: the SH fit and the automatic SH degree.
-//! - [`surface_init`], [`sparse_init`], [`initialise`]: the splats (from `initialise`, in Morton
-//!   order of their centres) and an [`InitSummary`].
+//! - [`surface_init`], [`sparse_init`], [`initialise`]: the splats (from `initialise`, laid out
+//!   [`in_morton_order`] of their centres) and an [`InitSummary`].
 //! - [`warm`]: a sequence's warm start, the previous frame's training corrections carried over.
 //!
 //! ```
@@ -108,15 +108,8 @@ pub struct InitSummary {
     pub warm_start: Option<PathBuf>,
 }
 
-/// Initialises splats from the input's surface points as `cfg.mode` says, laid out in Morton
-/// order of their centres ([`plenoptic_io::morton_order`]).
-///
-/// The layout is for the rasteriser: a tile's list holds splats near each other on screen, in
-/// depth order, so with the input's order (a file's, or a sampler's) consecutive entries read
-/// projection records scattered over the whole buffer, each a cache miss; in Morton order they
-/// come from a few runs of neighbouring records. On a 250k-splat model at 1024², 2 threads, the
-/// compositing and the backward pass's tile walks took about a fifth less time this way
-/// (docs/benchmarks/splat-core.md, §Session 22).
+/// Initialises splats from the input's surface points as `cfg.mode` says, laid out by
+/// [`in_morton_order`].
 pub fn initialise(
     input: &SurfacePoints,
     cfg: &InitConfig,
@@ -127,6 +120,19 @@ pub fn initialise(
         InitMode::Surface => surface_init(&choose_points(input, cfg), cfg, exponent),
         InitMode::Sparse => sparse_init(input, cfg, exponent, seed),
     }?;
-    let order = plenoptic_io::morton_order(&splats.means);
-    Ok((splats.gather(&order), summary))
+    Ok((in_morton_order(&splats), summary))
+}
+
+/// `splats` laid out in Morton order of their centres ([`plenoptic_io::morton_order`]), the
+/// layout initial splats are handed to training in.
+///
+/// The layout is for the rasteriser: a tile's list holds splats near each other on screen, in
+/// depth order, so with the input's order (a file's, or a sampler's) consecutive entries read
+/// projection records scattered over the whole buffer, each a cache miss; in Morton order they
+/// come from a few runs of neighbouring records. On a 250k-splat model at 1024², 2 threads, the
+/// compositing and the backward pass's tile walks took about a fifth less time this way
+/// (docs/benchmarks/splat-core.md, §Session 22).
+#[must_use]
+pub fn in_morton_order(splats: &Splats) -> Splats {
+    splats.gather(&plenoptic_io::morton_order(&splats.means))
 }

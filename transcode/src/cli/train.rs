@@ -468,7 +468,7 @@ fn train_config(args: &Args) -> TrainConfig {
 /// Inria's initial splats (splat-init's sparse init): isotropic kNN scales, identity rotation,
 /// opacity 0.1, SH DC from the colour and higher bands zero; the points are the dataset's
 /// points3D, or random ones (mid grey) in their bounds or, with fewer than 2 points, in the
-/// bounds of the camera centres.
+/// bounds of the camera centres. Laid out in Morton order, as the pipeline's initial splats.
 fn initial_splats(
     args: &Args,
     rec: &colmap_io::Reconstruction,
@@ -491,12 +491,13 @@ fn initial_splats(
             splat_init::random_points(lo, hi, args.random_points, args.seed)
         }
     };
-    Ok(splat_init::sparse_splats(
+    let splats = splat_init::sparse_splats(
         &points,
         &colors,
         splat_init::InitConfig::default().sparse_opacity,
         args.sh_degree,
-    )?)
+    )?;
+    Ok(splat_init::in_morton_order(&splats))
 }
 
 fn progress_bar(total: u32, done: u32, quiet: bool) -> ProgressBar {
