@@ -407,19 +407,16 @@ fn sandwich(p: [f64; 3], g: [f64; 3]) -> [f64; 3] {
     ]
 }
 
-/// Backward of [`project`]: chains `g` (summed over pixels) to the splat's parameters; SH
-/// coefficient gradients are added into `d_sh`.
+/// Backward of [`project`]: chains `g` (summed over pixels) to the parameters of the splat whose
+/// SH coefficients are `coeffs`; their gradients are added into `d_sh`.
 pub(crate) fn project_backward(
-    splats: &Splats,
-    i: usize,
+    coeffs: &[[f32; 3]],
     v: &ViewConsts,
     it: &Chain,
     g: &ProjectedGrad,
     image_size: (u32, u32),
     d_sh: &mut [[f32; 3]],
 ) -> ParamGrad {
-    let k = splats.coeffs_per_splat();
-    let coeffs = &splats.sh[i * k..(i + 1) * k];
     let mut d_mean = Vec3::ZERO;
 
     // Colour: clamped channels pass no gradient (Inria's `clamped` flags).

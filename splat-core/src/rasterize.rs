@@ -85,6 +85,8 @@ pub struct Rasterizer {
     pub(crate) last_view: Option<(usize, u32, u32)>,
     pub(crate) pair_grads: Vec<ProjectedGrad>,
     pub(crate) splat_grads: Vec<ProjectedGrad>,
+    /// The view of the last `backward_sums`, while its sums stand (a forward pass clears it).
+    pub(crate) chain_view: Option<crate::rasterize_backward::ChainView>,
     /// Per (tile, splat) pair: its summed blending weight (`accumulate_contributions`).
     pub(crate) pair_weights: Vec<f64>,
     /// Run the portable tile loops even where AVX2 is available (tests compare the two).
@@ -242,6 +244,7 @@ impl Rasterizer {
         splats.validate()?;
         Self::check_view_size(cam.width, cam.height)?;
         self.last_view = None;
+        self.chain_view = None;
         let v = ViewConsts::new(cam, opts, splats);
         let t0 = Instant::now();
         self.project_all(splats, &v);

@@ -9,7 +9,7 @@
 //! Every floating-point sum therefore happens in an order that does not depend on the thread
 //! count or scheduling: gradients are bit-for-bit identical for any number of threads.
 
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use rayon::prelude::*;
 
@@ -21,6 +21,30 @@ use crate::rasterize::{
 };
 use crate::tiles::{Falloff, HALF_ROWS, LANES, RowSpans, TILE_PIXELS, TILE_SIZE};
 use crate::{Rasterizer, RenderCamera, RenderOptions, SplatGrads, Splats};
+
+/// Splats per task of the chain phase.
+const CHAIN_CHUNK: usize = 256;
+
+/// What the chain phase needs of the view, kept by [`Rasterizer::backward_sums`] for
+/// [`Rasterizer::chain_into`].
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct ChainView {
+    v: ViewConsts,
+    size: (u32, u32),
+    coeffs_per_splat: usize,
+    /// The number of splats of the model it was made for.
+    splats: usize,
+}
+
+/// A range of splats' gradient arrays, as [`SplatGrads`] holds them.
+struct GradsMut<'a> {
+    means: &'a mut [glam::Vec3],
+    log_scales: &'a mut [glam::Vec3],
+    rotations: &'a mut [[f32; 4]],
+    opacity_logits: &'a mut [f32],
+    sh: &'a mut [[f32; 3]],
+    screen_grad_norm: &'a mut [f32],
+}
 
 /// One tile's list: its splats front to back, and which of them the forward pass blended.
 #[derive(Clone, Copy)]
@@ -48,6 +72,9 @@ impl Rasterizer {
     /// Gradients of α are zero where o·G is clamped at 0.99 (the exact derivative, as gsplat),
     /// and of the Jacobian's x/z, y/z where the 1.3·tan(fov/2) clamp acts (as Inria).
     ///
+    /// This is [`Rasterizer::backward_sums`] followed by [`Rasterizer::chain_into`] over all
+    /// the splats.
+    ///
     /// # Panics
     /// If the gradient images do not have the view's size.
     #[allow(clippy::too_many_arguments)]
@@ -61,6 +88,59 @@ impl Rasterizer {
         d_depth: Option<&[f32]>,
         grads: &mut SplatGrads,
     ) {
+        self.backward_sums(splats, cam, opts, d_rgb, d_alpha, d_depth);
+        if !grads.fits(splats) {
+            grads.reset(splats);
+        }
+        let t2 = Instant::now();
+        let k = splats.coeffs_per_splat();
+        let this = &*self;
+        grads
+            .means
+            .par_chunks_mut(CHAIN_CHUNK)
+            .zip(grads.log_scales.par_chunks_mut(CHAIN_CHUNK))
+            .zip(grads.rotations.par_chunks_mut(CHAIN_CHUNK))
+            .zip(grads.opacity_logits.par_chunks_mut(CHAIN_CHUNK))
+            .zip(grads.sh.par_chunks_mut(CHAIN_CHUNK * k))
+            .zip(grads.screen_grad_norm.par_chunks_mut(CHAIN_CHUNK))
+            .zip(splats.sh.par_chunks(CHAIN_CHUNK * k))
+            .enumerate()
+            .for_each(
+                |(
+                    c,
+                    ((((((means, log_scales), rotations), opacity_logits), sh), norms), coeffs),
+                )| {
+                    let chunk = GradsMut {
+                        means,
+                        log_scales,
+                        rotations,
+                        opacity_logits,
+                        sh,
+                        screen_grad_norm: norms,
+                    };
+                    this.chain_range(c * CHAIN_CHUNK, coeffs, chunk);
+                },
+            );
+        self.phases.backward_chain = t2.elapsed();
+    }
+
+    /// The first phases of [`Rasterizer::backward`]: the tiles' gradient records and their sums
+    /// per splat, with respect to each splat's projected centre, conic, opacity, colour and
+    /// depth. [`Rasterizer::chain_into`] then hands each splat's parameter gradients over, range
+    /// by range, so a caller can use them while they are in the cache (the trainer's Adam update
+    /// runs on them chunk by chunk) instead of storing them all first.
+    ///
+    /// # Panics
+    /// If the gradient images do not have the view's size.
+    pub fn backward_sums(
+        &mut self,
+        splats: &Splats,
+        cam: &RenderCamera,
+        opts: &RenderOptions,
+        d_rgb: &[f32],
+        d_alpha: Option<&[f32]>,
+        d_depth: Option<&[f32]>,
+    ) {
         let (w, h) = (cam.width as usize, cam.height as usize);
         assert_eq!(d_rgb.len(), 3 * w * h, "d_rgb must hold 3·W·H values");
         assert!(
@@ -73,9 +153,6 @@ impl Rasterizer {
         );
         if self.last_view != Some((splats.len(), cam.width, cam.height)) {
             self.forward(splats, cam, opts);
-        }
-        if !grads.fits(splats) {
-            grads.reset(splats);
         }
         let v = ViewConsts::new(cam, opts, splats);
         let pg = PixelGrads {
@@ -125,45 +202,91 @@ impl Rasterizer {
             ProjectedGrad::add,
             avx2,
         );
-        let t2 = Instant::now();
-        let k = splats.coeffs_per_splat();
-        let size = (cam.width, cam.height);
-        let this = &*self;
-        grads
-            .means
-            .par_iter_mut()
-            .zip(grads.log_scales.par_iter_mut())
-            .zip(grads.rotations.par_iter_mut())
-            .zip(grads.opacity_logits.par_iter_mut())
-            .zip(grads.sh.par_chunks_mut(k))
-            .zip(grads.screen_grad_norm.par_iter_mut())
-            .enumerate()
-            .for_each(|(i, (((((gm, gs), gr), go), gsh), gn))| {
-                // A splat with no gradient record (hidden behind others in every tile it is
-                // listed in) would add exact zeros: skip its chain.
-                if !this.visible[i] || this.splat_grads[i].is_zero() {
-                    return;
-                }
-                let p = project_backward(
-                    splats,
-                    i,
-                    &v,
-                    &this.chain[i],
-                    &this.splat_grads[i],
-                    size,
-                    gsh,
-                );
-                *gm += p.mean;
-                *gs += p.log_scale;
-                for (r, d) in gr.iter_mut().zip(p.rotation) {
-                    *r += d;
-                }
-                *go += p.opacity_logit;
-                *gn += p.screen_norm;
-            });
+        self.chain_view = Some(ChainView {
+            v,
+            size: (cam.width, cam.height),
+            coeffs_per_splat: splats.coeffs_per_splat(),
+            splats: splats.len(),
+        });
         self.phases.backward_tiles = t1 - t0;
-        self.phases.backward_sum = t2 - t1;
-        self.phases.backward_chain = t2.elapsed();
+        self.phases.backward_sum = t1.elapsed();
+        self.phases.backward_chain = Duration::ZERO;
+    }
+
+    /// Adds into `grads` the parameter gradients of the splats from `first` on, as many as
+    /// `grads.means` holds, whose SH coefficients are `sh` (theirs only, splat-major as in
+    /// [`Splats::sh`]): the last phase of [`Rasterizer::backward`] for that range, after
+    /// [`Rasterizer::backward_sums`] on the same splats. The ranges may be chained in any order
+    /// and on any threads; each splat's gradients are the same as `backward` gives.
+    ///
+    /// # Panics
+    /// If `backward_sums` has not run since the last forward pass, if the range runs past the
+    /// splats it saw, or if `grads`' arrays (or `sh`) are not all shaped for the range.
+    pub fn chain_into(&self, first: usize, sh: &[[f32; 3]], grads: &mut SplatGrads) {
+        let SplatGrads {
+            means,
+            log_scales,
+            rotations,
+            opacity_logits,
+            sh: sh_grads,
+            screen_grad_norm,
+        } = grads;
+        let chunk = GradsMut {
+            means,
+            log_scales,
+            rotations,
+            opacity_logits,
+            sh: sh_grads,
+            screen_grad_norm,
+        };
+        self.chain_range(first, sh, chunk);
+    }
+
+    /// The chain of splats `first`.. into `g` (see [`Rasterizer::chain_into`]).
+    fn chain_range(&self, first: usize, coeffs: &[[f32; 3]], g: GradsMut<'_>) {
+        let Some(cv) = &self.chain_view else {
+            panic!("Rasterizer::chain_into: backward_sums has not run since the last forward pass");
+        };
+        let (n, k) = (g.means.len(), cv.coeffs_per_splat);
+        assert!(
+            first + n <= cv.splats
+                && [
+                    g.log_scales.len(),
+                    g.rotations.len(),
+                    g.opacity_logits.len(),
+                    g.screen_grad_norm.len()
+                ]
+                .iter()
+                .all(|&m| m == n)
+                && g.sh.len() == n * k
+                && coeffs.len() == n * k,
+            "Rasterizer::chain_into: gradients or coefficients not shaped for {n} splats from \
+             {first} of {} with {k} SH coefficients each",
+            cv.splats
+        );
+        for j in 0..n {
+            let i = first + j;
+            // A splat with no gradient record (hidden behind others in every tile it is
+            // listed in) would add exact zeros: skip its chain.
+            if !self.visible[i] || self.splat_grads[i].is_zero() {
+                continue;
+            }
+            let p = project_backward(
+                &coeffs[j * k..(j + 1) * k],
+                &cv.v,
+                &self.chain[i],
+                &self.splat_grads[i],
+                cv.size,
+                &mut g.sh[j * k..(j + 1) * k],
+            );
+            g.means[j] += p.mean;
+            g.log_scales[j] += p.log_scale;
+            for (r, d) in g.rotations[j].iter_mut().zip(p.rotation) {
+                *r += d;
+            }
+            g.opacity_logits[j] += p.opacity_logit;
+            g.screen_grad_norm[j] += p.screen_norm;
+        }
     }
 
     /// Walks one tile back to front: the AVX2 instantiation where the CPU has it, else the
@@ -485,6 +608,74 @@ mod tests {
     /// Overlapping splats of many sizes (sub-pixel to several tiles) and opacities, some
     /// reaching the partial tiles at the right and bottom edges of a 70×45 image, and a loss
     /// gradient for its pixels.
+    /// Chaining the sums range by range, in any order, into per-range buffers gives each splat
+    /// the gradients `backward` gives it, bit for bit; a range past the splats is refused.
+    #[test]
+    fn chained_ranges_give_the_gradients_of_the_whole_backward() {
+        let (s, cam, d_rgb) = scene(5);
+        let opts = RenderOptions::default();
+        let mut r = Rasterizer::new();
+        r.forward(&s, &cam, &opts);
+        let mut whole = SplatGrads::default();
+        r.backward(&s, &cam, &opts, &d_rgb, None, None, &mut whole);
+        assert!(
+            whole.sh.iter().flatten().any(|&g| g != 0.0),
+            "the scene must have gradients"
+        );
+
+        let mut r = Rasterizer::new();
+        r.forward(&s, &cam, &opts);
+        r.backward_sums(&s, &cam, &opts, &d_rgb, None, None);
+        let k = s.coeffs_per_splat();
+        let mut ranged = SplatGrads::zeros_like(&s);
+        // Uneven ranges, last first.
+        let bounds = [0, 7, 100, 101, 333, s.len()];
+        for w in bounds.windows(2).rev() {
+            let (a, b) = (w[0], w[1]);
+            let mut g = SplatGrads {
+                means: vec![Vec3::ZERO; b - a],
+                log_scales: vec![Vec3::ZERO; b - a],
+                rotations: vec![[0.0; 4]; b - a],
+                opacity_logits: vec![0.0; b - a],
+                sh: vec![[0.0; 3]; (b - a) * k],
+                screen_grad_norm: vec![0.0; b - a],
+            };
+            r.chain_into(a, &s.sh[a * k..b * k], &mut g);
+            ranged.means[a..b].copy_from_slice(&g.means);
+            ranged.log_scales[a..b].copy_from_slice(&g.log_scales);
+            ranged.rotations[a..b].copy_from_slice(&g.rotations);
+            ranged.opacity_logits[a..b].copy_from_slice(&g.opacity_logits);
+            ranged.sh[a * k..b * k].copy_from_slice(&g.sh);
+            ranged.screen_grad_norm[a..b].copy_from_slice(&g.screen_grad_norm);
+        }
+        let bits = |g: &SplatGrads| -> Vec<u32> {
+            g.means
+                .iter()
+                .chain(&g.log_scales)
+                .flat_map(|v| v.to_array())
+                .chain(g.rotations.iter().flatten().copied())
+                .chain(g.opacity_logits.iter().copied())
+                .chain(g.sh.iter().flatten().copied())
+                .chain(g.screen_grad_norm.iter().copied())
+                .map(f32::to_bits)
+                .collect()
+        };
+        assert_eq!(bits(&ranged), bits(&whole));
+
+        let past = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            let mut g = SplatGrads {
+                means: vec![Vec3::ZERO; 2],
+                log_scales: vec![Vec3::ZERO; 2],
+                rotations: vec![[0.0; 4]; 2],
+                opacity_logits: vec![0.0; 2],
+                sh: vec![[0.0; 3]; 2 * k],
+                screen_grad_norm: vec![0.0; 2],
+            };
+            r.chain_into(s.len() - 1, &s.sh[..2 * k], &mut g);
+        }));
+        assert!(past.is_err(), "a range past the splats must be refused");
+    }
+
     fn scene(seed: u64) -> (Splats, RenderCamera, Vec<f32>) {
         let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
         let n = 400;

@@ -20,7 +20,7 @@ use crate::schedule::{
 };
 use crate::state::ParamState;
 use crate::strategy::{DensifyStrategy, InriaDensify, RefineContext, RefineReport};
-use crate::update::{UpdatePlan, update};
+use crate::update::{UpdatePlan, update, update_chained};
 use crate::view::{View, composite_in_place, composite_into};
 
 /// Log-scale range a splat is clamped to, relative to the scene extent: from a millionth of the
@@ -88,9 +88,11 @@ pub struct Timings {
     pub forward: Duration,
     /// Loss and its image gradient.
     pub loss: Duration,
-    /// Backward rasterisation.
+    /// Backward rasterisation; without a densification strategy, up to its per-splat sums
+    /// (the chain to the parameters then runs inside the update, chunk by chunk).
     pub backward: Duration,
-    /// Adam updates, clamps and the non-finite scan.
+    /// Adam updates, clamps and the non-finite scan; without a densification strategy, also the
+    /// backward's chain to the parameters.
     pub adam: Duration,
     /// Refinement strategy.
     pub refine: Duration,
@@ -213,9 +215,14 @@ pub struct Trainer {
     pub(crate) state: ParamState,
     pub(crate) strategy: Option<Box<dyn DensifyStrategy>>,
     pub(crate) run: RunState,
+    /// The gradients where a strategy observes them (empty otherwise: see `chained_update`).
     grads: SplatGrads,
     /// Whether `grads` is all zero (the update leaves it so for the next backward pass).
     grads_zeroed: bool,
+    /// Without a strategy, take each chunk's gradients from the rasteriser's chain straight into
+    /// the update (`update_chained`) rather than through `grads`; false only in the tests that
+    /// hold the two ways to the same model.
+    chained_update: bool,
     rasterizer: Rasterizer,
     loss: Option<Loss>,
     composite: Vec<f32>,
@@ -330,8 +337,10 @@ impl Trainer {
             warmup_over: false,
         };
         let mut t = Self {
-            grads: SplatGrads::zeros_like(&splats),
+            // Allocated by the first step that needs it (none does without a strategy).
+            grads: SplatGrads::default(),
             grads_zeroed: false,
+            chained_update: true,
             state: ParamState::new(splats),
             levels: vec![Level::new(views)?],
             config,
@@ -587,38 +596,57 @@ impl Trainer {
 
         let mut refine = RefineReport::default();
         if total.is_finite() {
-            // The last update left the gradients zero; they need it again only if the model has
-            // changed shape since (refinement, repair) or no update has run yet.
-            if !(self.grads_zeroed && self.grads.fits(&self.state.splats)) {
-                self.grads.reset(&self.state.splats);
-            }
-            self.grads_zeroed = false;
+            let t3;
             let d_alpha = if use_alpha {
                 Some(&self.d_alpha[..])
             } else {
                 None
             };
-            self.rasterizer.backward(
-                &self.state.splats,
-                &cam,
-                &opts,
-                loss.d_rgb(),
-                d_alpha,
-                None,
-                &mut self.grads,
-            );
-            let t3 = Instant::now();
-            self.timings.backward += t3 - t2;
-            // With a strategy observing the gradients, the check runs before it; otherwise the
-            // update does it chunk by chunk.
-            let observed = self.strategy.is_some();
-            if let Some(s) = self.strategy.as_mut() {
-                self.run.non_finite.zeroed_gradients += zero_non_finite_grads(&mut self.grads);
-                s.observe(iteration, &self.grads, self.rasterizer.radii());
-            }
-            let plan = self.update_plan(iteration, !observed);
-            let outcome = update(&plan, &mut self.state, &mut self.grads);
-            self.grads_zeroed = true;
+            let outcome = if self.strategy.is_none() && self.chained_update {
+                // No strategy observes the gradients: the update takes them chunk by chunk
+                // from the rasteriser's chain (the whole-model arrays are never written).
+                self.rasterizer.backward_sums(
+                    &self.state.splats,
+                    &cam,
+                    &opts,
+                    loss.d_rgb(),
+                    d_alpha,
+                    None,
+                );
+                t3 = Instant::now();
+                self.timings.backward += t3 - t2;
+                let plan = self.update_plan(iteration, true);
+                update_chained(&plan, &mut self.state, &self.rasterizer)
+            } else {
+                // The last update left the gradients zero; they need it again only if the model
+                // has changed shape since (refinement, repair) or no update has run yet.
+                if !(self.grads_zeroed && self.grads.fits(&self.state.splats)) {
+                    self.grads.reset(&self.state.splats);
+                }
+                self.grads_zeroed = false;
+                self.rasterizer.backward(
+                    &self.state.splats,
+                    &cam,
+                    &opts,
+                    loss.d_rgb(),
+                    d_alpha,
+                    None,
+                    &mut self.grads,
+                );
+                t3 = Instant::now();
+                self.timings.backward += t3 - t2;
+                // With a strategy observing the gradients, the check runs before it; otherwise
+                // the update does it chunk by chunk.
+                let observed = self.strategy.is_some();
+                if let Some(s) = self.strategy.as_mut() {
+                    self.run.non_finite.zeroed_gradients += zero_non_finite_grads(&mut self.grads);
+                    s.observe(iteration, &self.grads, self.rasterizer.radii());
+                }
+                let plan = self.update_plan(iteration, !observed);
+                let outcome = update(&plan, &mut self.state, &mut self.grads);
+                self.grads_zeroed = true;
+                outcome
+            };
             self.run.non_finite.zeroed_gradients += outcome.zeroed_gradients;
             if outcome.non_finite_parameters {
                 self.sanitize();
@@ -905,7 +933,8 @@ impl Trainer {
         if let Some(s) = self.strategy.as_mut() {
             s.retain(keep);
         }
-        self.grads = SplatGrads::zeros_like(&self.state.splats);
+        // Reshaped by the next step that needs it.
+        self.grads = SplatGrads::default();
         self.run.refine.pruned += removed;
         Ok(removed)
     }
@@ -944,7 +973,7 @@ impl Trainer {
             }
             None => {}
         }
-        self.grads = SplatGrads::zeros_like(&state.splats);
+        self.grads = SplatGrads::default();
         self.state = state;
         self.run = run;
         Ok(())
@@ -1134,6 +1163,97 @@ mod tests {
             "other splats keep their gradients"
         );
         assert!(all_finite(&[g.sh.as_flattened(), &g.screen_grad_norm]));
+    }
+
+    /// Taking the gradients chunk by chunk from the rasteriser's chain into the update
+    /// (`update_chained`) trains the same model, bit for bit, parameters and moments, as the
+    /// gradients written whole and then applied (`update`): with every SH band, an alpha loss
+    /// and masked views.
+    #[test]
+    fn the_chained_update_trains_the_model_the_whole_gradients_train() {
+        let mut state = 7_u64;
+        let mut r = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let mut splats = Splats::new(3);
+        for _ in 0..1_500 {
+            let sh: Vec<[f32; 3]> = (0..16).map(|_| [r() - 0.5, r() - 0.5, r() - 0.5]).collect();
+            splats.push(
+                Vec3::new(r() - 0.5, r() - 0.5, r() - 0.5),
+                Vec3::splat(-3.5) + Vec3::new(r(), r(), r()),
+                [r() - 0.5, r() - 0.5, r() - 0.5, r() - 0.5],
+                2.0 * r() - 1.0,
+                &sh,
+            );
+        }
+        let views: Vec<View> = (0..4)
+            .map(|i| {
+                let a = f64::from(i) * 1.3;
+                let eye = DVec3::new(3.0 * a.cos(), 0.7, 3.0 * a.sin());
+                let camera = Camera::new(
+                    Intrinsics::from_fov_y(48, 40, 45.0),
+                    Pose::look_at(eye, DVec3::ZERO, DVec3::Y),
+                );
+                let n = 48 * 40;
+                View {
+                    name: format!("v{i}"),
+                    camera,
+                    image: (0..3 * n)
+                        .map(|j| ((j * 7 + i) % 11) as f32 / 10.0)
+                        .collect(),
+                    mask: Some((0..n).map(|j| f32::from(u8::from(j % 5 != 0))).collect()),
+                }
+            })
+            .collect();
+        let config = TrainConfig {
+            iterations: 40,
+            densify: None,
+            sh_degree_interval: 10,
+            alpha_loss_weight: 0.1,
+            ..TrainConfig::default()
+        };
+        let train = |chained: bool| {
+            let mut t = Trainer::new(splats.clone(), views.clone(), config.clone()).unwrap();
+            t.chained_update = chained;
+            for _ in 0..config.iterations {
+                t.step();
+            }
+            (t.state.clone(), t.run.non_finite.zeroed_gradients)
+        };
+        let (chained, zeroed_chained) = train(true);
+        let (whole, zeroed_whole) = train(false);
+        assert!(
+            chained.splats.sh != splats.sh,
+            "training must move the model"
+        );
+        assert_eq!(zeroed_chained, zeroed_whole);
+        let bits = |s: &ParamState| -> Vec<u32> {
+            let p = &s.splats;
+            let m = &s.moments;
+            bytemuck::cast_slice::<Vec3, f32>(&p.means)
+                .iter()
+                .chain(bytemuck::cast_slice::<Vec3, f32>(&p.log_scales))
+                .chain(p.rotations.as_flattened())
+                .chain(&p.opacity_logits)
+                .chain(p.sh.as_flattened())
+                .chain(
+                    [
+                        &m.means,
+                        &m.log_scales,
+                        &m.rotations,
+                        &m.opacity_logits,
+                        &m.sh,
+                    ]
+                    .iter()
+                    .flat_map(|g| g.m.iter().chain(&g.v)),
+                )
+                .map(|x| x.to_bits())
+                .collect()
+        };
+        assert_eq!(bits(&chained), bits(&whole));
     }
 
     #[test]

@@ -104,9 +104,10 @@ pub struct StepPhases {
     pub forward_ms: f64,
     /// L1 + D-SSIM and their image gradient.
     pub loss_ms: f64,
-    /// Backward rasterisation.
+    /// Backward rasterisation (without densification: up to the per-splat sums).
     pub backward_ms: f64,
-    /// Adam, clamps and the non-finite scan.
+    /// Adam, clamps and the non-finite scan (without densification: with the backward's chain
+    /// to the parameters, which the update runs chunk by chunk).
     pub adam_ms: f64,
     /// Densification bookkeeping.
     pub refine_ms: f64,
