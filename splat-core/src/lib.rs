@@ -9,8 +9,9 @@
 //! - [`Splats`]: the model in structure-of-arrays form, with activations ([`sigmoid`], [`logit`]).
 //! - [`sh`]: real spherical harmonics of degree 0–3 with their gradients.
 //! - [`RenderCamera`], [`RenderOptions`], [`RenderOutput`], [`SplatGrads`]: rasteriser inputs/outputs.
-//! - [`Rasterizer`]: forward and backward passes (projection, tile binning, compositing), and
-//!   each splat's summed blending weight over a view (`accumulate_contributions`).
+//! - [`Rasterizer`]: forward and backward passes (projection, tile binning, compositing; the
+//!   backward also in two steps, `backward_sums` then `chain_into` range by range), and each
+//!   splat's summed blending weight over a view (`accumulate_contributions`).
 //! - [`ply`]: the Inria 3DGS PLY, read and write; [`export`]: the antimatter15 `.splat` layout,
 //!   read and write; [`spz`]: Niantic's compressed SPZ, read and write; [`glb`]: binary glTF with
 //!   `KHR_gaussian_splatting`, read and write; [`frame`]: the change to their y-up frame.
