@@ -223,23 +223,15 @@ impl Rasterizer {
     /// If `backward_sums` has not run since the last forward pass, if the range runs past the
     /// splats it saw, or if `grads`' arrays (or `sh`) are not all shaped for the range.
     pub fn chain_into(&self, first: usize, sh: &[[f32; 3]], grads: &mut SplatGrads) {
-        let SplatGrads {
-            means,
-            log_scales,
-            rotations,
-            opacity_logits,
-            sh: sh_grads,
-            screen_grad_norm,
-        } = grads;
-        let chunk = GradsMut {
-            means,
-            log_scales,
-            rotations,
-            opacity_logits,
-            sh: sh_grads,
-            screen_grad_norm,
+        let g = GradsMut {
+            means: &mut grads.means,
+            log_scales: &mut grads.log_scales,
+            rotations: &mut grads.rotations,
+            opacity_logits: &mut grads.opacity_logits,
+            sh: &mut grads.sh,
+            screen_grad_norm: &mut grads.screen_grad_norm,
         };
-        self.chain_range(first, sh, chunk);
+        self.chain_range(first, sh, g);
     }
 
     /// The chain of splats `first`.. into `g` (see [`Rasterizer::chain_into`]).

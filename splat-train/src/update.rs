@@ -70,93 +70,35 @@ struct GroupChunk<'a> {
     v: &'a mut [f32],
 }
 
-/// Splits one group's arrays (`width` floats a splat) into chunks of `CHUNK_SPLATS` splats.
-fn group_chunks<'a>(
-    p: &'a mut [f32],
-    g: &'a mut [f32],
-    moments: &'a mut Moments,
-    width: usize,
-) -> impl Iterator<Item = GroupChunk<'a>> {
-    let len = CHUNK_SPLATS * width.max(1);
-    p.chunks_mut(len)
-        .zip(g.chunks_mut(len))
-        .zip(moments.m.chunks_mut(len).zip(moments.v.chunks_mut(len)))
-        .map(|((p, g), (m, v))| GroupChunk { p, g, m, v })
-}
-
 /// One chunk of splats: its five groups and its screen-space gradient norms.
 struct Chunk<'a> {
     groups: [GroupChunk<'a>; 5],
     screen_grad_norm: &'a mut [f32],
 }
 
-/// Applies `plan` to `state` with `grads` (shaped like `state.splats`) and leaves `grads` zero.
-pub(crate) fn update(
-    plan: &UpdatePlan,
-    state: &mut ParamState,
-    grads: &mut SplatGrads,
-) -> UpdateOutcome {
-    let s = &mut state.splats;
-    let k = s.coeffs_per_splat();
-    let widths = [3, 3, 4, 1, 3 * k];
-    let mo = &mut state.moments;
-    let n = s.len();
-    assert!(
-        grads.means.len() == n
-            && grads.sh.len() == s.sh.len()
-            && mo.means.len() == 3 * n
-            && mo.sh.len() == 3 * s.sh.len(),
-        "update: gradients or moments not shaped like the model"
-    );
-    let mut chunks: Vec<Chunk<'_>> = group_chunks(
-        bytemuck::cast_slice_mut(&mut s.means),
-        bytemuck::cast_slice_mut(&mut grads.means),
-        &mut mo.means,
-        widths[0],
-    )
-    .zip(group_chunks(
-        bytemuck::cast_slice_mut(&mut s.log_scales),
-        bytemuck::cast_slice_mut(&mut grads.log_scales),
-        &mut mo.log_scales,
-        widths[1],
-    ))
-    .zip(group_chunks(
-        s.rotations.as_flattened_mut(),
-        grads.rotations.as_flattened_mut(),
-        &mut mo.rotations,
-        widths[2],
-    ))
-    .zip(group_chunks(
-        &mut s.opacity_logits,
-        &mut grads.opacity_logits,
-        &mut mo.opacity_logits,
-        widths[3],
-    ))
-    .zip(group_chunks(
-        s.sh.as_flattened_mut(),
-        grads.sh.as_flattened_mut(),
-        &mut mo.sh,
-        widths[4],
-    ))
-    .zip(grads.screen_grad_norm.chunks_mut(CHUNK_SPLATS))
-    .map(
-        |(((((means, scales), rotations), opacities), sh), norms)| Chunk {
-            groups: [means, scales, rotations, opacities, sh],
-            screen_grad_norm: norms,
-        },
-    )
-    .collect();
-    chunks
-        .par_iter_mut()
-        .map(|c| update_chunk(plan, &widths, c))
-        .reduce(UpdateOutcome::default, |a, b| a + b)
-}
-
-/// One group's share of a chunk before its gradients exist: values and moments.
+/// One group's share of a chunk before its gradients are paired with it: values and moments.
 struct ParamsChunk<'a> {
     p: &'a mut [f32],
     m: &'a mut [f32],
     v: &'a mut [f32],
+}
+
+impl<'a> ParamsChunk<'a> {
+    /// The group's chunk with its gradients `g`.
+    fn with_grads(self, g: &'a mut [f32]) -> GroupChunk<'a> {
+        GroupChunk {
+            p: self.p,
+            g,
+            m: self.m,
+            v: self.v,
+        }
+    }
+}
+
+/// The float width of each group a splat (means, log-scales, rotations, opacity logits, SH)
+/// for `k` SH coefficients a splat.
+fn group_widths(k: usize) -> [usize; 5] {
+    [3, 3, 4, 1, 3 * k]
 }
 
 /// Splits one group's values and moments (`width` floats a splat) into chunks of
@@ -172,41 +114,17 @@ fn params_chunks<'a>(
         .map(|(p, (m, v))| ParamsChunk { p, m, v })
 }
 
-/// A group's chunk with its gradients.
-fn with_grads<'a>(pc: ParamsChunk<'a>, g: &'a mut [f32]) -> GroupChunk<'a> {
-    GroupChunk {
-        p: pc.p,
-        g,
-        m: pc.m,
-        v: pc.v,
-    }
-}
-
-/// Sets `v` to `len` zeros, keeping its allocation.
-fn zeroed<T: Copy>(v: &mut Vec<T>, len: usize, zero: T) {
-    v.clear();
-    v.resize(len, zero);
-}
-
-/// Applies `plan` to `state` with the gradients of the view whose [`Rasterizer::backward_sums`]
-/// `raster` last ran on `state.splats`, chained chunk by chunk into a chunk-sized buffer (see
-/// the module's documentation). The model comes out as [`update`] leaves it given the
-/// gradients [`Rasterizer::backward`] writes.
-pub(crate) fn update_chained(
-    plan: &UpdatePlan,
-    state: &mut ParamState,
-    raster: &Rasterizer,
-) -> UpdateOutcome {
+/// The model's values and moments, chunk by chunk of `CHUNK_SPLATS` splats, group by group.
+fn chunked_state(state: &mut ParamState) -> Vec<[ParamsChunk<'_>; 5]> {
     let s = &mut state.splats;
-    let k = s.coeffs_per_splat();
-    let widths = [3, 3, 4, 1, 3 * k];
     let mo = &mut state.moments;
     let n = s.len();
     assert!(
         mo.means.len() == 3 * n && mo.sh.len() == 3 * s.sh.len(),
         "update: moments not shaped like the model"
     );
-    let chunks: Vec<[ParamsChunk<'_>; 5]> = params_chunks(
+    let widths = group_widths(s.coeffs_per_splat());
+    params_chunks(
         bytemuck::cast_slice_mut(&mut s.means),
         &mut mo.means,
         widths[0],
@@ -234,8 +152,106 @@ pub(crate) fn update_chained(
     .map(|((((means, scales), rotations), opacities), sh)| {
         [means, scales, rotations, opacities, sh]
     })
-    .collect();
-    chunks
+    .collect()
+}
+
+/// A chunk's values and moments paired with its gradients `g` (shaped for the chunk).
+fn paired<'a>(groups: [ParamsChunk<'a>; 5], g: GradsChunk<'a>) -> Chunk<'a> {
+    let [means, scales, rotations, opacities, sh] = groups;
+    Chunk {
+        groups: [
+            means.with_grads(bytemuck::cast_slice_mut(g.means)),
+            scales.with_grads(bytemuck::cast_slice_mut(g.log_scales)),
+            rotations.with_grads(g.rotations.as_flattened_mut()),
+            opacities.with_grads(g.opacity_logits),
+            sh.with_grads(g.sh.as_flattened_mut()),
+        ],
+        screen_grad_norm: g.screen_grad_norm,
+    }
+}
+
+/// One chunk's share of the gradient arrays.
+struct GradsChunk<'a> {
+    means: &'a mut [Vec3],
+    log_scales: &'a mut [Vec3],
+    rotations: &'a mut [[f32; 4]],
+    opacity_logits: &'a mut [f32],
+    sh: &'a mut [[f32; 3]],
+    screen_grad_norm: &'a mut [f32],
+}
+
+impl<'a> GradsChunk<'a> {
+    /// All of `g`.
+    fn whole(g: &'a mut SplatGrads) -> Self {
+        Self {
+            means: &mut g.means,
+            log_scales: &mut g.log_scales,
+            rotations: &mut g.rotations,
+            opacity_logits: &mut g.opacity_logits,
+            sh: &mut g.sh,
+            screen_grad_norm: &mut g.screen_grad_norm,
+        }
+    }
+}
+
+/// Applies `plan` to `state` with `grads` (shaped like `state.splats`) and leaves `grads` zero.
+pub(crate) fn update(
+    plan: &UpdatePlan,
+    state: &mut ParamState,
+    grads: &mut SplatGrads,
+) -> UpdateOutcome {
+    let k = state.splats.coeffs_per_splat();
+    assert!(
+        grads.fits(&state.splats),
+        "update: gradients not shaped like the model"
+    );
+    let widths = group_widths(k);
+    let grads: Vec<GradsChunk<'_>> = grads
+        .means
+        .chunks_mut(CHUNK_SPLATS)
+        .zip(grads.log_scales.chunks_mut(CHUNK_SPLATS))
+        .zip(grads.rotations.chunks_mut(CHUNK_SPLATS))
+        .zip(grads.opacity_logits.chunks_mut(CHUNK_SPLATS))
+        .zip(grads.sh.chunks_mut(CHUNK_SPLATS * k))
+        .zip(grads.screen_grad_norm.chunks_mut(CHUNK_SPLATS))
+        .map(
+            |(((((means, log_scales), rotations), opacity_logits), sh), screen_grad_norm)| {
+                GradsChunk {
+                    means,
+                    log_scales,
+                    rotations,
+                    opacity_logits,
+                    sh,
+                    screen_grad_norm,
+                }
+            },
+        )
+        .collect();
+    chunked_state(state)
+        .into_par_iter()
+        .zip(grads)
+        .map(|(groups, g)| update_chunk(plan, &widths, &mut paired(groups, g)))
+        .reduce(UpdateOutcome::default, |a, b| a + b)
+}
+
+/// Sets `v` to `len` zeros, keeping its allocation.
+fn zeroed<T: Copy>(v: &mut Vec<T>, len: usize, zero: T) {
+    v.clear();
+    v.resize(len, zero);
+}
+
+/// Applies `plan` to `state` with the gradients of the view whose [`Rasterizer::backward_sums`]
+/// `raster` last ran on `state.splats`, chained chunk by chunk into a chunk-sized buffer (see
+/// the module's documentation). The model comes out as [`update`] leaves it given the
+/// gradients [`Rasterizer::backward`] writes.
+pub(crate) fn update_chained(
+    plan: &UpdatePlan,
+    state: &mut ParamState,
+    raster: &Rasterizer,
+) -> UpdateOutcome {
+    let k = state.splats.coeffs_per_splat();
+    let widths = group_widths(k);
+    chunked_state(state)
         .into_par_iter()
         .enumerate()
         .map_init(SplatGrads::default, |g, (c, groups)| {
@@ -247,18 +263,7 @@ pub(crate) fn update_chained(
             zeroed(&mut g.sh, len * k, [0.0; 3]);
             zeroed(&mut g.screen_grad_norm, len, 0.0);
             raster.chain_into(c * CHUNK_SPLATS, bytemuck::cast_slice(&*groups[4].p), g);
-            let [means, scales, rotations, opacities, sh] = groups;
-            let mut chunk = Chunk {
-                groups: [
-                    with_grads(means, bytemuck::cast_slice_mut(&mut g.means)),
-                    with_grads(scales, bytemuck::cast_slice_mut(&mut g.log_scales)),
-                    with_grads(rotations, g.rotations.as_flattened_mut()),
-                    with_grads(opacities, &mut g.opacity_logits),
-                    with_grads(sh, g.sh.as_flattened_mut()),
-                ],
-                screen_grad_norm: &mut g.screen_grad_norm,
-            };
-            update_chunk(plan, &widths, &mut chunk)
+            update_chunk(plan, &widths, &mut paired(groups, GradsChunk::whole(g)))
         })
         .reduce(UpdateOutcome::default, |a, b| a + b)
 }
