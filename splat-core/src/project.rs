@@ -351,6 +351,18 @@ pub(crate) fn project(splats: &Splats, i: usize, v: &ViewConsts) -> Result<Inter
     })
 }
 
+/// What the chain to the parameters needs of a view, kept by the backward pass's sums for the
+/// chain's ranges (`Rasterizer::chain_into`).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct ChainView {
+    pub v: ViewConsts,
+    /// The image size (for the screen-space gradient norm).
+    pub size: (u32, u32),
+    pub coeffs_per_splat: usize,
+    /// The number of splats of the model it was made for.
+    pub splats: usize,
+}
+
 /// Gradients of the loss with respect to one splat's projected quantities, summed over pixels.
 #[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct ProjectedGrad {

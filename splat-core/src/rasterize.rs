@@ -86,7 +86,7 @@ pub struct Rasterizer {
     pub(crate) pair_grads: Vec<ProjectedGrad>,
     pub(crate) splat_grads: Vec<ProjectedGrad>,
     /// The view of the last `backward_sums`, while its sums stand (a forward pass clears it).
-    pub(crate) chain_view: Option<crate::rasterize_backward::ChainView>,
+    pub(crate) chain_view: Option<crate::project::ChainView>,
     /// Per (tile, splat) pair: its summed blending weight (`accumulate_contributions`).
     pub(crate) pair_weights: Vec<f64>,
     /// Run the portable tile loops even where AVX2 is available (tests compare the two).

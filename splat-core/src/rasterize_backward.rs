@@ -15,7 +15,7 @@ use rayon::prelude::*;
 
 use crate::constants::{MAX_ALPHA, MIN_ALPHA};
 use crate::disjoint::DisjointWrites;
-use crate::project::{ProjectedGrad, ViewConsts, project_backward};
+use crate::project::{ChainView, ProjectedGrad, ViewConsts, project_backward};
 use crate::rasterize::{
     DEPTH_MIN_ALPHA, PREFETCH_AHEAD, lanes_mut, prefetch, tile_extent, tile_major_index,
 };
@@ -24,17 +24,6 @@ use crate::{Rasterizer, RenderCamera, RenderOptions, SplatGrads, Splats};
 
 /// Splats per task of the chain phase.
 const CHAIN_CHUNK: usize = 256;
-
-/// What the chain phase needs of the view, kept by [`Rasterizer::backward_sums`] for
-/// [`Rasterizer::chain_into`].
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct ChainView {
-    v: ViewConsts,
-    size: (u32, u32),
-    coeffs_per_splat: usize,
-    /// The number of splats of the model it was made for.
-    splats: usize,
-}
 
 /// A range of splats' gradient arrays, as [`SplatGrads`] holds them.
 struct GradsMut<'a> {
