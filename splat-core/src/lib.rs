@@ -8,7 +8,8 @@
 //!
 //! - [`Splats`]: the model in structure-of-arrays form, with activations ([`sigmoid`], [`logit`]).
 //! - [`sh`]: real spherical harmonics of degree 0–3 with their gradients.
-//! - [`RenderCamera`], [`RenderOptions`], [`RenderOutput`], [`SplatGrads`]: rasteriser inputs/outputs.
+//! - [`RenderCamera`], [`RenderOptions`], [`RenderOutput`], [`SplatGrads`] (and [`SplatGradsMut`], a range
+//!   of it for chunked work): rasteriser inputs/outputs.
 //! - [`Rasterizer`]: forward and backward passes (projection, tile binning, compositing; the
 //!   backward also in two steps, `backward_sums` then `chain_into` range by range), and each
 //!   splat's summed blending weight over a view (`accumulate_contributions`).
@@ -60,7 +61,7 @@ mod tiles;
 pub use camera::RenderCamera;
 pub use error::Error;
 pub use rasterize::{MAX_PIXELS, RasterPhases, Rasterizer, RenderStats, has_avx2};
-pub use render::{RenderOptions, RenderOutput, SplatGrads};
+pub use render::{RenderOptions, RenderOutput, SplatGrads, SplatGradsMut};
 pub use sh::num_sh_coeffs;
 pub use splats::{
     MIN_QUAT_NORM, Splats, all_finite, logit, normalize_quat, rgb_to_sh_dc, sh_dc_to_rgb, sigmoid,

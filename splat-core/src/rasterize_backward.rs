@@ -20,20 +20,10 @@ use crate::rasterize::{
     DEPTH_MIN_ALPHA, PREFETCH_AHEAD, lanes_mut, prefetch, tile_extent, tile_major_index,
 };
 use crate::tiles::{Falloff, HALF_ROWS, LANES, RowSpans, TILE_PIXELS, TILE_SIZE};
-use crate::{Rasterizer, RenderCamera, RenderOptions, SplatGrads, Splats};
+use crate::{Rasterizer, RenderCamera, RenderOptions, SplatGrads, SplatGradsMut, Splats};
 
 /// Splats per task of the chain phase.
 const CHAIN_CHUNK: usize = 256;
-
-/// A range of splats' gradient arrays, as [`SplatGrads`] holds them.
-struct GradsMut<'a> {
-    means: &'a mut [glam::Vec3],
-    log_scales: &'a mut [glam::Vec3],
-    rotations: &'a mut [[f32; 4]],
-    opacity_logits: &'a mut [f32],
-    sh: &'a mut [[f32; 3]],
-    screen_grad_norm: &'a mut [f32],
-}
 
 /// One tile's list: its splats front to back, and which of them the forward pass blended.
 #[derive(Clone, Copy)]
@@ -85,31 +75,10 @@ impl Rasterizer {
         let k = splats.coeffs_per_splat();
         let this = &*self;
         grads
-            .means
             .par_chunks_mut(CHAIN_CHUNK)
-            .zip(grads.log_scales.par_chunks_mut(CHAIN_CHUNK))
-            .zip(grads.rotations.par_chunks_mut(CHAIN_CHUNK))
-            .zip(grads.opacity_logits.par_chunks_mut(CHAIN_CHUNK))
-            .zip(grads.sh.par_chunks_mut(CHAIN_CHUNK * k))
-            .zip(grads.screen_grad_norm.par_chunks_mut(CHAIN_CHUNK))
             .zip(splats.sh.par_chunks(CHAIN_CHUNK * k))
             .enumerate()
-            .for_each(
-                |(
-                    c,
-                    ((((((means, log_scales), rotations), opacity_logits), sh), norms), coeffs),
-                )| {
-                    let chunk = GradsMut {
-                        means,
-                        log_scales,
-                        rotations,
-                        opacity_logits,
-                        sh,
-                        screen_grad_norm: norms,
-                    };
-                    this.chain_range(c * CHAIN_CHUNK, coeffs, chunk);
-                },
-            );
+            .for_each(|(c, (g, coeffs))| this.chain_into(c * CHAIN_CHUNK, coeffs, g));
         self.phases.backward_chain = t2.elapsed();
     }
 
@@ -202,29 +171,16 @@ impl Rasterizer {
         self.phases.backward_chain = Duration::ZERO;
     }
 
-    /// Adds into `grads` the parameter gradients of the splats from `first` on, as many as
-    /// `grads.means` holds, whose SH coefficients are `sh` (theirs only, splat-major as in
+    /// Adds into `g` the parameter gradients of the splats from `first` on, as many as
+    /// `g.means` holds, whose SH coefficients are `coeffs` (theirs only, splat-major as in
     /// [`Splats::sh`]): the last phase of [`Rasterizer::backward`] for that range, after
     /// [`Rasterizer::backward_sums`] on the same splats. The ranges may be chained in any order
     /// and on any threads; each splat's gradients are the same as `backward` gives.
     ///
     /// # Panics
     /// If `backward_sums` has not run since the last forward pass, if the range runs past the
-    /// splats it saw, or if `grads`' arrays (or `sh`) are not all shaped for the range.
-    pub fn chain_into(&self, first: usize, sh: &[[f32; 3]], grads: &mut SplatGrads) {
-        let g = GradsMut {
-            means: &mut grads.means,
-            log_scales: &mut grads.log_scales,
-            rotations: &mut grads.rotations,
-            opacity_logits: &mut grads.opacity_logits,
-            sh: &mut grads.sh,
-            screen_grad_norm: &mut grads.screen_grad_norm,
-        };
-        self.chain_range(first, sh, g);
-    }
-
-    /// The chain of splats `first`.. into `g` (see [`Rasterizer::chain_into`]).
-    fn chain_range(&self, first: usize, coeffs: &[[f32; 3]], g: GradsMut<'_>) {
+    /// splats it saw, or if `g`'s arrays (or `coeffs`) are not all shaped for the range.
+    pub fn chain_into(&self, first: usize, coeffs: &[[f32; 3]], g: SplatGradsMut<'_>) {
         let Some(cv) = &self.chain_view else {
             panic!("Rasterizer::chain_into: backward_sums has not run since the last forward pass");
         };
@@ -504,7 +460,7 @@ mod tests {
     use glam::{Mat3, Vec3};
     use rand::{RngExt, SeedableRng};
 
-    use crate::{Rasterizer, RenderCamera, RenderOptions, SplatGrads, Splats};
+    use crate::{Rasterizer, RenderCamera, RenderOptions, SplatGrads, SplatGradsMut, Splats};
 
     /// Renders and differentiates `splats` with either instantiation of the projection and
     /// tile loops.
@@ -613,21 +569,15 @@ mod tests {
         let bounds = [0, 7, 100, 101, 333, s.len()];
         for w in bounds.windows(2).rev() {
             let (a, b) = (w[0], w[1]);
-            let mut g = SplatGrads {
-                means: vec![Vec3::ZERO; b - a],
-                log_scales: vec![Vec3::ZERO; b - a],
-                rotations: vec![[0.0; 4]; b - a],
-                opacity_logits: vec![0.0; b - a],
-                sh: vec![[0.0; 3]; (b - a) * k],
-                screen_grad_norm: vec![0.0; b - a],
+            let g = SplatGradsMut {
+                means: &mut ranged.means[a..b],
+                log_scales: &mut ranged.log_scales[a..b],
+                rotations: &mut ranged.rotations[a..b],
+                opacity_logits: &mut ranged.opacity_logits[a..b],
+                sh: &mut ranged.sh[a * k..b * k],
+                screen_grad_norm: &mut ranged.screen_grad_norm[a..b],
             };
-            r.chain_into(a, &s.sh[a * k..b * k], &mut g);
-            ranged.means[a..b].copy_from_slice(&g.means);
-            ranged.log_scales[a..b].copy_from_slice(&g.log_scales);
-            ranged.rotations[a..b].copy_from_slice(&g.rotations);
-            ranged.opacity_logits[a..b].copy_from_slice(&g.opacity_logits);
-            ranged.sh[a * k..b * k].copy_from_slice(&g.sh);
-            ranged.screen_grad_norm[a..b].copy_from_slice(&g.screen_grad_norm);
+            r.chain_into(a, &s.sh[a * k..b * k], g);
         }
         let bits = |g: &SplatGrads| -> Vec<u32> {
             g.means
@@ -652,7 +602,7 @@ mod tests {
                 sh: vec![[0.0; 3]; 2 * k],
                 screen_grad_norm: vec![0.0; 2],
             };
-            r.chain_into(s.len() - 1, &s.sh[..2 * k], &mut g);
+            r.chain_into(s.len() - 1, &s.sh[..2 * k], g.as_mut());
         }));
         assert!(past.is_err(), "a range past the splats must be refused");
     }

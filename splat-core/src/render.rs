@@ -98,6 +98,76 @@ impl SplatGrads {
     }
 }
 
+/// A range of splats' gradients borrowed from a [`SplatGrads`], array by array: what one task
+/// of work chained or updated chunk by chunk writes or reads.
+#[derive(Debug)]
+pub struct SplatGradsMut<'a> {
+    /// dL/d mean.
+    pub means: &'a mut [Vec3],
+    /// dL/d log-scale.
+    pub log_scales: &'a mut [Vec3],
+    /// dL/d stored (unnormalised) quaternion (w, x, y, z).
+    pub rotations: &'a mut [[f32; 4]],
+    /// dL/d opacity logit.
+    pub opacity_logits: &'a mut [f32],
+    /// dL/d SH coefficient, splat-major.
+    pub sh: &'a mut [[f32; 3]],
+    /// Σ |dL/d mean2d| in NDC units (see [`SplatGrads::screen_grad_norm`]).
+    pub screen_grad_norm: &'a mut [f32],
+}
+
+impl SplatGrads {
+    /// All of these gradients as one range.
+    pub fn as_mut(&mut self) -> SplatGradsMut<'_> {
+        SplatGradsMut {
+            means: &mut self.means,
+            log_scales: &mut self.log_scales,
+            rotations: &mut self.rotations,
+            opacity_logits: &mut self.opacity_logits,
+            sh: &mut self.sh,
+            screen_grad_norm: &mut self.screen_grad_norm,
+        }
+    }
+
+    /// These gradients in ranges of `splats` splats each (the last one shorter when `splats`
+    /// does not divide the count), in order, for parallel work.
+    ///
+    /// # Panics
+    /// If `splats` is zero.
+    pub fn par_chunks_mut(
+        &mut self,
+        splats: usize,
+    ) -> impl IndexedParallelIterator<Item = SplatGradsMut<'_>> {
+        assert!(splats > 0, "SplatGrads::par_chunks_mut: empty ranges");
+        // Coefficients a splat (none for an empty model, whose arrays give no ranges anyway).
+        let k = self
+            .sh
+            .len()
+            .checked_div(self.means.len())
+            .unwrap_or(1)
+            .max(1);
+        self.means
+            .par_chunks_mut(splats)
+            .zip(self.log_scales.par_chunks_mut(splats))
+            .zip(self.rotations.par_chunks_mut(splats))
+            .zip(self.opacity_logits.par_chunks_mut(splats))
+            .zip(self.sh.par_chunks_mut(splats * k))
+            .zip(self.screen_grad_norm.par_chunks_mut(splats))
+            .map(
+                |(((((means, log_scales), rotations), opacity_logits), sh), screen_grad_norm)| {
+                    SplatGradsMut {
+                        means,
+                        log_scales,
+                        rotations,
+                        opacity_logits,
+                        sh,
+                        screen_grad_norm,
+                    }
+                },
+            )
+    }
+}
+
 /// Sets `v` to `len` copies of `zero`, the kept part in parallel.
 fn zero_fill<T: Copy + Send + Sync>(v: &mut Vec<T>, len: usize, zero: T) {
     v.truncate(len);

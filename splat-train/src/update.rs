@@ -17,7 +17,7 @@
 
 use glam::Vec3;
 use rayon::prelude::*;
-use splat_core::{Rasterizer, SplatGrads, all_finite};
+use splat_core::{Rasterizer, SplatGrads, SplatGradsMut, all_finite};
 
 use crate::adam::{AdamStep, Moments, Rates};
 use crate::state::ParamState;
@@ -156,7 +156,7 @@ fn chunked_state(state: &mut ParamState) -> Vec<[ParamsChunk<'_>; 5]> {
 }
 
 /// A chunk's values and moments paired with its gradients `g` (shaped for the chunk).
-fn paired<'a>(groups: [ParamsChunk<'a>; 5], g: GradsChunk<'a>) -> Chunk<'a> {
+fn paired<'a>(groups: [ParamsChunk<'a>; 5], g: SplatGradsMut<'a>) -> Chunk<'a> {
     let [means, scales, rotations, opacities, sh] = groups;
     Chunk {
         groups: [
@@ -167,30 +167,6 @@ fn paired<'a>(groups: [ParamsChunk<'a>; 5], g: GradsChunk<'a>) -> Chunk<'a> {
             sh.with_grads(g.sh.as_flattened_mut()),
         ],
         screen_grad_norm: g.screen_grad_norm,
-    }
-}
-
-/// One chunk's share of the gradient arrays.
-struct GradsChunk<'a> {
-    means: &'a mut [Vec3],
-    log_scales: &'a mut [Vec3],
-    rotations: &'a mut [[f32; 4]],
-    opacity_logits: &'a mut [f32],
-    sh: &'a mut [[f32; 3]],
-    screen_grad_norm: &'a mut [f32],
-}
-
-impl<'a> GradsChunk<'a> {
-    /// All of `g`.
-    fn whole(g: &'a mut SplatGrads) -> Self {
-        Self {
-            means: &mut g.means,
-            log_scales: &mut g.log_scales,
-            rotations: &mut g.rotations,
-            opacity_logits: &mut g.opacity_logits,
-            sh: &mut g.sh,
-            screen_grad_norm: &mut g.screen_grad_norm,
-        }
     }
 }
 
@@ -206,30 +182,9 @@ pub(crate) fn update(
         "update: gradients not shaped like the model"
     );
     let widths = group_widths(k);
-    let grads: Vec<GradsChunk<'_>> = grads
-        .means
-        .chunks_mut(CHUNK_SPLATS)
-        .zip(grads.log_scales.chunks_mut(CHUNK_SPLATS))
-        .zip(grads.rotations.chunks_mut(CHUNK_SPLATS))
-        .zip(grads.opacity_logits.chunks_mut(CHUNK_SPLATS))
-        .zip(grads.sh.chunks_mut(CHUNK_SPLATS * k))
-        .zip(grads.screen_grad_norm.chunks_mut(CHUNK_SPLATS))
-        .map(
-            |(((((means, log_scales), rotations), opacity_logits), sh), screen_grad_norm)| {
-                GradsChunk {
-                    means,
-                    log_scales,
-                    rotations,
-                    opacity_logits,
-                    sh,
-                    screen_grad_norm,
-                }
-            },
-        )
-        .collect();
     chunked_state(state)
         .into_par_iter()
-        .zip(grads)
+        .zip(grads.par_chunks_mut(CHUNK_SPLATS))
         .map(|(groups, g)| update_chunk(plan, &widths, &mut paired(groups, g)))
         .reduce(UpdateOutcome::default, |a, b| a + b)
 }
@@ -262,8 +217,12 @@ pub(crate) fn update_chained(
             zeroed(&mut g.opacity_logits, len, 0.0);
             zeroed(&mut g.sh, len * k, [0.0; 3]);
             zeroed(&mut g.screen_grad_norm, len, 0.0);
-            raster.chain_into(c * CHUNK_SPLATS, bytemuck::cast_slice(&*groups[4].p), g);
-            update_chunk(plan, &widths, &mut paired(groups, GradsChunk::whole(g)))
+            raster.chain_into(
+                c * CHUNK_SPLATS,
+                bytemuck::cast_slice(&*groups[4].p),
+                g.as_mut(),
+            );
+            update_chunk(plan, &widths, &mut paired(groups, g.as_mut()))
         })
         .reduce(UpdateOutcome::default, |a, b| a + b)
 }
