@@ -2,6 +2,7 @@
 //! coloured towards the viewer.
 
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Mutex, PoisonError};
 
 use camera_model::Camera;
 use glam::Vec3;
@@ -42,15 +43,66 @@ pub fn render_cloud(
 pub(crate) struct PreparedCloud<'a> {
     cloud: &'a PlenopticCloud,
     capture: Vec<Vec3>,
-    /// Point indices in Morton order. The visibility pass draws points in this order and keys
-    /// the z-buffer by rank in it, so consecutive points write neighbouring pixels and the
-    /// shading pass reads neighbouring colours.
-    order: Vec<u32>,
-    /// The points' positions in that order. Read through `order` instead, a paper-scale frame
-    /// listed in random order spent half its drawing time waiting for positions from memory
+    /// Each point's rank in Morton order. The visibility pass draws points in this order and
+    /// keys the z-buffer by rank in it, so consecutive points write neighbouring pixels and the
+    /// shading pass reads neighbouring colours; by rank, a view lists its visible points in
+    /// cloud order with one pass over the cloud instead of a sort.
+    rank_of: Vec<u32>,
+    /// The points' positions in that order. Read through an index list instead, a paper-scale
+    /// frame listed in random order spent half its drawing time waiting for positions from memory
     /// (docs/benchmarks/views.md).
     positions: Vec<Vec3>,
     opts: ViewOptions,
+    /// Per-view buffers of views already drawn, for the next views to reuse.
+    buffers: ViewBuffersPool,
+}
+
+/// What drawing one view needs besides its image: the z-buffer, the visible flags and the
+/// visible points' colours by rank. At 1024² supersampled 3× and 3M points that is 75 + 3 +
+/// 38 MB; allocated afresh for each of a frame's 44 views, the pages' first touch (the kernel
+/// zeroing them, one fault a page) and the z-buffer's serial fill cost about a twentieth of the
+/// views' time.
+struct ViewBuffers {
+    zbuf: ZBuffer,
+    visible: Vec<AtomicBool>,
+    colours: Vec<[f32; 3]>,
+}
+
+/// Buffers of finished views, one set for each view that was in flight at once (rayon draws
+/// views in parallel), kept until the prepared cloud is dropped.
+#[derive(Default)]
+struct ViewBuffersPool(Mutex<Vec<ViewBuffers>>);
+
+impl ViewBuffersPool {
+    /// A set for a view of `pixels` sub-pixels and `points` points: the z-buffer empty and no
+    /// point visible. The colours are left as the last view wrote them: a view reads the colour
+    /// of a rank only after it has shaded that rank.
+    fn take(&self, pixels: usize, points: usize) -> ViewBuffers {
+        let reused = self.0.lock().unwrap_or_else(PoisonError::into_inner).pop();
+        match reused {
+            Some(mut b) if b.zbuf.len() == pixels && b.visible.len() == points => {
+                b.zbuf.clear();
+                b.visible
+                    .par_iter_mut()
+                    .with_min_len(CHUNK)
+                    .for_each(|v| *v.get_mut() = false);
+                b
+            }
+            _ => ViewBuffers {
+                zbuf: ZBuffer::new(pixels),
+                visible: (0..points).map(|_| AtomicBool::new(false)).collect(),
+                colours: vec![[0.0; 3]; points],
+            },
+        }
+    }
+
+    /// Returns a set for later views.
+    fn give_back(&self, b: ViewBuffers) {
+        self.0
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .push(b);
+    }
 }
 
 impl<'a> PreparedCloud<'a> {
@@ -63,12 +115,17 @@ impl<'a> PreparedCloud<'a> {
             .par_iter()
             .map(|&i| cloud.positions[i as usize])
             .collect();
+        let mut rank_of = vec![0; order.len()];
+        for (rank, &i) in order.iter().enumerate() {
+            rank_of[i as usize] = rank as u32;
+        }
         Ok(Self {
             cloud,
             capture: cloud.camera_positions(),
-            order,
+            rank_of,
             positions,
             opts: opts.for_cloud(cloud),
+            buffers: ViewBuffersPool::default(),
         })
     }
 
@@ -81,16 +138,20 @@ impl<'a> PreparedCloud<'a> {
     fn render_once(&self, camera: &Camera) -> Result<ViewImage, Error> {
         let (cloud, opts) = (self.cloud, &self.opts);
         let view = ViewCamera::new(camera)?;
-        let zbuf = ZBuffer::new(view.pixels());
+        let mut buffers = self.buffers.take(view.pixels(), cloud.len());
+        let ViewBuffers {
+            zbuf,
+            visible,
+            colours,
+        } = &mut buffers;
         match opts.point_shape {
-            PointShape::Cube => draw_cubes(&self.positions, &view, 0.5 * opts.point_size, &zbuf),
+            PointShape::Cube => draw_cubes(&self.positions, &view, 0.5 * opts.point_size, zbuf),
             PointShape::Disc => {
-                draw_discs(&self.positions, &view, disc_radius(opts.point_size), &zbuf)
+                draw_discs(&self.positions, &view, disc_radius(opts.point_size), zbuf)
             }
         }
         // A point's colour depends on the point and the viewer, not on the pixel: shade each
         // visible point once rather than each of its pixels (a supersampled point covers many).
-        let visible: Vec<AtomicBool> = (0..cloud.len()).map(|_| AtomicBool::new(false)).collect();
         (0..view.pixels())
             .into_par_iter()
             .with_min_len(CHUNK)
@@ -103,13 +164,13 @@ impl<'a> PreparedCloud<'a> {
         // per-camera colours (13 × 12 bytes a point at 8iVSLF's size) are then read forwards
         // through memory. Read in rank (Morton) order they came from all over a 490 MB array,
         // and the shading pass spent most of its time waiting for them (docs/benchmarks/views.md).
-        let mut by_index: Vec<(u32, u32)> = visible
+        let by_index: Vec<(u32, u32)> = self
+            .rank_of
             .par_iter()
             .enumerate()
-            .filter(|(_, seen)| seen.load(Ordering::Relaxed))
-            .map(|(rank, _)| (self.order[rank], rank as u32))
+            .filter(|&(_, &rank)| visible[rank as usize].load(Ordering::Relaxed))
+            .map(|(i, &rank)| (i as u32, rank))
             .collect();
-        by_index.par_sort_unstable();
         let shader = Shader {
             cloud,
             capture: &self.capture,
@@ -122,13 +183,14 @@ impl<'a> PreparedCloud<'a> {
             .par_chunks_mut(CHUNK)
             .zip(by_index.par_chunks(CHUNK))
             .for_each(|(out, points)| shader.shade(points, out, avx2));
-        let mut colours = vec![[0.0f32; 3]; cloud.len()];
         for (&(_, rank), colour) in by_index.iter().zip(shaded) {
             colours[rank as usize] = colour;
         }
-        Ok(resolve(&view, &zbuf, opts, |rank, _, _| {
-            colours[rank as usize]
-        }))
+        // Every rank the z-buffer holds is visible, so shaded this view: no stale colour of an
+        // earlier view is read.
+        let image = resolve(&view, zbuf, opts, |rank, _, _| colours[rank as usize]);
+        self.buffers.give_back(buffers);
+        Ok(image)
     }
 }
 
@@ -562,6 +624,40 @@ mod tests {
         )
         .unwrap();
         assert_eq!(img.rgb_at(32, 32), [0.5, 0.5, 0.5]);
+    }
+
+    #[test]
+    fn views_drawn_one_after_another_match_views_drawn_alone() {
+        // A prepared cloud reuses one view's z-buffer, visible flags and colours for the next;
+        // nothing of an earlier view (a nearer point, a colour, a visible flag) may show in a
+        // later one, also when the view size changes in between. Colours vary with position,
+        // so a colour left from another view would show.
+        let pts = voxel_sphere(12.0);
+        let colors = pts
+            .iter()
+            .map(|p| [0.5 + p.x / 30.0, 0.5 + p.y / 30.0, 0.5 + p.z / 30.0])
+            .collect();
+        let cloud = cloud_of(pts, colors);
+        let opts = ViewOptions {
+            point_size: 1.0,
+            background: [0.1, 0.2, 0.3],
+            ..ViewOptions::default()
+        };
+        let prepared = PreparedCloud::new(&cloud, &opts).unwrap();
+        let views = [
+            (DVec3::new(0.0, 0.0, 60.0), 48),
+            (DVec3::new(50.0, 20.0, -30.0), 48),
+            (DVec3::new(-20.0, -55.0, 10.0), 40),
+            (DVec3::new(0.0, 30.0, 50.0), 48),
+            (DVec3::new(0.0, 0.0, -60.0), 48),
+        ];
+        for (eye, w) in views {
+            let cam = camera(eye, DVec3::ZERO, w, w, 40.0);
+            let alone = render_cloud(&cloud, &cam, &opts).unwrap();
+            let in_turn = prepared.render(&cam).unwrap();
+            assert!(alone.alpha.iter().filter(|&&a| a > 0.0).count() > 100);
+            assert_eq!(in_turn, alone, "view from {eye}");
+        }
     }
 
     #[test]

@@ -3,6 +3,8 @@
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
+use rayon::prelude::*;
+
 /// The empty cell: larger than any (depth, id) key.
 const EMPTY: u64 = u64::MAX;
 
@@ -18,9 +20,24 @@ pub(crate) struct ZBuffer {
 impl ZBuffer {
     /// An empty buffer of `n` pixels.
     pub fn new(n: usize) -> Self {
-        Self {
-            cells: (0..n).map(|_| AtomicU64::new(EMPTY)).collect(),
-        }
+        let mut z = Self {
+            cells: Vec::with_capacity(n),
+        };
+        z.cells.resize_with(n, || AtomicU64::new(EMPTY));
+        z
+    }
+
+    /// Pixels of the buffer.
+    pub fn len(&self) -> usize {
+        self.cells.len()
+    }
+
+    /// Empties every pixel (in parallel: a supersampled 1024² view has 9.4M cells).
+    pub fn clear(&mut self) {
+        self.cells
+            .par_iter_mut()
+            .with_min_len(1 << 16)
+            .for_each(|c| *c.get_mut() = EMPTY);
     }
 
     /// Keeps (depth, id) at `pixel` if it is nearer than what is there. `depth` must be positive.
