@@ -367,7 +367,7 @@ impl Cubes<'_> {
 
 /// Whether the AVX2 instantiations of the drawing loops can run on this CPU (detected at run
 /// time, so the binary runs on any x86-64; always false elsewhere).
-fn has_avx2() -> bool {
+pub(crate) fn has_avx2() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
         std::arch::is_x86_feature_detected!("avx2")

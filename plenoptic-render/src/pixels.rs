@@ -118,6 +118,21 @@ fn filter_down<F>(
 where
     F: Fn(usize, &mut [[f32; 4]]) + Sync,
 {
+    filter_down_using(bw, bh, k, taps, fill_row, crate::cloud::has_avx2())
+}
+
+/// [`filter_down`] with the AVX2 instantiation of its band loops or without it.
+fn filter_down_using<F>(
+    bw: usize,
+    bh: usize,
+    k: usize,
+    taps: &[(i64, f32)],
+    fill_row: F,
+    avx2: bool,
+) -> (Vec<f32>, Vec<f32>)
+where
+    F: Fn(usize, &mut [[f32; 4]]) + Sync,
+{
     let (w, h) = (bw / k, bh / k);
     let (first, last) = taps
         .iter()
@@ -125,66 +140,130 @@ where
     // The weights' sum, added in the same order as the border case adds them, so that an
     // interior pixel of a constant image comes out exactly that constant.
     let full_norm = taps.iter().fold(0.0f32, |n, t| n + t.1);
-    // Output pixel x's taps fall inside a row of `len` sub-pixels.
-    let inside =
-        |x: usize, len: usize| (x * k) as i64 + first >= 0 && (x * k) as i64 + last < len as i64;
     let mut rgb = vec![0.0f32; 3 * w * h];
     let mut alpha = vec![0.0f32; w * h];
+    let band = Band {
+        bw,
+        bh,
+        k,
+        taps,
+        first,
+        last,
+        full_norm,
+    };
     rgb.par_chunks_mut(3 * w * BAND_ROWS)
         .zip(alpha.par_chunks_mut(w * BAND_ROWS))
         .enumerate()
-        .for_each(|(band, (rgb, alpha))| {
-            let y0 = band * BAND_ROWS;
-            let rows_out = alpha.len() / w;
-            let sy0 = ((y0 * k) as i64 + first).max(0) as usize;
-            let sy1 = (((y0 + rows_out - 1) * k) as i64 + last + 1).min(bh as i64) as usize;
-            let mut sub = vec![[0.0f32; 4]; bw];
-            // Row-filtered sub-rows sy0..sy1, w pixels each.
-            let mut rows = vec![[0.0f32; 4]; (sy1 - sy0) * w];
-            for (sy, out) in (sy0..sy1).zip(rows.chunks_mut(w)) {
-                fill_row(sy, &mut sub);
-                for (x, o) in out.iter_mut().enumerate() {
-                    let mut acc = [0.0f32; 4];
-                    let norm = if inside(x, bw) {
-                        let s = &sub[((x * k) as i64 + first) as usize..];
-                        for &(off, wt) in taps {
-                            add_weighted(&mut acc, wt, s[(off - first) as usize]);
-                        }
-                        full_norm
-                    } else {
-                        let mut norm = 0.0f32;
-                        for (sx, wt) in taps_within(taps, x * k, bw) {
-                            norm += wt;
-                            add_weighted(&mut acc, wt, sub[sx]);
-                        }
-                        norm
-                    };
-                    *o = acc.map(|a| a / norm);
-                }
-            }
-            // Then columns, from the row-filtered sub-rows.
-            let mut acc = vec![[0.0f32; 4]; w];
-            for r in 0..rows_out {
-                let y = y0 + r;
-                acc.fill([0.0; 4]);
-                let mut norm = 0.0f32;
-                for (sy, wt) in taps_within(taps, y * k, bh) {
-                    norm += wt;
-                    let src = &rows[(sy - sy0) * w..][..w];
-                    for (a, &v) in acc.iter_mut().zip(src) {
-                        add_weighted(a, wt, v);
-                    }
-                }
-                for (x, a) in acc.iter().enumerate() {
-                    let i = r * w + x;
-                    for c in 0..3 {
-                        rgb[3 * i + c] = a[c] / norm;
-                    }
-                    alpha[i] = a[3] / norm;
-                }
-            }
-        });
+        .for_each(|(i, (rgb, alpha))| band.filter(i, rgb, alpha, &fill_row, avx2));
     (rgb, alpha)
+}
+
+/// What every band of one [`filter_down`] shares.
+struct Band<'a> {
+    bw: usize,
+    bh: usize,
+    k: usize,
+    taps: &'a [(i64, f32)],
+    first: i64,
+    last: i64,
+    full_norm: f32,
+}
+
+impl Band<'_> {
+    /// Filters band `band` into its `rgb` and `alpha` rows: the AVX2 instantiation where the
+    /// CPU has it, else the portable one (the same operations, so the same bits).
+    fn filter<F>(&self, band: usize, rgb: &mut [f32], alpha: &mut [f32], fill_row: &F, avx2: bool)
+    where
+        F: Fn(usize, &mut [[f32; 4]]) + Sync,
+    {
+        #[cfg(target_arch = "x86_64")]
+        if avx2 {
+            // SAFETY: `avx2` is only true when `has_avx2()` is, so the CPU has AVX2.
+            #[allow(unsafe_code)]
+            return unsafe { self.filter_avx2(band, rgb, alpha, fill_row) };
+        }
+        let _ = avx2;
+        self.filter_portable(band, rgb, alpha, fill_row);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn filter_avx2<F>(&self, band: usize, rgb: &mut [f32], alpha: &mut [f32], fill_row: &F)
+    where
+        F: Fn(usize, &mut [[f32; 4]]) + Sync,
+    {
+        self.filter_portable(band, rgb, alpha, fill_row);
+    }
+
+    #[inline(always)]
+    fn filter_portable<F>(&self, band: usize, rgb: &mut [f32], alpha: &mut [f32], fill_row: &F)
+    where
+        F: Fn(usize, &mut [[f32; 4]]) + Sync,
+    {
+        let Self {
+            bw,
+            bh,
+            k,
+            taps,
+            first,
+            last,
+            full_norm,
+        } = *self;
+        let w = bw / k;
+        // Output pixel x's taps fall inside a row of `len` sub-pixels.
+        let inside = |x: usize, len: usize| {
+            (x * k) as i64 + first >= 0 && (x * k) as i64 + last < len as i64
+        };
+        let y0 = band * BAND_ROWS;
+        let rows_out = alpha.len() / w;
+        let sy0 = ((y0 * k) as i64 + first).max(0) as usize;
+        let sy1 = (((y0 + rows_out - 1) * k) as i64 + last + 1).min(bh as i64) as usize;
+        let mut sub = vec![[0.0f32; 4]; bw];
+        // Row-filtered sub-rows sy0..sy1, w pixels each.
+        let mut rows = vec![[0.0f32; 4]; (sy1 - sy0) * w];
+        for (sy, out) in (sy0..sy1).zip(rows.chunks_mut(w)) {
+            fill_row(sy, &mut sub);
+            for (x, o) in out.iter_mut().enumerate() {
+                let mut acc = [0.0f32; 4];
+                let norm = if inside(x, bw) {
+                    let s = &sub[((x * k) as i64 + first) as usize..];
+                    for &(off, wt) in taps {
+                        add_weighted(&mut acc, wt, s[(off - first) as usize]);
+                    }
+                    full_norm
+                } else {
+                    let mut norm = 0.0f32;
+                    for (sx, wt) in taps_within(taps, x * k, bw) {
+                        norm += wt;
+                        add_weighted(&mut acc, wt, sub[sx]);
+                    }
+                    norm
+                };
+                *o = acc.map(|a| a / norm);
+            }
+        }
+        // Then columns, from the row-filtered sub-rows.
+        let mut acc = vec![[0.0f32; 4]; w];
+        for r in 0..rows_out {
+            let y = y0 + r;
+            acc.fill([0.0; 4]);
+            let mut norm = 0.0f32;
+            for (sy, wt) in taps_within(taps, y * k, bh) {
+                norm += wt;
+                let src = &rows[(sy - sy0) * w..][..w];
+                for (a, &v) in acc.iter_mut().zip(src) {
+                    add_weighted(a, wt, v);
+                }
+            }
+            for (x, a) in acc.iter().enumerate() {
+                let i = r * w + x;
+                for c in 0..3 {
+                    rgb[3 * i + c] = a[c] / norm;
+                }
+                alpha[i] = a[3] / norm;
+            }
+        }
+    }
 }
 
 /// The taps of the output pixel whose first sub-pixel is `start` that fall inside a row (or
@@ -296,6 +375,40 @@ mod tests {
         filter_down(bw, bh, k, taps, |sy, row| {
             row.copy_from_slice(&big[sy * bw..(sy + 1) * bw]);
         })
+    }
+
+    #[test]
+    fn avx2_and_portable_filters_agree_bit_for_bit() {
+        // Sizes that are not multiples of the band height, so the last band is short, and both
+        // filters (their border taps renormalised).
+        for (k, filter, bw, bh) in [
+            (3, PixelFilter::Gaussian, 3 * 37, 3 * 21),
+            (2, PixelFilter::Box, 2 * 19, 2 * 40),
+        ] {
+            let taps = filter_taps(filter, k);
+            let big = random_image(bw, bh, 7);
+            let run = |avx2| {
+                filter_down_using(
+                    bw,
+                    bh,
+                    k,
+                    &taps,
+                    |sy, row| row.copy_from_slice(&big[sy * bw..(sy + 1) * bw]),
+                    avx2,
+                )
+            };
+            let bits = |(rgb, alpha): (Vec<f32>, Vec<f32>)| {
+                rgb.iter()
+                    .chain(&alpha)
+                    .map(|v| v.to_bits())
+                    .collect::<Vec<_>>()
+            };
+            assert_eq!(
+                bits(run(false)),
+                bits(run(crate::cloud::has_avx2())),
+                "k = {k}"
+            );
+        }
     }
 
     /// The banded separable filter against a direct 2-D weighted sum in f64 (border pixels
