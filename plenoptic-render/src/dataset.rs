@@ -138,13 +138,26 @@ where
                 c.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8),
             )
         }));
-    writer.finish(&rec, Format::Text)?;
-    writer.finish(&rec, Format::Binary)?;
+    // Three independent files, written at once: at a paper-scale frame's 3M points they are
+    // 100, 160 and 85 MB, and the text's number formatting alone takes seconds on one core.
     let ply = writer.sparse_dir().join("points3D.ply");
-    plenoptic_io::write_cloud(&ply, &points).map_err(|e| Error::Encode {
-        path: ply.clone(),
-        message: e.to_string(),
-    })?;
+    let (text, (binary, cloud)) = rayon::join(
+        || writer.finish(&rec, Format::Text),
+        || {
+            rayon::join(
+                || writer.finish(&rec, Format::Binary),
+                || {
+                    plenoptic_io::write_cloud(&ply, &points).map_err(|e| Error::Encode {
+                        path: ply.clone(),
+                        message: e.to_string(),
+                    })
+                },
+            )
+        },
+    );
+    text?;
+    binary?;
+    cloud?;
     Ok(kept.into_iter().map(|k| k.1).collect())
 }
 
