@@ -11,6 +11,7 @@ use plenoptic_io::view_color::interpolate_lanes;
 use rayon::prelude::*;
 
 use crate::camera::ViewCamera;
+use crate::cpu::has_avx2;
 use crate::pixels::{render_supersampled, resolve};
 use crate::zbuffer::ZBuffer;
 use crate::{Error, PointShape, ViewImage, ViewOptions};
@@ -362,19 +363,6 @@ impl Cubes<'_> {
                 }
             }
         }
-    }
-}
-
-/// Whether the AVX2 instantiations of the drawing loops can run on this CPU (detected at run
-/// time, so the binary runs on any x86-64; always false elsewhere).
-pub(crate) fn has_avx2() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        std::arch::is_x86_feature_detected!("avx2")
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        false
     }
 }
 

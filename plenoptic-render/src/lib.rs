@@ -45,6 +45,7 @@
 mod camera;
 mod closing;
 mod cloud;
+mod cpu;
 pub mod dataset;
 pub mod degenerate;
 mod error;

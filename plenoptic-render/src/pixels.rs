@@ -118,7 +118,7 @@ fn filter_down<F>(
 where
     F: Fn(usize, &mut [[f32; 4]]) + Sync,
 {
-    filter_down_using(bw, bh, k, taps, fill_row, crate::cloud::has_avx2())
+    filter_down_using(bw, bh, k, taps, fill_row, crate::cpu::has_avx2())
 }
 
 /// [`filter_down`] with the AVX2 instantiation of its band loops or without it.
@@ -405,7 +405,7 @@ mod tests {
             };
             assert_eq!(
                 bits(run(false)),
-                bits(run(crate::cloud::has_avx2())),
+                bits(run(crate::cpu::has_avx2())),
                 "k = {k}"
             );
         }
