@@ -134,23 +134,9 @@ where
     F: Fn(usize, &mut [[f32; 4]]) + Sync,
 {
     let (w, h) = (bw / k, bh / k);
-    let (first, last) = taps
-        .iter()
-        .fold((i64::MAX, i64::MIN), |(a, b), t| (a.min(t.0), b.max(t.0)));
-    // The weights' sum, added in the same order as the border case adds them, so that an
-    // interior pixel of a constant image comes out exactly that constant.
-    let full_norm = taps.iter().fold(0.0f32, |n, t| n + t.1);
     let mut rgb = vec![0.0f32; 3 * w * h];
     let mut alpha = vec![0.0f32; w * h];
-    let band = Band {
-        bw,
-        bh,
-        k,
-        taps,
-        first,
-        last,
-        full_norm,
-    };
+    let band = Band::new(bw, bh, k, taps);
     rgb.par_chunks_mut(3 * w * BAND_ROWS)
         .zip(alpha.par_chunks_mut(w * BAND_ROWS))
         .enumerate()
@@ -169,7 +155,25 @@ struct Band<'a> {
     full_norm: f32,
 }
 
-impl Band<'_> {
+impl<'a> Band<'a> {
+    /// The filter of a `bw`×`bh` image of k× sub-pixels with the 1-D `taps`.
+    fn new(bw: usize, bh: usize, k: usize, taps: &'a [(i64, f32)]) -> Self {
+        let (first, last) = taps
+            .iter()
+            .fold((i64::MAX, i64::MIN), |(a, b), t| (a.min(t.0), b.max(t.0)));
+        Self {
+            bw,
+            bh,
+            k,
+            taps,
+            first,
+            last,
+            // The weights' sum, added in the same order as the border case adds them, so that
+            // an interior pixel of a constant image comes out exactly that constant.
+            full_norm: taps.iter().fold(0.0f32, |n, t| n + t.1),
+        }
+    }
+
     /// Filters band `band` into its `rgb` and `alpha` rows: the AVX2 instantiation where the
     /// CPU has it, else the portable one (the same operations, so the same bits).
     fn filter<F>(&self, band: usize, rgb: &mut [f32], alpha: &mut [f32], fill_row: &F, avx2: bool)
@@ -200,15 +204,8 @@ impl Band<'_> {
     where
         F: Fn(usize, &mut [[f32; 4]]) + Sync,
     {
-        let Self {
-            bw,
-            bh,
-            k,
-            taps,
-            first,
-            last,
-            full_norm,
-        } = *self;
+        let (bw, bh, k, taps) = (self.bw, self.bh, self.k, self.taps);
+        let (first, last, full_norm) = (self.first, self.last, self.full_norm);
         let w = bw / k;
         // Output pixel x's taps fall inside a row of `len` sub-pixels.
         let inside = |x: usize, len: usize| {
