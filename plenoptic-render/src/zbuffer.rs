@@ -20,11 +20,9 @@ pub(crate) struct ZBuffer {
 impl ZBuffer {
     /// An empty buffer of `n` pixels.
     pub fn new(n: usize) -> Self {
-        let mut z = Self {
-            cells: Vec::with_capacity(n),
-        };
-        z.cells.resize_with(n, || AtomicU64::new(EMPTY));
-        z
+        Self {
+            cells: (0..n).map(|_| AtomicU64::new(EMPTY)).collect(),
+        }
     }
 
     /// Pixels of the buffer.
