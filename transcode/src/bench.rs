@@ -5,12 +5,15 @@
 //! the reference views of the rig (in memory); surface initialisation capped at a splat count;
 //! the rasteriser's forward and forward + backward passes on one training view (medians of
 //! repeats, at each thread count asked for, so the scaling and the serial fraction come out of
-//! the same run); training steps with the trainer's own split of time per phase; and, with two
-//! or more thread counts, the training step at each count, timed in rounds in turn. Medians
+//! the same run); training steps on the full-resolution views with the trainer's own split of
+//! time per phase; with two or more thread counts, that step at each count, timed in rounds in
+//! turn; and the coarse-to-fine warm-up's step on reduced views, with the mean step of a default
+//! run that mixes the two kinds in their planned shares. Medians
 //! are quoted for repeated figures; everything else is one measurement. The peak resident
 //! memory is read from the operating system where it says (Linux).
 
 use std::path::Path;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use serde::{Deserialize, Serialize};
@@ -113,6 +116,29 @@ pub struct StepPhases {
     pub refine_ms: f64,
     /// Whole step, as the run timed it (the phases plus what lies between them).
     pub step_ms: f64,
+    /// How many of the steps averaged trained on reduced (warm-up) views: 0 for the
+    /// full-resolution figure.
+    #[serde(default)]
+    pub reduced_steps: u64,
+}
+
+/// The coarse-to-fine warm-up's step (training views reduced `factor`-fold in each side), and
+/// what a default run's steps cost on average with it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct WarmupStep {
+    /// Reduction factor of the warm-up views' sides.
+    pub factor: u32,
+    /// Steps averaged.
+    pub steps: u64,
+    /// How many of them trained on reduced views, as the trainer counted them.
+    pub reduced_steps: u64,
+    /// Mean warm-up step, ms, at the machine's thread count.
+    pub step_ms: f64,
+    /// The share of a default run's steps that are warm-up steps.
+    pub run_share: f64,
+    /// A default run's mean step: `run_share` warm-up steps, the rest full-resolution
+    /// ([`StepPhases::step_ms`]), ms.
+    pub run_mean_ms: f64,
 }
 
 /// A training step at one thread count, timed in rounds interleaved with the other counts'.
@@ -156,8 +182,11 @@ pub struct BenchReport {
     /// Amdahl serial fraction of forward + backward from the fewest and most threads timed
     /// (`None` with one thread count).
     pub serial_fraction: Option<f64>,
-    /// A training step's phases at the machine's thread count.
+    /// A training step's phases at the machine's thread count, on full-resolution views.
     pub step: StepPhases,
+    /// The warm-up's step on reduced views, where the default configuration has a warm-up.
+    #[serde(default)]
+    pub warmup_step: Option<WarmupStep>,
     /// The training step at each thread count asked for (with two or more), timed round by
     /// round in turn, so that a machine whose speed drifts moves every count's figure alike.
     #[serde(default)]
@@ -233,12 +262,13 @@ pub fn run_bench(
     let images =
         plenoptic_render::render_views(&model, &rig.train, &view_opts).map_err(|e| stage(&e))?;
     let views_s = t.elapsed().as_secs_f64();
-    let views: Vec<View> = images
+    let views: Arc<Vec<View>> = images
         .into_iter()
         .zip(&rig.train)
         .enumerate()
         .map(|(i, (img, cam))| training_view(format!("view_{i:03}"), *cam, img))
-        .collect();
+        .collect::<Vec<View>>()
+        .into();
 
     progress(&format!("initialising at most {} splats", opts.splats));
     let t = Instant::now();
@@ -308,13 +338,19 @@ pub fn run_bench(
     } else {
         0
     };
-    let tc = splat_train::TrainConfig {
+    // The step is the full-resolution one: a default run trains its first share of steps on
+    // reduced views (the warm-up, timed apart below), and timing those as if they were full
+    // steps made the figure depend on how many steps were asked for.
+    let warmup = tc.warmup;
+    let full_tc = splat_train::TrainConfig {
         iterations: opts.steps + 1 + by_threads,
         time_budget: None,
         densify: None,
-        ..tc
+        warmup: None,
+        ..tc.clone()
     };
-    let mut trainer = Trainer::new(splats, views, tc).map_err(|e| stage(&e))?;
+    let warmup_splats = warmup.map(|_| splats.clone());
+    let mut trainer = Trainer::new(splats, Arc::clone(&views), full_tc).map_err(|e| stage(&e))?;
     trainer.run_until(1, |_| {});
     let before = trainer.report(false).timings;
     let started_s = trainer.report(false).elapsed_s;
@@ -330,6 +366,7 @@ pub fn run_bench(
         adam_ms: per(after.adam, before.adam),
         refine_ms: per(after.refine, before.refine),
         step_ms: 1e3 * (report.elapsed_s - started_s) / steps as f64,
+        reduced_steps: after.coarse_steps - before.coarse_steps,
     };
     let step_threads = if thread_counts.len() > 1 {
         progress(&format!(
@@ -339,6 +376,42 @@ pub fn run_bench(
             .map_err(|e| stage(&e))?
     } else {
         Vec::new()
+    };
+    let trained_splats = trainer.splats().len();
+    drop(trainer);
+    let warmup_step = match (warmup, warmup_splats) {
+        (Some(w), Some(splats)) => {
+            progress(&format!(
+                "timing {} warm-up training steps (views reduced {}-fold)",
+                opts.steps, w.factor
+            ));
+            let warm_tc = splat_train::TrainConfig {
+                iterations: opts.steps + 1,
+                time_budget: None,
+                densify: None,
+                warmup: Some(splat_train::Warmup {
+                    factor: w.factor,
+                    until: opts.steps + 1,
+                }),
+                ..tc
+            };
+            let mut trainer = Trainer::new(splats, views, warm_tc).map_err(|e| stage(&e))?;
+            trainer.run_until(1, |_| {});
+            let before = trainer.report(false);
+            let report = trainer.run_until(opts.steps + 1, |_| {});
+            let steps = (report.timings.steps - before.timings.steps).max(1);
+            let step_ms = 1e3 * (report.elapsed_s - before.elapsed_s) / steps as f64;
+            let run_share = cfg.warmup_share();
+            Some(WarmupStep {
+                factor: w.factor,
+                steps,
+                reduced_steps: report.timings.coarse_steps - before.timings.coarse_steps,
+                step_ms,
+                run_share,
+                run_mean_ms: run_share * step_ms + (1.0 - run_share) * step.step_ms,
+            })
+        }
+        _ => None,
     };
 
     Ok(BenchReport {
@@ -350,12 +423,13 @@ pub fn run_bench(
         point_size: view_opts.point_size,
         views_s,
         init_s,
-        splats: trainer.splats().len(),
+        splats: trained_splats,
         pixel_evaluations,
         tile_pairs,
         raster,
         serial_fraction,
         step,
+        warmup_step,
         step_threads,
         peak_rss_bytes: peak_rss_bytes(),
         machine_threads,

@@ -66,6 +66,24 @@ fn bench_measures_a_generated_frame_and_an_existing_one() {
         r.step
     );
     assert!(r.read_s > 0.0 && r.views_s > 0.0 && r.init_s > 0.0);
+    // The step is the full-resolution one; the default run's warm-up (a quarter of its steps,
+    // with the splat budget on, on views halved in each side) is timed apart.
+    assert_eq!(r.step.reduced_steps, 0, "{:?}", r.step);
+    let w = r
+        .warmup_step
+        .as_ref()
+        .expect("the default configuration has a warm-up");
+    assert_eq!((w.factor, w.steps, w.reduced_steps), (2, 3, 3), "{w:?}");
+    assert!((w.run_share - 0.25).abs() < 1e-12, "{w:?}");
+    let expect = 0.25 * w.step_ms + 0.75 * r.step.step_ms;
+    assert!(
+        w.step_ms > 0.0 && (w.run_mean_ms - expect).abs() <= 1e-9 * expect,
+        "{w:?}"
+    );
+    assert!(
+        text.contains("warm-up step on views reduced 2-fold"),
+        "{text}"
+    );
     // The step at each thread count, rounds in turn: one figure a round, the median quoted.
     let counts: Vec<usize> = r.step_threads.iter().map(|t| t.threads).collect();
     assert_eq!(counts, [1, 2]);

@@ -187,7 +187,7 @@ fn print_report(r: &BenchReport, opts: &BenchOptions) {
     }
     let s = &r.step;
     println!(
-        "training step ({} steps, {} threads): {:.1} ms = forward {:.1} + loss {:.1} + backward {:.1} + Adam {:.1} + refine {:.1} + other {:.1}",
+        "training step on full-resolution views ({} steps, {} threads): {:.1} ms = forward {:.1} + loss {:.1} + backward {:.1} + Adam {:.1} + refine {:.1} + other {:.1}",
         s.steps,
         r.machine_threads,
         s.step_ms,
@@ -211,6 +211,17 @@ fn print_report(r: &BenchReport, opts: &BenchOptions) {
             few.threads,
             most.threads,
             few.step_ms / most.step_ms
+        );
+    }
+    if let Some(w) = &r.warmup_step {
+        println!(
+            "warm-up step on views reduced {}-fold ({} steps, {} threads): {:.1} ms; a default run's mean step ({:.0} % warm-up): {:.1} ms",
+            w.factor,
+            w.steps,
+            r.machine_threads,
+            w.step_ms,
+            100.0 * w.run_share,
+            w.run_mean_ms
         );
     }
     if let Some(b) = r.peak_rss_bytes {
