@@ -396,8 +396,7 @@ impl BudgetSearch {
             self.rounds.push(round);
             return Ok(Some(round));
         }
-        let kept = trainer.snapshot();
-        trainer.restore_snapshot(start).map_err(fail)?;
+        let kept = trainer.swap_snapshot(start).map_err(fail)?;
         let keep = merges.apply(trainer.state_mut(), &contributions);
         trainer
             .prune(&keep)

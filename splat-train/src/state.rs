@@ -21,7 +21,7 @@ pub struct SplatMoments {
 }
 
 /// Splats and their optimiser state.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct ParamState {
     /// The model being trained.
     pub splats: Splats,

@@ -907,6 +907,34 @@ impl Trainer {
         Ok(())
     }
 
+    /// Returns to `snapshot` like [`Trainer::restore_snapshot`] and hands back the state it
+    /// leaves as a snapshot, moved rather than copied: a caller that keeps both branches holds
+    /// two copies of the model and its moments instead of three (at 250k splats of degree 3,
+    /// 177 MB less at the moment of the swap).
+    ///
+    /// # Errors
+    /// As [`Trainer::restore_snapshot`]; the trainer is then unchanged.
+    pub fn swap_snapshot(&mut self, snapshot: Snapshot) -> Result<Snapshot, String> {
+        let strategy = self
+            .strategy
+            .as_ref()
+            .map(|s| s.export_state())
+            .unwrap_or_default();
+        let run = self.run.clone();
+        let state = std::mem::take(&mut self.state);
+        let spent = run.elapsed_s;
+        if let Err(e) = self.restore(snapshot.state, snapshot.run, &snapshot.strategy) {
+            self.state = state;
+            return Err(e);
+        }
+        self.run.elapsed_s = self.run.elapsed_s.max(spent);
+        Ok(Snapshot {
+            state,
+            run,
+            strategy,
+        })
+    }
+
     /// The splats and their moments, to edit in place between steps.
     pub(crate) fn state_mut(&mut self) -> &mut ParamState {
         &mut self.state

@@ -258,6 +258,33 @@ fn steps_of_a_thrown_away_branch_stay_counted_and_a_warmup_can_end_early() {
     assert!(tm.mean_pace().step_s.is_some_and(|s| s > 0.0));
 }
 
+/// Swapping to a snapshot is restoring it and snapshotting what was there: continued from
+/// either branch, the model is the one a trainer that never branched reaches.
+#[test]
+fn a_swapped_snapshot_is_the_state_it_replaced() {
+    let (init, train, mut cfg) = budgeted_run(BUDGET_S);
+    cfg.time_budget = None;
+    cfg.iterations = 14;
+    let mut straight = Trainer::new(init.clone(), train.clone(), cfg.clone()).unwrap();
+    straight.run_until(9, |_| {});
+    let at_9 = straight.splats().clone();
+    straight.run_until(14, |_| {});
+
+    let mut t = Trainer::new(init, train, cfg).unwrap();
+    t.run_until(5, |_| {});
+    let at_5 = t.snapshot();
+    t.run_until(9, |_| {});
+    let left = t.swap_snapshot(at_5).unwrap();
+    assert_eq!(t.iteration(), 5);
+    assert_eq!(left.splats(), &at_9);
+    t.run_until(7, |_| {});
+    let other = t.swap_snapshot(left).unwrap();
+    assert_eq!(other.splats().len(), t.splats().len());
+    assert_eq!((t.iteration(), t.splats()), (9, &at_9));
+    t.run_until(14, |_| {});
+    assert_eq!(t.splats(), straight.splats());
+}
+
 #[test]
 fn frozen_positions_stay_bit_identical() {
     let truth = random_model(60, 3);
