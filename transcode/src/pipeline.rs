@@ -782,6 +782,8 @@ fn init_train_eval(
 ) -> Result<TrainedModel, PipelineError> {
     let mut clock = StageClock::default();
     let init = initialise(run, surfaces, refs, cfg, layout, state, observer)?;
+    // (Already released on a fresh start; a run continued from its checkpoint comes back
+    // before that.)
     if run.last {
         surfaces.release_init();
     }
@@ -848,7 +850,7 @@ fn init_train_eval(
 /// train on the same one even when it came from timed probe steps.
 fn initialise(
     run: &RunOf<'_>,
-    surfaces: &Surfaces,
+    surfaces: &mut Surfaces,
     refs: &References,
     cfg: &Config,
     layout: &Layout,
@@ -936,6 +938,12 @@ fn initialise(
             .unwrap_or_default()
     )));
     let step_zero = colour_solve(mode, &mut splats, surfaces, refs, cfg, observer)?;
+    // The points are not needed past here by the last model: release them before the time
+    // budget's probe builds a trainer of its own (at a paper-scale frame they are 0.6 GB, and
+    // with the probe's trainer on top they set the run's peak memory).
+    if run.last {
+        surfaces.release_init();
+    }
     let schedule = match &saved {
         Some(m) => m.schedule,
         None => {
