@@ -901,19 +901,17 @@ impl Trainer {
     /// A message when the snapshot's strategy statistics do not fit this trainer's strategy
     /// (a snapshot of another trainer).
     pub fn restore_snapshot(&mut self, snapshot: Snapshot) -> Result<(), String> {
-        let spent = self.run.elapsed_s;
-        self.restore(snapshot.state, snapshot.run, &snapshot.strategy)?;
-        self.run.elapsed_s = self.run.elapsed_s.max(spent);
-        Ok(())
+        self.swap_snapshot(snapshot).map(drop)
     }
 
-    /// Returns to `snapshot` like [`Trainer::restore_snapshot`] and hands back the state it
+    /// Returns to `snapshot` as [`Trainer::restore_snapshot`] does and hands back the state it
     /// leaves as a snapshot, moved rather than copied: a caller that keeps both branches holds
     /// two copies of the model and its moments instead of three (at 250k splats of degree 3,
     /// 177 MB less at the moment of the swap).
     ///
     /// # Errors
-    /// As [`Trainer::restore_snapshot`]; the trainer is then unchanged.
+    /// A message when the snapshot's strategy statistics do not fit this trainer's strategy;
+    /// the trainer is then unchanged.
     pub fn swap_snapshot(&mut self, snapshot: Snapshot) -> Result<Snapshot, String> {
         let strategy = self
             .strategy

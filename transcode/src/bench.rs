@@ -408,7 +408,11 @@ pub fn run_bench(
                 reduced_steps: report.timings.coarse_steps - before.timings.coarse_steps,
                 step_ms,
                 run_share,
-                run_mean_ms: run_share * step_ms + (1.0 - run_share) * step.step_ms,
+                // Linear in the step times, so milliseconds in, milliseconds out.
+                run_mean_ms: splat_train::schedule::mean_step_s(
+                    step.step_ms,
+                    Some((run_share, step_ms)),
+                ),
             })
         }
         _ => None,
