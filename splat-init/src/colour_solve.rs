@@ -23,7 +23,7 @@
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 use splat_core::{Rasterizer, RenderOptions, SplatGrads, Splats};
-use splat_train::View;
+use splat_train::{View, from_unorm16};
 
 /// Coverage from which a pixel counts as covered, in the view and in the render, for the solve.
 pub const COVERED: f32 = 0.95;
@@ -95,8 +95,10 @@ pub fn solve_colours(
             })
         })
         .collect::<Result<Vec<_>, _>>()?;
-    // Straight colour of each view and its coverage (1 everywhere for a view without a mask).
-    let targets: Vec<(&[f32], Option<&[f32]>)> = views
+    // Straight colour of each view and its coverage (1 everywhere for a view without a mask),
+    // as the views hold them: 16-bit fractions, read value by value (`from_unorm16`) rather than
+    // expanded, which would double the views' memory while the solve runs.
+    let targets: Vec<(&[u16], Option<&[u16]>)> = views
         .iter()
         .map(|v| (v.image.as_slice(), v.mask.as_deref()))
         .collect();
@@ -125,7 +127,7 @@ pub fn solve_colours(
             .iter()
             .enumerate()
             .map(|(i, &a)| {
-                let reference = mask.map_or(1.0, |m| m[i]);
+                let reference = mask.map_or(1.0, |m| from_unorm16(m[i]));
                 if a >= COVERED && reference >= COVERED {
                     1.0 / a
                 } else {
@@ -139,7 +141,7 @@ pub fn solve_colours(
                 continue;
             }
             for c in 3 * i..3 * i + 3 {
-                let r = y[c] - 0.5 - s * out.rgb[c];
+                let r = from_unorm16(y[c]) - 0.5 - s * out.rgb[c];
                 sq_error += f64::from(r).powi(2);
                 values += 1;
                 d_rgb[c] = s * r;
@@ -267,7 +269,7 @@ mod tests {
                 );
                 let cam = splat_core::RenderCamera::try_from(&camera).unwrap();
                 let out = raster.forward(splats, &cam, &RenderOptions::default());
-                View::from_premultiplied(format!("v{i}"), camera, &out.rgb, out.alpha.clone())
+                View::from_premultiplied(format!("v{i}"), camera, &out.rgb, &out.alpha).unwrap()
             })
             .collect()
     }
@@ -285,8 +287,8 @@ mod tests {
                 &RenderOptions::default(),
             );
             let target = v.on_background([0.0; 3]);
-            let mask = v.mask.as_ref().unwrap();
-            for (i, (&a, &m)) in out.alpha.iter().zip(mask).enumerate() {
+            let mask = v.coverage().unwrap();
+            for (i, (&a, &m)) in out.alpha.iter().zip(&mask).enumerate() {
                 if a >= COVERED && m >= COVERED {
                     let (got, want) = (&out.rgb[3 * i..3 * i + 3], &target[3 * i..3 * i + 3]);
                     for (g, w) in got.iter().zip(want) {

@@ -28,16 +28,8 @@ fn views(model: &Splats, size: u32) -> Vec<View> {
             let a = f64::from(i) * std::f64::consts::FRAC_PI_2;
             let eye = DVec3::new(2.2 * a.sin(), -2.2 * a.cos(), 2.3);
             let camera = Camera::new(k, Pose::look_at(eye, DVec3::ZERO, DVec3::Z));
-            let image = r
-                .forward(model, &RenderCamera::try_from(&camera).unwrap(), &opts)
-                .rgb
-                .clone();
-            View {
-                name: format!("v{i}"),
-                camera,
-                image,
-                mask: None,
-            }
+            let out = r.forward(model, &RenderCamera::try_from(&camera).unwrap(), &opts);
+            View::from_straight(format!("v{i}"), camera, &out.rgb, None).unwrap()
         })
         .collect()
 }

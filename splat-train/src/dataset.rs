@@ -175,16 +175,16 @@ fn read_view(
         .chunks_exact(4)
         .flat_map(|p| [p[0], p[1], p[2]])
         .collect();
-    let alpha = || px.chunks_exact(4).map(|p| p[3]).collect::<Vec<f32>>();
-    Ok(if mask.is_some() || has_alpha {
-        View::from_premultiplied(name.to_string(), camera, &rgb, alpha())
+    let view = if mask.is_some() || has_alpha {
+        let alpha: Vec<f32> = px.chunks_exact(4).map(|p| p[3]).collect();
+        View::from_premultiplied(name.to_string(), camera, &rgb, &alpha)
     } else {
-        View {
-            name: name.to_string(),
-            camera,
-            image: rgb,
-            mask: None,
-        }
+        View::from_straight(name.to_string(), camera, &rgb, None)
+    };
+    // Decoded 8- and 16-bit images are finite; a float image (EXR) may not be.
+    view.map_err(|problem| DatasetError::Unreadable {
+        path: path.to_path_buf(),
+        problem,
     })
 }
 
@@ -308,15 +308,18 @@ mod tests {
         assert_eq!(a.views.len(), 2);
         let v = &a.views[0];
         assert_eq!(v.name, "a.png");
-        let mask = v.mask.as_ref().unwrap();
+        let (mask, colour) = (v.coverage().unwrap(), v.colour());
         let centre = (H / 2 * W + W / 2) as usize;
         let rim = (H / 2 * W + W / 2 + 3) as usize;
-        assert_eq!((mask[0], mask[centre]), (0.0, 1.0));
-        assert!((mask[rim] - 128.0 / 255.0).abs() < 1e-7);
+        // 8-bit values are held exactly; others to half a 16-bit step.
+        assert_eq!(
+            (mask[0], mask[centre], mask[rim]),
+            (0.0, 1.0, 128.0 / 255.0)
+        );
         // Straight colour: 200/255 in the centre; on the rim ⌊200·128/255⌋ / 128 = 100/128.
-        assert!((v.image[3 * centre] - 200.0 / 255.0).abs() < 1e-6);
-        assert!((v.image[3 * rim] - 100.0 / 128.0).abs() < 1e-6);
-        assert_eq!(&v.image[..3], &[0.0; 3]);
+        assert_eq!(colour[3 * centre], 200.0 / 255.0);
+        assert!((colour[3 * rim] - 100.0 / 128.0).abs() <= 0.5 / 65535.0);
+        assert_eq!(&v.image[..3], &[0; 3]);
 
         let opts = EvalOptions {
             alpha_threshold: 0.5,
@@ -351,7 +354,7 @@ mod tests {
         write(&plain, [90, 170, 30], false);
         let p = read_dataset(&plain, 1.0).unwrap();
         assert!(p.views[0].mask.is_none());
-        assert!((p.views[0].image[1] - 170.0 / 255.0).abs() < 1e-7);
+        assert_eq!(p.views[0].colour()[1], 170.0 / 255.0);
     }
 
     /// An RGBA image without a mask is straight colour with its coverage: it reads as the same
@@ -388,7 +391,7 @@ mod tests {
             let b = read_dataset(&rgba, downscale).unwrap().views;
             for (va, vb) in a.iter().zip(&b) {
                 let (ma, mb) = (va.mask.as_ref().unwrap(), vb.mask.as_ref().unwrap());
-                assert!(ma.iter().zip(mb).all(|(x, y)| (x - y).abs() < 1e-6));
+                assert!(ma.iter().zip(mb).all(|(x, y)| x.abs_diff(*y) <= 1));
                 let on = |v: &View| v.on_background([0.0; 3]);
                 let worst = on(va)
                     .iter()
@@ -414,8 +417,8 @@ mod tests {
         let mask = v.mask.as_ref().unwrap();
         assert_eq!(mask.len(), 8 * 6);
         // The corner is far from the square: still uncovered and black; the centre covered.
-        assert_eq!((mask[0], &v.image[..3]), (0.0, &[0.0f32; 3][..]));
-        assert!((mask[3 * 8 + 4] - 1.0).abs() < 1e-6);
+        assert_eq!((mask[0], &v.image[..3]), (0, &[0u16; 3][..]));
+        assert_eq!(mask[3 * 8 + 4], u16::MAX);
         assert!(matches!(
             read_dataset(dir.path(), 0.5),
             Err(DatasetError::Downscale(f)) if f == 0.5

@@ -5,7 +5,7 @@
 //!   densification schedules, time-budgeted run lengths, pause points.
 //! - [`strategy`]: the replaceable densification policy ([`InriaDensify`]).
 //! - [`dataset`]: reading a dataset folder (COLMAP cameras, images, masks) as [`View`]s;
-//!   [`composite`]: colour over a background, the one place it is written.
+//!   [`View::target_into`]: colour over a background, the one place it is written.
 //! - [`ssim`], [`metrics`], [`eval`]: image quality and held-out evaluation; [`init`]: kNN scale
 //!   initialisation and the nearest-neighbour index.
 //! - [`checkpoint`]: save and resume a run exactly; [`budget`]: the automatic splat budget
@@ -24,7 +24,7 @@
 //!     Intrinsics::from_fov_y(16, 16, 40.0),
 //!     Pose::look_at(DVec3::new(0.0, 0.0, 5.0), DVec3::ZERO, DVec3::Y),
 //! );
-//! let view = View { name: "grey".into(), camera, image: vec![0.5; 3 * 16 * 16], mask: None };
+//! let view = View::from_straight("grey".into(), camera, &[0.5; 3 * 16 * 16], None)?;
 //! let splats = Splats::from_points(&[Vec3::ZERO], &[[0.2; 3]], &[Vec3::splat(0.5)], None, 0.5, 0)?;
 //! let config = TrainConfig { iterations: 5, ..TrainConfig::default() };
 //! let mut trainer = Trainer::new(splats, vec![view], config)?;
@@ -68,4 +68,4 @@ pub use strategy::{DensifyStrategy, InriaDensify, RefineContext, RefineReport};
 pub use trainer::{
     HistoryEntry, NonFinite, Progress, Snapshot, StepStats, Timings, TrainReport, Trainer,
 };
-pub use view::{View, composite, composite_in_place, composite_into, over, scale_intrinsics};
+pub use view::{View, composite_into, from_unorm16, over, scale_intrinsics, to_unorm16};

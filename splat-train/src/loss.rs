@@ -139,9 +139,10 @@ impl Loss {
     }
 }
 
-/// Mean absolute error of an alpha map against a target mask; adds `weight · ∂/∂alpha` into
-/// `d_alpha` and returns the unweighted error.
-pub fn alpha_l1(alpha: &[f32], mask: &[f32], weight: f32, d_alpha: &mut [f32]) -> f64 {
+/// Mean absolute error of an alpha map against a target mask (16-bit fractions of one, as a
+/// [`View`](crate::View) holds it); adds `weight · ∂/∂alpha` into `d_alpha` and returns the
+/// unweighted error.
+pub fn alpha_l1(alpha: &[f32], mask: &[u16], weight: f32, d_alpha: &mut [f32]) -> f64 {
     let n = alpha.len();
     let k = weight / n as f32;
     // Partial sums per chunk, added in order so the value does not depend on scheduling.
@@ -151,7 +152,7 @@ pub fn alpha_l1(alpha: &[f32], mask: &[f32], weight: f32, d_alpha: &mut [f32]) -
         .map(|(d, (a, m))| {
             let mut sum = 0.0f64;
             for ((d, &a), &m) in d.iter_mut().zip(a).zip(m) {
-                let e = a - m;
+                let e = a - crate::view::from_unorm16(m);
                 sum += f64::from(e.abs());
                 *d = if e > 0.0 {
                     k
@@ -210,8 +211,9 @@ mod tests {
 
     #[test]
     fn alpha_loss_value_and_sign() {
-        let alpha = [0.2, 0.9, 0.5];
-        let mask = [0.0, 1.0, 0.5];
+        // The mask as a view holds it: 16-bit fractions (32768 is the alpha of the third pixel).
+        let alpha = [0.2, 0.9, crate::view::from_unorm16(32768)];
+        let mask = [0, u16::MAX, 32768];
         let mut d = [9.0; 3];
         let e = alpha_l1(&alpha, &mask, 3.0, &mut d);
         assert!((e - 0.1).abs() < 1e-7);

@@ -21,7 +21,7 @@ use crate::schedule::{
 use crate::state::ParamState;
 use crate::strategy::{DensifyStrategy, InriaDensify, RefineContext, RefineReport};
 use crate::update::{UpdatePlan, update, update_chained};
-use crate::view::{View, composite_in_place, composite_into};
+use crate::view::View;
 
 /// Log-scale range a splat is clamped to, relative to the scene extent: from a millionth of the
 /// extent (far below a pixel at any sensible distance) to ten extents (larger than the scene).
@@ -31,8 +31,6 @@ const MAX_SCALE_OF_EXTENT: f32 = 10.0;
 const MAX_OPACITY_LOGIT: f32 = 20.0;
 /// Opacity given to a splat whose parameters became non-finite and are reset (Inria's initial 0.1).
 const RESET_OPACITY: f32 = 0.1;
-/// Pixels per parallel task when a target is composited over a random background.
-const COMPOSITE_CHUNK: usize = 16 * 1024;
 
 /// Figures of one step.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -244,8 +242,8 @@ impl Trainer {
     /// does not fit its camera, [`Error::Splats`] for inconsistent or non-finite splats.
     ///
     /// `views` may be shared (`Arc<Vec<View>>`): a paper-scale frame's 44 views at 1024² hold
-    /// 0.7 GB, which the trainer then reads in place instead of copying (it copies them only to
-    /// composite them over a fixed background).
+    /// 0.37 GB, which the trainer reads in place and never copies (each step expands its view
+    /// over the step's background into a buffer of its own).
     pub fn new(
         splats: Splats,
         views: impl Into<Arc<Vec<View>>>,
@@ -355,7 +353,6 @@ impl Trainer {
             timings: Timings::default(),
             warm: [false; 2],
         };
-        t.composite_fixed_background();
         if let Some(w) = t.config.warmup {
             let coarse = t.levels[0]
                 .views
@@ -367,29 +364,13 @@ impl Trainer {
         Ok(t)
     }
 
-    /// With a fixed background, views with a mask are composited over it once, so the target
-    /// of every step is the photo as it would look over that background.
-    fn composite_fixed_background(&mut self) {
-        if let Background::Fixed(bg) = self.config.background {
-            let views = &mut self.levels[0].views;
-            if views.iter().any(|v| v.mask.is_some()) {
-                // Copies the views if the caller shares them.
-                for v in Arc::make_mut(views) {
-                    if let Some(mask) = &v.mask {
-                        composite_in_place(&mut v.image, mask, bg);
-                    }
-                }
-            }
-        }
-    }
-
     /// The splats being trained.
     #[must_use]
     pub fn splats(&self) -> &Splats {
         &self.state.splats
     }
 
-    /// The training views (masked views composited over a fixed background).
+    /// The training views, as given.
     #[must_use]
     pub fn views(&self) -> &[View] {
         &self.levels[0].views
@@ -558,21 +539,11 @@ impl Trainer {
             unreachable!("the loss buffers were just created")
         };
 
-        // Target: the photo, or the photo over this step's random background.
+        // Target: the photo over this step's background, expanded to f32 (views hold 16-bit
+        // fractions; the pass is one read of the view and one write of the buffer).
         let view = &level.views[vi];
-        let random_bg = matches!(self.config.background, Background::Random);
-        let target_img = match (&view.mask, random_bg) {
-            (Some(mask), true) => {
-                self.composite.resize(view.image.len(), 0.0);
-                self.composite
-                    .par_chunks_mut(3 * COMPOSITE_CHUNK)
-                    .zip(view.image.par_chunks(3 * COMPOSITE_CHUNK))
-                    .zip(mask.par_chunks(COMPOSITE_CHUNK))
-                    .for_each(|((o, img), m)| composite_into(o, img, m, bg.to_array()));
-                &self.composite[..]
-            }
-            _ => &view.image[..],
-        };
+        view.target_into(&mut self.composite, bg.to_array());
+        let target_img = &self.composite[..];
 
         let t0 = Instant::now();
         let out = self.rasterizer.forward(&self.state.splats, &cam, &opts);
@@ -1034,32 +1005,48 @@ impl Level {
 /// `view` reduced by an integer `factor`: each output pixel is the mean of a factor × factor
 /// block (a remainder at the right and bottom is dropped), and the intrinsics are divided by the
 /// factor, which keeps pixel centres aligned (centre of block = factor · (i + ½)).
+///
+/// With a mask, the block's colour is its coverage-weighted mean, Σ c·a / Σ a, and its coverage
+/// the mean of a: the reduced view over any background is then the mean of the full view over
+/// it (Σ (c·a + bg·(1 − a)) / n), as a dataset's reduction averages colour on black with its
+/// coverage. A plain mean of straight colour would let a block's uncovered pixels (black) darken
+/// its silhouette. The sums are integers of the 16-bit fractions, rounded once at the end.
 fn downsample_view(view: &View, factor: u32) -> View {
     let k = view.camera.intrinsics;
     let f = factor.max(1) as usize;
     let (w, h) = (k.width as usize, k.height as usize);
     let (cw, ch) = ((w / f).max(1), (h / f).max(1));
-    let norm = 1.0 / (f * f) as f32;
-    let block = |data: &[f32], channels: usize| -> Vec<f32> {
-        let mut out = vec![0.0f32; cw * ch * channels];
-        for y in 0..ch {
-            for x in 0..cw {
-                let o = &mut out[(y * cw + x) * channels..(y * cw + x + 1) * channels];
-                for yy in y * f..((y + 1) * f).min(h) {
-                    for xx in x * f..((x + 1) * f).min(w) {
-                        let i = (yy * w + xx) * channels;
-                        for c in 0..channels {
-                            o[c] += data[i + c];
-                        }
+    let div_round = |num: u64, den: u64| ((num + den / 2) / den.max(1)) as u16;
+    let mut image = vec![0u16; cw * ch * 3];
+    let mut mask = view.mask.as_ref().map(|_| vec![0u16; cw * ch]);
+    for y in 0..ch {
+        for x in 0..cw {
+            // Σ c·a per channel, Σ a, pixel count (a = 65535 without a mask).
+            let (mut sums, mut cover, mut n) = ([0u64; 3], 0u64, 0u64);
+            for yy in y * f..((y + 1) * f).min(h) {
+                for xx in x * f..((x + 1) * f).min(w) {
+                    let i = yy * w + xx;
+                    let a = view.mask.as_ref().map_or(u16::MAX, |m| m[i]);
+                    for (c, s) in sums.iter_mut().enumerate() {
+                        *s += u64::from(view.image[3 * i + c]) * u64::from(a);
                     }
-                }
-                for v in o.iter_mut() {
-                    *v *= norm;
+                    cover += u64::from(a);
+                    n += 1;
                 }
             }
+            let o = y * cw + x;
+            for c in 0..3 {
+                image[3 * o + c] = if cover == 0 {
+                    0
+                } else {
+                    div_round(sums[c], cover)
+                };
+            }
+            if let Some(m) = mask.as_mut() {
+                m[o] = div_round(cover, n);
+            }
         }
-        out
-    };
+    }
     let inv = 1.0 / f as f64;
     let intrinsics = camera_model::Intrinsics {
         width: cw as u32,
@@ -1073,8 +1060,8 @@ fn downsample_view(view: &View, factor: u32) -> View {
     View {
         name: view.name.clone(),
         camera: camera_model::Camera::new(intrinsics, view.camera.pose),
-        image: block(&view.image, 3),
-        mask: view.mask.as_ref().map(|m| block(m, 1)),
+        image,
+        mask,
     }
 }
 
@@ -1151,6 +1138,7 @@ pub(crate) fn zero_non_finite_grads(g: &mut SplatGrads) -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::view::to_unorm16;
     use camera_model::{Camera, Intrinsics, Pose};
     use glam::DVec3;
 
@@ -1228,9 +1216,13 @@ mod tests {
                     name: format!("v{i}"),
                     camera,
                     image: (0..3 * n)
-                        .map(|j| ((j * 7 + i) % 11) as f32 / 10.0)
+                        .map(|j| to_unorm16(((j * 7 + i) % 11) as f32 / 10.0))
                         .collect(),
-                    mask: Some((0..n).map(|j| f32::from(u8::from(j % 5 != 0))).collect()),
+                    mask: Some(
+                        (0..n)
+                            .map(|j| if j % 5 != 0 { u16::MAX } else { 0 })
+                            .collect(),
+                    ),
                 }
             })
             .collect();
@@ -1283,16 +1275,16 @@ mod tests {
     }
 
     #[test]
-    fn downsampling_averages_blocks_and_keeps_projection() {
+    fn downsampling_averages_blocks() {
         let k = Intrinsics::centered(5, 4, 10.0, 12.0);
         let pose = Pose::look_at(DVec3::new(0.0, 0.0, -5.0), DVec3::ZERO, DVec3::Y);
-        let image: Vec<f32> = (0..3 * 20).map(|i| i as f32).collect();
-        let mask: Vec<f32> = (0..20).map(|i| i as f32).collect();
+        // Values in 16-bit steps (1000 a pixel index, 10 a channel), so block means are exact.
+        let image: Vec<u16> = (0..3 * 20).map(|i| 1000 * (i / 3) + 10 * (i % 3)).collect();
         let v = View {
             name: "v".into(),
             camera: Camera::new(k, pose),
             image,
-            mask: Some(mask),
+            mask: None,
         };
         let d = downsample_view(&v, 2);
         assert_eq!(
@@ -1300,8 +1292,108 @@ mod tests {
             (2, 2)
         );
         // Block (0,0) holds pixels 0, 1, 5, 6; block (1,1) pixels 12, 13, 17, 18.
-        assert_eq!(d.mask.as_ref().unwrap(), &vec![3.0, 5.0, 13.0, 15.0]);
-        assert_eq!(d.image[0], (0.0 + 3.0 + 15.0 + 18.0) / 4.0);
+        assert_eq!(&d.image[..3], &[3000, 3010, 3020]);
+        assert_eq!(&d.image[9..], &[15000, 15010, 15020]);
+        assert!(d.mask.is_none());
+        // Block means round to the nearest step: (1 + 2 + 2 + 2) / 4 = 1.75 → 2.
+        let odd = View {
+            image: vec![1, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2],
+            mask: None,
+            camera: Camera::new(Intrinsics::centered(2, 2, 10.0, 12.0), pose),
+            ..v.clone()
+        };
+        assert_eq!(downsample_view(&odd, 2).image, vec![2, 2, 2]);
+    }
+
+    /// A reduced masked view over any background is the mean of the full view over it (against
+    /// an f64 reference, to a step of rounding), a block with no coverage is black and
+    /// uncovered, and its colour is coverage-weighted (a half-covered block keeps its colour).
+    #[test]
+    fn downsampling_a_masked_view_commutes_with_compositing() {
+        let (w, h) = (12u32, 8u32);
+        let pose = Pose::look_at(DVec3::new(0.0, 0.0, -5.0), DVec3::ZERO, DVec3::Y);
+        let n = (w * h) as usize;
+        let mut state = 0x2545_f491_4f6c_dd1d_u64;
+        let mut r = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 48) as u16
+        };
+        let image: Vec<u16> = (0..3 * n).map(|_| r()).collect();
+        // Coverage: random, but the top-left 3×3 block uncovered and the next one half covered
+        // by full-coverage pixels.
+        let mut mask: Vec<u16> = (0..n).map(|_| r()).collect();
+        for y in 0..3 {
+            for x in 0..6 {
+                mask[y * w as usize + x] = if x < 3 || (x + y) % 2 == 0 {
+                    0
+                } else {
+                    u16::MAX
+                };
+            }
+        }
+        let v = View {
+            name: "v".into(),
+            camera: Camera::new(Intrinsics::centered(w, h, 10.0, 10.0), pose),
+            image,
+            mask: Some(mask),
+        };
+        let d = downsample_view(&v, 3);
+        let (cw, ch) = (4usize, 2usize);
+        assert_eq!(d.image.len(), 3 * cw * ch);
+        for bg in [[0.0, 0.0, 0.0], [1.0, 1.0, 1.0], [0.2, 0.7, 0.4]] {
+            let fine = v.on_background(bg);
+            let coarse = d.on_background(bg);
+            for by in 0..ch {
+                for bx in 0..cw {
+                    for c in 0..3 {
+                        let mut mean = 0.0f64;
+                        for y in 3 * by..3 * by + 3 {
+                            for x in 3 * bx..3 * bx + 3 {
+                                mean += f64::from(fine[3 * (y * w as usize + x) + c]) / 9.0;
+                            }
+                        }
+                        let got = f64::from(coarse[3 * (by * cw + bx) + c]);
+                        assert!(
+                            (got - mean).abs() < 2.0 / 65535.0,
+                            "{bg:?} {bx},{by}: {got} {mean}"
+                        );
+                    }
+                }
+            }
+        }
+        let mask = d.mask.as_ref().unwrap();
+        assert_eq!((mask[0], &d.image[..3]), (0, &[0u16; 3][..]));
+        // The half-covered block: its covered pixels' colour mean, not darkened by the others.
+        let covered: Vec<usize> = (0..3)
+            .flat_map(|y| (3..6).map(move |x| (x, y)))
+            .filter(|&(x, y)| (x + y) % 2 == 1)
+            .map(|(x, y)| y * w as usize + x)
+            .collect();
+        let mean = covered
+            .iter()
+            .map(|&i| u64::from(v.image[3 * i]))
+            .sum::<u64>() as f64
+            / covered.len() as f64;
+        assert!(
+            (f64::from(d.image[3]) - mean).abs() <= 0.5,
+            "{} {mean}",
+            d.image[3]
+        );
+    }
+
+    #[test]
+    fn downsampling_keeps_projection() {
+        let k = Intrinsics::centered(5, 4, 10.0, 12.0);
+        let pose = Pose::look_at(DVec3::new(0.0, 0.0, -5.0), DVec3::ZERO, DVec3::Y);
+        let v = View {
+            name: "v".into(),
+            camera: Camera::new(k, pose),
+            image: vec![0; 60],
+            mask: None,
+        };
+        let d = downsample_view(&v, 2);
         let p = DVec3::new(0.3, -0.2, 0.4);
         let fine = v.camera.project(p).unwrap();
         let coarse = d.camera.project(p).unwrap();

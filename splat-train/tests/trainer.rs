@@ -72,14 +72,9 @@ fn render_views(model: &Splats, cams: &[Camera], prefix: &str) -> Vec<View> {
     };
     cams.iter()
         .enumerate()
-        .map(|(i, c)| View {
-            name: format!("{prefix}{i}"),
-            camera: *c,
-            image: r
-                .forward(model, &RenderCamera::try_from(c).unwrap(), &opts)
-                .rgb
-                .clone(),
-            mask: None,
+        .map(|(i, c)| {
+            let out = r.forward(model, &RenderCamera::try_from(c).unwrap(), &opts);
+            View::from_straight(format!("{prefix}{i}"), *c, &out.rgb, None).unwrap()
         })
         .collect()
 }
@@ -356,29 +351,29 @@ fn densify_config(iterations: u32) -> TrainConfig {
 fn masked_views() -> (Splats, Vec<View>) {
     let truth = random_model(40, 7);
     let cams = cameras(8, 40, 30, 0.0);
-    let mut views = render_views(&truth, &cams, "v");
     let mut r = Rasterizer::new();
     let opts = RenderOptions {
         background: Vec3::ZERO,
-        active_sh_degree: 1,
+        active_sh_degree: truth.sh_degree,
         antialiased: false,
         linear_colour: false,
     };
-    for (v, c) in views.iter_mut().zip(&cams) {
-        let out = r.forward(&truth, &RenderCamera::try_from(c).unwrap(), &opts);
-        // Straight colour where covered, so that compositing over a random background is exact.
-        v.image = v
-            .image
-            .chunks_exact(3)
-            .zip(&out.alpha)
-            .flat_map(|(px, &a)| {
-                px.iter()
-                    .map(move |c| if a > 1e-3 { c / a } else { 0.0 })
-                    .collect::<Vec<_>>()
-            })
-            .collect();
-        v.mask = Some(out.alpha.clone());
-    }
+    let views = cams
+        .iter()
+        .enumerate()
+        .map(|(i, c)| {
+            let out = r.forward(&truth, &RenderCamera::try_from(c).unwrap(), &opts);
+            // Straight colour where covered, so that compositing over a random background is
+            // exact.
+            let straight: Vec<f32> = out
+                .rgb
+                .chunks_exact(3)
+                .zip(&out.alpha)
+                .flat_map(|(px, &a)| px.iter().map(move |&c| if a > 1e-3 { c / a } else { 0.0 }))
+                .collect();
+            View::from_straight(format!("v{i}"), *c, &straight, Some(&out.alpha)).unwrap()
+        })
+        .collect();
     (initial_model(&truth, 0.05, 8), views)
 }
 
@@ -548,8 +543,17 @@ fn non_finite_inputs_are_refused() {
     assert!(
         matches!(Trainer::new(bad, views.clone(), base_config(5)), Err(splat_train::Error::Splats(m)) if m.contains("splat 2"))
     );
+    // A view cannot hold a non-finite value: its constructors refuse one, naming its place.
+    let v = &views[1];
+    let mut rgb = v.colour();
+    rgb[7] = f32::INFINITY;
+    assert_eq!(
+        View::from_straight(v.name.clone(), v.camera, &rgb, None).unwrap_err(),
+        "image value 7 is not finite"
+    );
+    // An image that does not fit its camera is refused by the trainer, with the view's index.
     let mut bad_views = views;
-    bad_views[1].image[7] = f32::INFINITY;
+    bad_views[1].image.pop();
     assert!(matches!(
         Trainer::new(truth, bad_views, base_config(5)),
         Err(splat_train::Error::View { index: 1, .. })

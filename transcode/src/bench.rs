@@ -266,8 +266,9 @@ pub fn run_bench(
         .into_iter()
         .zip(&rig.train)
         .enumerate()
-        .map(|(i, (img, cam))| training_view(format!("view_{i:03}"), *cam, img))
-        .collect::<Vec<View>>()
+        .map(|(i, (img, cam))| training_view(i, format!("view_{i:03}"), *cam, img))
+        .collect::<Result<Vec<View>, _>>()
+        .map_err(|e| stage(&e))?
         .into();
 
     progress(&format!("initialising at most {} splats", opts.splats));

@@ -21,7 +21,7 @@ use plenoptic_io::Model;
 use splat_core::Splats;
 use splat_train::eval::{EvalOptions, Metrics, RenderedView, evaluate_views};
 use splat_train::schedule::Pace;
-use splat_train::{BudgetConfig, BudgetSearch, TrainConfig, Trainer, View};
+use splat_train::{BudgetConfig, BudgetSearch, TrainConfig, Trainer, View, from_unorm16};
 
 use crate::config::{Config, InitMode};
 use crate::progress::{Event, Observer};
@@ -130,12 +130,26 @@ fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> PipelineError + '_ {
     }
 }
 
-/// A reference view as the trainer wants it: straight (un-premultiplied) colour and its mask
-/// ([`View::from_premultiplied`]). It takes the rendered image, so that a frame's views are
+/// Reference view `index` as the trainer wants it: straight (un-premultiplied) colour and its
+/// mask ([`View::from_premultiplied`]). It takes the rendered image, so that a frame's views are
 /// converted one at a time instead of held twice.
-#[must_use]
-pub fn training_view(name: String, camera: Camera, image: ViewImage) -> View {
-    View::from_premultiplied(name, camera, &image.rgb, image.alpha)
+///
+/// # Errors
+/// [`PipelineError::Train`] naming the view and the first value that is not finite (the
+/// renderer makes none; the trainer would refuse one).
+pub fn training_view(
+    index: usize,
+    name: String,
+    camera: Camera,
+    image: ViewImage,
+) -> Result<View, PipelineError> {
+    View::from_premultiplied(name.clone(), camera, &image.rgb, &image.alpha)
+        .map_err(|problem| splat_train::Error::View {
+            index,
+            name,
+            problem,
+        })
+        .map_err(PipelineError::from)
 }
 
 /// Fewest steps of each size timed (after one untimed step) to estimate a time-budgeted run's
@@ -616,7 +630,7 @@ fn reference_views(
     // Each view becomes the trainer's view as soon as it is rendered (its depth dropped), so a
     // frame's full images are never all held at once.
     let to_training = |i: usize, image: ViewImage| {
-        training_view(views::dataset_image_name(i), rig.train[i], image)
+        training_view(i, views::dataset_image_name(i), rig.train[i], image)
     };
     let train = if state.dataset_written || !cfg.output.dataset {
         // The dataset's PNGs are quantised: training needs the renders themselves, which are
@@ -626,7 +640,9 @@ fn reference_views(
                 "the dataset is already written: rendering the training views in memory".into(),
             ));
         }
-        let train = views::render_views_with(model, &rig.train, &opts, to_training)?;
+        let train = views::render_views_with(model, &rig.train, &opts, to_training)?
+            .into_iter()
+            .collect::<Result<Vec<_>, _>>()?;
         clock.lap("render training views");
         train
     } else {
@@ -650,7 +666,9 @@ fn reference_views(
                 });
             },
             to_training,
-        )?;
+        )?
+        .into_iter()
+        .collect::<Result<Vec<_>, _>>()?;
         observer(Event::End);
         state.dataset_written = true;
         state.save(&layout.out)?;
@@ -658,16 +676,15 @@ fn reference_views(
         train
     };
     let heldout: Vec<View> = views::render_views_with(model, &rig.heldout, &opts, |i, image| {
-        training_view(heldout_name(i), rig.heldout[i], image)
-    })?;
-    plenoptic_render::degenerate::check_views(
-        input,
-        "held-out",
-        heldout
-            .iter()
-            .map(|v| v.mask.as_deref().unwrap_or_default()),
-        heldout_name,
-    )?;
+        training_view(i, heldout_name(i), rig.heldout[i], image)
+    })?
+    .into_iter()
+    .collect::<Result<_, _>>()?;
+    let covered: Vec<bool> = heldout
+        .iter()
+        .map(|v| v.mask.as_ref().is_none_or(|m| m.iter().any(|&a| a > 0)))
+        .collect();
+    plenoptic_render::degenerate::check_coverage(input, "held-out", &covered, heldout_name)?;
     clock.lap("render held-out views");
     if cfg.output.dataset {
         observer(Event::Note(format!(
@@ -1026,7 +1043,7 @@ fn mean_covered_pixels(views: &[View]) -> f64 {
     let covered: usize = views
         .iter()
         .map(|v| match &v.mask {
-            Some(m) => m.iter().filter(|&&a| a > 0.5).count(),
+            Some(m) => m.iter().filter(|&&a| from_unorm16(a) > 0.5).count(),
             None => v.image.len() / 3,
         })
         .sum();

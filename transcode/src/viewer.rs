@@ -169,7 +169,7 @@ mod tests {
         let view = View {
             name: "heldout_000".into(),
             camera,
-            image: vec![0.5; 8 * 6 * 3],
+            image: vec![32768; 8 * 6 * 3],
             mask: None,
         };
         let render = RenderedView {

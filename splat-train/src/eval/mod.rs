@@ -15,8 +15,6 @@
 //! - [`psnr_black_and_white`] gives [`evaluate_views`]' two mean PSNRs alone from one render a
 //!   view, for the splat budget's rounds, which score both branches several times a round.
 
-use std::borrow::Cow;
-
 use glam::Vec3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -159,11 +157,7 @@ pub fn psnr_black_and_white(
     let mut raster = Rasterizer::new();
     let (mut black, mut white, mut scored) = (0.0, 0.0, 0_usize);
     for v in views {
-        let covered = match &v.mask {
-            Some(m) => m.iter().any(|&a| a > 0.0),
-            None => v.camera.intrinsics.width * v.camera.intrinsics.height > 0,
-        };
-        if !covered {
+        if covered_pixels(v) == 0 {
             continue;
         }
         let cam = camera_of(v)?;
@@ -191,6 +185,17 @@ fn camera_of(view: &View) -> Result<RenderCamera, EvalError> {
         name: view.name.clone(),
         problem,
     })
+}
+
+/// Pixels of `view` its reference covers (every pixel of a view without a mask).
+fn covered_pixels(view: &View) -> usize {
+    match &view.mask {
+        Some(m) => m.iter().filter(|&&a| a > 0).count(),
+        None => {
+            let k = &view.camera.intrinsics;
+            k.width as usize * k.height as usize
+        }
+    }
 }
 
 /// One view scored on one background, with the clamped render and its coverage.
@@ -363,27 +368,19 @@ pub fn evaluate_views(
     surface: Option<(&[Vec3], f32)>,
     opts: &EvalOptions,
 ) -> Result<(Metrics, Vec<RenderedView>), EvalError> {
-    let coverage: Vec<Cow<'_, [f32]>> = views
-        .iter()
-        .map(|v| match &v.mask {
-            Some(m) => Cow::Borrowed(m.as_slice()),
-            None => {
-                let k = &v.camera.intrinsics;
-                Cow::Owned(vec![1.0; k.width as usize * k.height as usize])
-            }
-        })
-        .collect();
-    let covered: Vec<usize> = coverage
-        .iter()
-        .map(|a| a.iter().filter(|&&a| a > 0.0).count())
-        .collect();
+    let covered: Vec<usize> = views.iter().map(covered_pixels).collect();
     if covered.iter().all(|&c| c == 0) {
         return Err(EvalError::NothingCovered { views: views.len() });
     }
     let mut raster = Rasterizer::new();
     let mut per_view = Vec::with_capacity(views.len());
     let mut renders = Vec::with_capacity(views.len());
-    for ((v, reference), &covered_pixels) in views.iter().zip(&coverage).zip(&covered) {
+    for (v, &covered_pixels) in views.iter().zip(&covered) {
+        // The reference coverage as f32, one view at a time (1 everywhere without a mask).
+        let reference = &v.coverage().unwrap_or_else(|| {
+            let k = &v.camera.intrinsics;
+            vec![1.0; k.width as usize * k.height as usize]
+        });
         let black = score(
             &mut raster,
             splats,
@@ -617,8 +614,9 @@ mod tests {
             name.into(),
             Camera::new(Intrinsics::centered(w, 1, 1.0, 1.0), Pose::IDENTITY),
             &rgb,
-            alpha,
+            &alpha,
         )
+        .unwrap()
     }
 
     #[test]
@@ -647,19 +645,26 @@ mod tests {
             (m.views[0].covered_pixels, m.views[1].covered_pixels),
             (0, 8)
         );
-        // The empty model renders black: MSE on black = 8·3·0.25 / 48 = 1/8.
-        let expected = -10.0 * (1.0f64 / 8.0).log10();
+        // The grey g is 0.5 in 16 bits (32768 / 65535): g² ≈ (1 − g)² ≈ ¼.
+        let g = f64::from(crate::view::from_unorm16(32768));
+        let (g2, w2) = (g * g, (1.0 - g) * (1.0 - g));
+        // The empty model renders black: MSE on black = 8·3·g² / 48 = g²/2.
+        let expected = -10.0 * (g2 / 2.0).log10();
         assert!((m.psnr_black - expected).abs() < 1e-9, "{}", m.psnr_black);
         assert_eq!(m.psnr_black, m.views[1].psnr_black);
         assert!(m.views[0].psnr_black.is_infinite());
         assert_eq!(m.ssim_black, m.views[1].ssim_black);
-        // On white the uncovered pixels are white in both: MSE = 8·3·0.25 / 48 again.
-        assert!((m.psnr_white - expected).abs() < 1e-9, "{}", m.psnr_white);
-        // Masked, only the 8 covered pixels count: MSE 0.25 on both backgrounds, and on white
-        // all of it is the missing coverage (0.5 grey on white against white).
-        let masked = -10.0 * 0.25f64.log10();
-        assert!((m.masked_psnr_black - masked).abs() < 1e-9);
-        assert!((m.masked_psnr_white - masked).abs() < 1e-9);
+        // On white the uncovered pixels are white in both: MSE = 8·3·(1 − g)² / 48.
+        let expected_white = -10.0 * (w2 / 2.0).log10();
+        assert!(
+            (m.psnr_white - expected_white).abs() < 1e-9,
+            "{}",
+            m.psnr_white
+        );
+        // Masked, only the 8 covered pixels count: MSE g² on black and (1 − g)² on white, where
+        // all of it is the missing coverage (g grey on white against white).
+        assert!((m.masked_psnr_black - -10.0 * g2.log10()).abs() < 1e-9);
+        assert!((m.masked_psnr_white - -10.0 * w2.log10()).abs() < 1e-9);
         let b = &m.views[1].breakdown;
         assert_eq!(
             b.interior.pixels + b.silhouette.pixels + b.background.pixels,
@@ -708,7 +713,7 @@ mod tests {
                     .iter()
                     .flat_map(|&a| [0.6 * a, 0.3 * a, 0.2 * a])
                     .collect();
-                View::from_premultiplied(format!("v{k}"), camera, &rgb, alpha)
+                View::from_premultiplied(format!("v{k}"), camera, &rgb, &alpha).unwrap()
             })
             .collect();
         let opts = EvalOptions {
@@ -730,7 +735,7 @@ mod tests {
             m.psnr_white
         );
         let empty = [View {
-            mask: Some(vec![0.0; (w * h) as usize]),
+            mask: Some(vec![0; (w * h) as usize]),
             ..views[0].clone()
         }];
         assert!(matches!(
@@ -747,7 +752,8 @@ mod tests {
         let view = View {
             name: "grey".into(),
             camera: Camera::new(Intrinsics::centered(16, 1, 1.0, 1.0), Pose::IDENTITY),
-            image: vec![0.25; 48],
+            // A quarter grey (16384 of 65535, a hair over ¼).
+            image: vec![16384; 48],
             mask: None,
         };
         let opts = EvalOptions {
@@ -757,9 +763,10 @@ mod tests {
         };
         let (m, _) = evaluate_views(&splats, std::slice::from_ref(&view), None, &opts).unwrap();
         assert_eq!(m.views[0].covered_pixels, 16);
-        // Black render against 0.25 grey: MSE 1/16; white render: MSE 9/16.
-        assert!((m.psnr_black - -10.0 * (1.0f64 / 16.0).log10()).abs() < 1e-9);
-        assert!((m.psnr_white - -10.0 * (9.0f64 / 16.0).log10()).abs() < 1e-9);
+        // Black render against grey g: MSE g²; white render: MSE (1 − g)².
+        let g = f64::from(crate::view::from_unorm16(16384));
+        assert!((m.psnr_black - -10.0 * (g * g).log10()).abs() < 1e-6);
+        assert!((m.psnr_white - -10.0 * ((1.0 - g) * (1.0 - g)).log10()).abs() < 1e-6);
         let black = evaluate(&splats, std::slice::from_ref(&view), Vec3::ZERO).unwrap();
         let white = evaluate(&splats, std::slice::from_ref(&view), Vec3::ONE).unwrap();
         assert_eq!((black.psnr, black.ssim), (m.psnr_black, m.ssim_black));
