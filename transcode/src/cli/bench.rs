@@ -187,7 +187,7 @@ fn print_report(r: &BenchReport, opts: &BenchOptions) {
     }
     let s = &r.step;
     println!(
-        "training step on full-resolution views ({} steps, {} threads): {:.1} ms = forward {:.1} + loss {:.1} + backward {:.1} + Adam {:.1} + refine {:.1} + other {:.1}",
+        "training step on full-resolution views ({} steps, {} threads): {:.1} ms = forward {:.1} + loss {:.1} + backward {:.1} + update {:.1} (the backward's chain to the parameters, Adam, clamps) + refine {:.1} + other {:.1}",
         s.steps,
         r.machine_threads,
         s.step_ms,
