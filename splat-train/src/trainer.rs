@@ -223,7 +223,8 @@ pub struct Trainer {
     chained_update: bool,
     rasterizer: Rasterizer,
     loss: Option<Loss>,
-    composite: Vec<f32>,
+    /// This step's target: its view over its background, in f32 ([`View::target_into`]).
+    target: Vec<f32>,
     d_alpha: Vec<f32>,
     extent: f32,
     max_sh_degree: u32,
@@ -346,7 +347,7 @@ impl Trainer {
             run,
             rasterizer: Rasterizer::new(),
             loss: None,
-            composite: Vec::new(),
+            target: Vec::new(),
             d_alpha: Vec::new(),
             extent,
             max_sh_degree,
@@ -542,8 +543,8 @@ impl Trainer {
         // Target: the photo over this step's background, expanded to f32 (views hold 16-bit
         // fractions; the pass is one read of the view and one write of the buffer).
         let view = &level.views[vi];
-        view.target_into(&mut self.composite, bg.to_array());
-        let target_img = &self.composite[..];
+        view.target_into(&mut self.target, bg.to_array());
+        let target_img = &self.target[..];
 
         let t0 = Instant::now();
         let out = self.rasterizer.forward(&self.state.splats, &cam, &opts);
