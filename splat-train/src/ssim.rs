@@ -124,10 +124,15 @@ pub struct Ssim {
     height: usize,
     taps: [f32; TAPS],
     spans: Spans,
-    /// Horizontal window sums of x, y, x², y² and xy (then of the three partials), 3·W·H each.
+    /// Horizontal window sums of x, y, x², y² and xy, 3·W·H each.
     sums: [Vec<f32>; 5],
-    /// ∂SSIM/∂μx (with the chain through σx² and σxy folded in), ∂SSIM/∂E[x²], ∂SSIM/∂E[xy].
-    partials: [Vec<f32>; 3],
+    /// Horizontal window sums of the map's partials ∂SSIM/∂μx (with the chain through σx² and
+    /// σxy folded in), ∂SSIM/∂E[x²] and ∂SSIM/∂E[xy], 3·W·H each. The partials themselves live
+    /// one row at a time in a thread's scratch: a row's horizontal sums need only that row, so
+    /// they are taken as soon as the row's map is done instead of written out whole and read
+    /// back (at 1024², 72 MB of memory traffic an evaluation; on many threads the passes are
+    /// bound by memory bandwidth).
+    partial_sums: [Vec<f32>; 3],
     row_sums: Vec<f64>,
 }
 
@@ -142,7 +147,7 @@ impl Ssim {
             taps: gaussian_taps(),
             spans: Spans::default(),
             sums: std::array::from_fn(|_| vec![0.0; n]),
-            partials: std::array::from_fn(|_| vec![0.0; n]),
+            partial_sums: std::array::from_fn(|_| vec![0.0; n]),
             row_sums: Vec::with_capacity(height as usize),
         }
     }
@@ -226,19 +231,22 @@ impl Ssim {
 
         // Vertical window sums and the map over each row's `map` span, with its partials. Per
         // SSIM = A1·A2 / (B1·B2) with A1 = 2μxμy + C1, A2 = 2σxy + C2, B1 = μx² + μy² + C1,
-        // B2 = σx² + σy² + C2, σx² = E[x²] − μx², σxy = E[xy] − μxμy.
+        // B2 = σx² + σy² + C2, σx² = E[x²] − μx², σxy = E[xy] − μxμy. With a gradient wanted,
+        // each row's partials are blurred horizontally at once: the adjoint of a zero-padded
+        // "same" convolution with a symmetric kernel is the same convolution, so each partial
+        // is blurred back onto the pixels of x.
         let want_grad = grad.is_some();
         let sums = &self.sums;
-        let [p_mu, p_xx, p_xy] = &mut self.partials;
+        let [h_mu, h_xx, h_xy] = &mut self.partial_sums;
         // Per-row partial sums, added in row order afterwards: rayon's reduction tree depends on
         // scheduling, and a fixed order keeps the value bit-identical from run to run.
-        p_mu.par_chunks_mut(row)
-            .zip(p_xx.par_chunks_mut(row))
-            .zip(p_xy.par_chunks_mut(row))
+        h_mu.par_chunks_mut(row)
+            .zip(h_xx.par_chunks_mut(row))
+            .zip(h_xy.par_chunks_mut(row))
             .enumerate()
             .map_init(
-                || vec![0.0_f32; 5 * row],
-                |scratch, (r, ((d_mu, d_xx), d_xy))| {
+                || vec![0.0_f32; 8 * row],
+                |scratch, (r, ((o_mu, o_xx), o_xy))| {
                     let span = sp.map[r];
                     // Every pixel outside the span has SSIM exactly 1.
                     let s = (3 * (w - span.len())) as f64;
@@ -246,8 +254,9 @@ impl Ssim {
                         return s;
                     }
                     let cols = 3 * span.lo..3 * span.hi;
+                    let (means, partials) = scratch.split_at_mut(5 * row);
                     let mut v: [&mut [f32]; 5] = {
-                        let (a, rest) = scratch.split_at_mut(row);
+                        let (a, rest) = means.split_at_mut(row);
                         let (b, rest) = rest.split_at_mut(row);
                         let (c, rest) = rest.split_at_mut(row);
                         let (d, e) = rest.split_at_mut(row);
@@ -263,14 +272,24 @@ impl Ssim {
                         vertical(rows, r, span, &mut out[cols.clone()], taps, avx2);
                     }
                     let means = v.each_ref().map(|b| &b[cols.clone()]);
-                    let grads = want_grad.then(|| {
-                        [
-                            &mut d_mu[cols.clone()],
-                            &mut d_xx[cols.clone()],
-                            &mut d_xy[cols.clone()],
-                        ]
-                    });
-                    s + map_row(means, grads, avx2)
+                    if !want_grad {
+                        return s + map_row(means, None, avx2);
+                    }
+                    let (d_mu, rest) = partials.split_at_mut(row);
+                    let (d_xx, d_xy) = rest.split_at_mut(row);
+                    let grads = [
+                        &mut d_mu[cols.clone()],
+                        &mut d_xx[cols.clone()],
+                        &mut d_xy[cols.clone()],
+                    ];
+                    let value = s + map_row(means, Some(grads), avx2);
+                    // The partials are valid over the map's span only; the blur reads nothing
+                    // outside it.
+                    let out = sp.partial_sums[r];
+                    horizontal(d_mu, span, o_mu, out, taps, avx2);
+                    horizontal(d_xx, span, o_xx, out, taps, avx2);
+                    horizontal(d_xy, span, o_xy, out, taps, avx2);
+                    value
                 },
             )
             .collect_into_vec(&mut self.row_sums);
@@ -282,25 +301,7 @@ impl Ssim {
                 n,
                 "gradient buffer size does not match SSIM buffers"
             );
-            // The adjoint of a zero-padded "same" convolution with a symmetric kernel is the
-            // same convolution, so each partial is blurred back onto the pixels of x.
-            let [h_mu, h_xx, h_xy, _, _] = &mut self.sums;
-            let partials = &self.partials;
-            h_mu.par_chunks_mut(row)
-                .zip(h_xx.par_chunks_mut(row))
-                .zip(h_xy.par_chunks_mut(row))
-                .enumerate()
-                .for_each(|(r, ((o_mu, o_xx), o_xy))| {
-                    let (valid, out) = (sp.map[r], sp.partial_sums[r]);
-                    if out.is_empty() {
-                        return;
-                    }
-                    let rows = r * row..(r + 1) * row;
-                    horizontal(&partials[0][rows.clone()], valid, o_mu, out, taps, avx2);
-                    horizontal(&partials[1][rows.clone()], valid, o_xx, out, taps, avx2);
-                    horizontal(&partials[2][rows], valid, o_xy, out, taps, avx2);
-                });
-            let sums = &self.sums;
+            let partial_sums = &self.partial_sums;
             let k = scale / n as f32;
             out.par_chunks_mut(row)
                 .zip(x.par_chunks(row).zip(y.par_chunks(row)))
@@ -319,7 +320,7 @@ impl Ssim {
                         for (q, buf) in v.iter_mut().enumerate() {
                             let dst = &mut buf[cols.clone()];
                             let rows = RowSums {
-                                src: &sums[q],
+                                src: &partial_sums[q],
                                 h,
                                 row,
                                 filled: &sp.partial_sums,
