@@ -66,6 +66,7 @@ pub use eval::{
 };
 pub use strategy::{DensifyStrategy, InriaDensify, RefineContext, RefineReport};
 pub use trainer::{
-    HistoryEntry, NonFinite, Progress, Snapshot, StepStats, Timings, TrainReport, Trainer,
+    HistoryEntry, NonFinite, Progress, SizedSteps, Snapshot, StepStats, Timings, TrainReport,
+    Trainer,
 };
 pub use view::{View, composite_into, from_unorm16, over, scale_intrinsics, to_unorm16};

@@ -109,6 +109,53 @@ pub struct Timings {
     /// Steps counted in `step_wall`.
     #[serde(default)]
     pub walled_steps: u64,
+    /// The part of `step_wall` spent at the model size the trainer was made with: what a probe
+    /// that timed steps on that model is to be compared with, since a budget round or a
+    /// refinement that changes the size changes the step's cost.
+    #[serde(default)]
+    pub at_initial_size: SizedSteps,
+}
+
+/// Wall time of the steps taken at one model size, the full-size and the warm-up's apart.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct SizedSteps {
+    /// The model's splat count.
+    pub splats: u64,
+    /// Wall time of the full-size steps at that count.
+    pub full_wall: Duration,
+    /// Full-size steps at that count.
+    pub full_steps: u64,
+    /// Wall time of the warm-up's steps at that count.
+    pub coarse_wall: Duration,
+    /// Warm-up steps at that count.
+    pub coarse_steps: u64,
+}
+
+impl SizedSteps {
+    /// Adds a step's wall time.
+    fn add(&mut self, wall: Duration, coarse: bool) {
+        if coarse {
+            self.coarse_wall += wall;
+            self.coarse_steps += 1;
+        } else {
+            self.full_wall += wall;
+            self.full_steps += 1;
+        }
+    }
+
+    /// The mean wall seconds of each kind of step (`None` for a kind with no steps).
+    #[must_use]
+    pub fn mean_pace(&self) -> Pace {
+        Pace {
+            step_s: mean_seconds(self.full_wall, self.full_steps),
+            coarse_step_s: mean_seconds(self.coarse_wall, self.coarse_steps),
+        }
+    }
+}
+
+/// `wall / steps` in seconds, `None` without steps.
+fn mean_seconds(wall: Duration, steps: u64) -> Option<f64> {
+    (steps > 0).then(|| wall.as_secs_f64() / steps as f64)
 }
 
 impl Timings {
@@ -117,14 +164,12 @@ impl Timings {
     /// is to be compared with.
     #[must_use]
     pub fn mean_pace(&self) -> Pace {
-        let mean =
-            |wall: Duration, steps: u64| (steps > 0).then(|| wall.as_secs_f64() / steps as f64);
         Pace {
-            step_s: mean(
+            step_s: mean_seconds(
                 self.step_wall.saturating_sub(self.coarse_wall),
                 self.walled_steps - self.coarse_steps.min(self.walled_steps),
             ),
-            coarse_step_s: mean(self.coarse_wall, self.coarse_steps),
+            coarse_step_s: mean_seconds(self.coarse_wall, self.coarse_steps),
         }
     }
 }
@@ -335,6 +380,7 @@ impl Trainer {
             sh_reached: 0,
             warmup_over: false,
         };
+        let initial_splats = splats.len() as u64;
         let mut t = Self {
             // Allocated by the first step that needs it (none does without a strategy).
             grads: SplatGrads::default(),
@@ -351,7 +397,13 @@ impl Trainer {
             d_alpha: Vec::new(),
             extent,
             max_sh_degree,
-            timings: Timings::default(),
+            timings: Timings {
+                at_initial_size: SizedSteps {
+                    splats: initial_splats,
+                    ..SizedSteps::default()
+                },
+                ..Timings::default()
+            },
             warm: [false; 2],
         };
         if let Some(w) = t.config.warmup {
@@ -804,6 +856,8 @@ impl Trainer {
                 break;
             }
             // Only the step is timed: the callback (progress display, evaluation) is not training.
+            let at_initial_size =
+                self.state.splats.len() as u64 == self.timings.at_initial_size.splats;
             let start = Instant::now();
             let s = self.step();
             let wall = start.elapsed();
@@ -814,6 +868,9 @@ impl Trainer {
             if s.coarse {
                 self.timings.coarse_wall += wall;
                 self.timings.coarse_steps += 1;
+            }
+            if at_initial_size {
+                self.timings.at_initial_size.add(wall, s.coarse);
             }
             let warm = &mut self.warm[usize::from(s.coarse)];
             if *warm {

@@ -253,6 +253,39 @@ fn steps_of_a_thrown_away_branch_stay_counted_and_a_warmup_can_end_early() {
     assert!(tm.mean_pace().step_s.is_some_and(|s| s > 0.0));
 }
 
+/// The steps at the model size the trainer was made with are counted apart (what a probe that
+/// timed that model is compared with): a pruned branch's steps are not, and a restored branch
+/// of the first size counts again.
+#[test]
+fn steps_at_the_initial_size_are_counted_apart() {
+    let (init, train, mut cfg) = budgeted_run(BUDGET_S);
+    let n = init.len();
+    cfg.time_budget = None;
+    cfg.iterations = 40;
+    cfg.warmup = Some(Warmup {
+        factor: 2,
+        until: 4,
+    });
+    let mut t = Trainer::new(init, train, cfg).unwrap();
+    t.run_until(6, |_| {});
+    let whole = t.snapshot();
+    let keep: Vec<bool> = (0..n).map(|i| i % 2 == 0).collect();
+    assert_eq!(t.prune(&keep).unwrap(), n / 2);
+    t.run_until(9, |_| {});
+    t.restore_snapshot(whole).unwrap();
+    let report = t.run_until(8, |_| {});
+    let tm = report.timings;
+    let at = tm.at_initial_size;
+    assert_eq!(at.splats, n as u64);
+    // Steps 1-4 coarse, 5-6 full at the first size; 7-9 pruned; 7-8 full again at the first.
+    assert_eq!((tm.walled_steps, tm.coarse_steps), (11, 4));
+    assert_eq!((at.full_steps, at.coarse_steps), (4, 4));
+    assert!(at.full_wall < tm.step_wall - tm.coarse_wall);
+    assert_eq!(at.coarse_wall, tm.coarse_wall);
+    let pace = at.mean_pace();
+    assert!(pace.step_s.is_some_and(|s| s > 0.0) && pace.coarse_step_s.is_some());
+}
+
 /// Swapping to a snapshot is restoring it and snapshotting what was there: continued from
 /// either branch, the model is the one a trainer that never branched reaches.
 #[test]

@@ -825,6 +825,10 @@ fn init_train_eval(
     };
     let (metrics, renders) = evaluate(run.mode, &splats, refs, surfaces, cfg, observer)?;
     clock.lap("evaluate");
+    // The probe timed the initialised model; a resumed session's trainer starts from another.
+    let at = train_report.timings.at_initial_size;
+    let probed_size_steps =
+        (init.schedule.pace.is_some() && at.splats == init.summary.splats as u64).then_some(at);
     let report = RunReport {
         init: init.summary,
         iterations: train_report.iterations,
@@ -833,6 +837,7 @@ fn init_train_eval(
         step_estimate_s: init.schedule.step_estimate_s,
         probe_pace: init.schedule.pace,
         run_pace: train_report.timings.mean_pace(),
+        probed_size_steps,
         step_zero: init.step_zero,
         curve: train_report
             .history

@@ -154,6 +154,11 @@ pub struct RunReport {
     /// the budget rounds' thrown-away branches too): what the probe's figures are compared with.
     #[serde(default)]
     pub run_pace: splat_train::schedule::Pace,
+    /// The run's steps at the model size the probe timed (before a budget round or a
+    /// refinement changed it): the like-for-like comparison with the probe. `None` when the
+    /// run never trained that model in this session (a resumed run).
+    #[serde(default)]
+    pub probed_size_steps: Option<splat_train::SizedSteps>,
     /// Held-out scores before training (absent when training continued from a checkpoint made
     /// by an older version).
     pub step_zero: Option<StepZero>,
@@ -395,19 +400,38 @@ fn metrics_table(h: &mut String, report: &Report, names: &[String]) {
             let Some(probe) = r.probe_pace else {
                 return "–".into();
             };
+            let at_size = r.probed_size_steps.map(|s| (s.splats, s.mean_pace()));
             let kinds = [
-                ("full size", probe.step_s, r.run_pace.step_s),
-                ("warm-up", probe.coarse_step_s, r.run_pace.coarse_step_s),
+                (
+                    "full size",
+                    probe.step_s,
+                    r.run_pace.step_s,
+                    at_size.and_then(|(n, p)| Some((n, p.step_s?))),
+                ),
+                (
+                    "warm-up",
+                    probe.coarse_step_s,
+                    r.run_pace.coarse_step_s,
+                    at_size.and_then(|(n, p)| Some((n, p.coarse_step_s?))),
+                ),
             ];
+            let off = |p: f64, run: f64| 100.0 * (p / run - 1.0);
             let shown: Vec<String> = kinds
                 .iter()
-                .filter_map(|&(kind, p, run)| {
+                .filter_map(|&(kind, p, run, same_size)| {
                     let (p, run) = (p?, run?);
+                    let like_for_like = same_size.map_or(String::new(), |(n, s)| {
+                        format!(
+                            "; at the probe's {n} splats {:.1}, {:+.0} %",
+                            1e3 * s,
+                            off(p, s)
+                        )
+                    });
                     Some(format!(
-                        "{kind} {:.1} / {:.1} ({:+.0} %)",
+                        "{kind} {:.1} / {:.1} ({:+.0} %{like_for_like})",
                         1e3 * p,
                         1e3 * run,
-                        100.0 * (p / run - 1.0)
+                        off(p, run)
                     ))
                 })
                 .collect();
