@@ -72,12 +72,11 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
         "project",
         "bin",
         "composite",
-        "resolve",
         "backward tiles",
         "backward sums",
         "chain",
     ];
-    let mut times: Vec<[Duration; 7]> = Vec::with_capacity(repeats);
+    let mut times: Vec<[Duration; 6]> = Vec::with_capacity(repeats);
     for _ in 0..repeats.max(1) {
         r.try_forward(&splats, &cam, &opts)?;
         r.backward(
@@ -94,7 +93,6 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
             p.project,
             p.bin,
             p.composite,
-            p.resolve,
             p.backward_tiles,
             p.backward_sum,
             p.backward_chain,

@@ -44,10 +44,8 @@ pub struct RasterPhases {
     pub project: Duration,
     /// Depth sort and binning into tile lists.
     pub bin: Duration,
-    /// Front-to-back compositing of every tile.
+    /// Front-to-back compositing of every tile, each tile written into the output images.
     pub composite: Duration,
-    /// Tile-major buffers to the row-major output images.
-    pub resolve: Duration,
     /// Back-to-front tile walks writing one gradient record per (tile, splat) pair.
     pub backward_tiles: Duration,
     /// The records summed per splat.
@@ -72,7 +70,6 @@ pub struct Rasterizer {
     pub(crate) px_t: Vec<f32>,
     /// Accumulated Σ wᵢ zᵢ per pixel, tile-major.
     pub(crate) px_d: Vec<f32>,
-    px_rgb: Vec<[f32; 3]>,
     /// One past the index (in the tile's list) of the last splat that contributed, tile-major.
     pub(crate) px_last: Vec<u32>,
     /// Per (tile, splat) pair, in list order: whether the forward pass blended the splat into
@@ -216,8 +213,9 @@ impl Rasterizer {
     ) -> Result<&RenderOutput, Error> {
         let v = self.project_and_bin(splats, cam, opts)?;
         let t2 = Instant::now();
-        let (evaluations, contributions) = self.composite(cam, v.tiles_x, v.tiles_y);
-        let t3 = Instant::now();
+        let (evaluations, contributions) =
+            self.composite(cam, v.tiles_x, v.tiles_y, opts.background);
+        self.phases.composite = t2.elapsed();
         self.stats = RenderStats {
             visible: self.visible.iter().filter(|&&b| b).count(),
             culled_non_finite: self.non_finite.iter().filter(|&&b| b).count(),
@@ -225,9 +223,6 @@ impl Rasterizer {
             pixel_evaluations: evaluations,
             contributions,
         };
-        self.resolve(cam, v.tiles_x, opts.background);
-        self.phases.composite = t3 - t2;
-        self.phases.resolve = t3.elapsed();
         self.last_view = Some((splats.len(), cam.width, cam.height));
         Ok(&self.output)
     }
@@ -289,78 +284,123 @@ impl Rasterizer {
             );
     }
 
-    /// Composites every tile; returns the (pixel, splat) evaluations and contributions.
-    fn composite(&mut self, cam: &RenderCamera, tiles_x: u32, tiles_y: u32) -> (u64, u64) {
+    /// Composites every tile and writes it into the row-major output images over `bg` (the
+    /// tile's colours stay in a thread's scratch: the backward pass reads only the tile-major
+    /// transmittance and depth sums, so a whole-image colour buffer and a second pass over
+    /// the image to resolve it were memory traffic for nothing). Returns the (pixel, splat)
+    /// evaluations and contributions.
+    fn composite(
+        &mut self,
+        cam: &RenderCamera,
+        tiles_x: u32,
+        tiles_y: u32,
+        bg: Vec3,
+    ) -> (u64, u64) {
         let n_px = (tiles_x * tiles_y) as usize * TILE_PIXELS;
         self.px_t.resize(n_px, 1.0);
         self.px_d.resize(n_px, 0.0);
-        self.px_rgb.resize(n_px, [0.0; 3]);
         self.px_last.resize(n_px, 0);
         let bins = &self.bins;
         let proj = &self.proj;
         let (w, h) = (cam.width, cam.height);
         let avx2 = self.use_avx2();
+        let images = OutputImages::new(&mut self.output, w, h, bg);
         // Not cleared: each tile's walk writes its whole run.
         self.pair_live.resize(bins.pairs(), false);
         let live_runs = DisjointWrites::new(&mut self.pair_live);
         self.px_t
             .par_chunks_mut(TILE_PIXELS)
             .zip(self.px_d.par_chunks_mut(TILE_PIXELS))
-            .zip(self.px_rgb.par_chunks_mut(TILE_PIXELS))
             .zip(self.px_last.par_chunks_mut(TILE_PIXELS))
             .enumerate()
-            .map(|(tile, (((t, d), rgb), last))| {
-                let (start, end) = (bins.offsets[tile], bins.offsets[tile + 1]);
-                let ext = tile_extent(tile, tiles_x, w, h);
-                // SAFETY: [start, end) is this tile's own run of `pair_live`: the tiles' runs
-                // are disjoint (and `run` checks they end inside the vector).
-                #[allow(unsafe_code)]
-                let live = unsafe { live_runs.run(start, end) };
-                let o = TileOut {
-                    t,
-                    d,
-                    rgb,
-                    last,
-                    live,
-                };
-                let list = &bins.list[start..end];
-                composite_tile(list, proj, ext, o, &mut NoWeights, avx2)
-            })
+            .map_init(
+                || vec![[0.0_f32; 3]; TILE_PIXELS],
+                |rgb, (tile, ((t, d), last))| {
+                    let (start, end) = (bins.offsets[tile], bins.offsets[tile + 1]);
+                    let ext = tile_extent(tile, tiles_x, w, h);
+                    // SAFETY: [start, end) is this tile's own run of `pair_live`: the tiles'
+                    // runs are disjoint (and `run` checks they end inside the vector).
+                    #[allow(unsafe_code)]
+                    let live = unsafe { live_runs.run(start, end) };
+                    let o = TileOut {
+                        t: &mut *t,
+                        d: &mut *d,
+                        rgb: rgb.as_mut_slice(),
+                        last,
+                        live,
+                    };
+                    let list = &bins.list[start..end];
+                    let counts = composite_tile(list, proj, ext, o, &mut NoWeights, avx2);
+                    images.write_tile(ext, t, d, rgb);
+                    counts
+                },
+            )
             .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1))
     }
+}
 
-    /// Converts the tile-major buffers into the row-major output images.
-    fn resolve(&mut self, cam: &RenderCamera, tiles_x: u32, bg: Vec3) {
-        let (w, h) = (cam.width as usize, cam.height as usize);
-        let out = &mut self.output;
-        out.width = cam.width;
-        out.height = cam.height;
-        out.rgb.resize(3 * w * h, 0.0);
-        out.alpha.resize(w * h, 0.0);
-        out.depth.resize(w * h, 0.0);
-        let (px_t, px_d, px_rgb) = (&self.px_t, &self.px_d, &self.px_rgb);
-        out.rgb
-            .par_chunks_mut(3 * w.max(1))
-            .zip(out.alpha.par_chunks_mut(w.max(1)))
-            .zip(out.depth.par_chunks_mut(w.max(1)))
-            .enumerate()
-            .for_each(|(y, ((rgb, alpha), depth))| {
-                for x in 0..w {
-                    let k = tile_major_index(x, y, tiles_x);
-                    let t = px_t[k];
-                    let c = px_rgb[k];
-                    for ch in 0..3 {
-                        rgb[3 * x + ch] = c[ch] + t * bg[ch];
-                    }
-                    let a = 1.0 - t;
-                    alpha[x] = a;
-                    depth[x] = if a > DEPTH_MIN_ALPHA {
-                        px_d[k] / a
-                    } else {
-                        0.0
-                    };
+/// The row-major output images (colour over the background, alpha = 1 − T, expected depth),
+/// written tile by tile by the compositing's tasks.
+struct OutputImages<'a> {
+    rgb: DisjointWrites<'a, f32>,
+    alpha: DisjointWrites<'a, f32>,
+    depth: DisjointWrites<'a, f32>,
+    width: usize,
+    bg: Vec3,
+}
+
+impl<'a> OutputImages<'a> {
+    /// Sizes `out` for a `width × height` view and takes its images for the tiles to write.
+    fn new(out: &'a mut RenderOutput, width: u32, height: u32, bg: Vec3) -> Self {
+        let n = width as usize * height as usize;
+        out.width = width;
+        out.height = height;
+        out.rgb.resize(3 * n, 0.0);
+        out.alpha.resize(n, 0.0);
+        out.depth.resize(n, 0.0);
+        Self {
+            rgb: DisjointWrites::new(&mut out.rgb),
+            alpha: DisjointWrites::new(&mut out.alpha),
+            depth: DisjointWrites::new(&mut out.depth),
+            width: width as usize,
+            bg,
+        }
+    }
+
+    /// Writes the pixels of the tile at `ext` from its tile-major transmittance, depth sums
+    /// and colours.
+    fn write_tile(&self, ext: (i32, i32, i32, i32), t: &[f32], d: &[f32], rgb: &[[f32; 3]]) {
+        let (x0, y0, tw, th) = (
+            ext.0 as usize,
+            ext.1 as usize,
+            ext.2 as usize,
+            ext.3 as usize,
+        );
+        let ts = TILE_SIZE as usize;
+        let bg = self.bg;
+        for ly in 0..th {
+            let first = (y0 + ly) * self.width + x0;
+            // SAFETY: row `y0 + ly`'s columns `x0..x0 + tw` lie in this tile alone, and the
+            // tiles are disjoint, so no other task writes these positions.
+            #[allow(unsafe_code)]
+            let (rgb_out, alpha_out, depth_out) = unsafe {
+                (
+                    self.rgb.run(3 * first, 3 * (first + tw)),
+                    self.alpha.run(first, first + tw),
+                    self.depth.run(first, first + tw),
+                )
+            };
+            for lx in 0..tw {
+                let k = ly * ts + lx;
+                let (t, c) = (t[k], rgb[k]);
+                for ch in 0..3 {
+                    rgb_out[3 * lx + ch] = c[ch] + t * bg[ch];
                 }
-            });
+                let a = 1.0 - t;
+                alpha_out[lx] = a;
+                depth_out[lx] = if a > DEPTH_MIN_ALPHA { d[k] / a } else { 0.0 };
+            }
+        }
     }
 }
 

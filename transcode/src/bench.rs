@@ -71,8 +71,8 @@ pub struct RasterFigure {
     pub forward_backward_ms: f64,
     /// Estimated useful GFLOP/s of forward + backward ([`FLOPS_PER_PAIR_FORWARD_BACKWARD`]).
     pub gflops: f64,
-    /// Median of each phase over the repeats, ms: projection, binning, compositing, resolve
-    /// (forward), then tile walks, per-splat sums, chain to the parameters (backward).
+    /// Median of each phase over the repeats, ms: projection, binning, compositing into the
+    /// output images (forward), then tile walks, per-splat sums, chain to the parameters (backward).
     pub phases_ms: PhaseTimes,
 }
 
@@ -83,10 +83,8 @@ pub struct PhaseTimes {
     pub project: f64,
     /// Depth sort and binning.
     pub bin: f64,
-    /// Tile compositing.
+    /// Tile compositing, each tile written into the output images.
     pub composite: f64,
-    /// Output images.
-    pub resolve: f64,
     /// Backward tile walks.
     pub backward_tiles: f64,
     /// Per-splat sums of the pair records.
@@ -498,7 +496,6 @@ fn time_raster(
         project: phase(|p| p.project),
         bin: phase(|p| p.bin),
         composite: phase(|p| p.composite),
-        resolve: phase(|p| p.resolve),
         backward_tiles: phase(|p| p.backward_tiles),
         backward_sum: phase(|p| p.backward_sum),
         backward_chain: phase(|p| p.backward_chain),

@@ -168,11 +168,10 @@ fn print_report(r: &BenchReport, opts: &BenchOptions) {
         );
         let p = &f.phases_ms;
         println!(
-            "      forward: project {:.1}, bin {:.1}, composite {:.1}, resolve {:.1} ms; backward: tiles {:.1}, sums {:.1}, chain {:.1} ms; contribution pass {:.1} ms",
+            "      forward: project {:.1}, bin {:.1}, composite {:.1} ms; backward: tiles {:.1}, sums {:.1}, chain {:.1} ms; contribution pass {:.1} ms",
             p.project,
             p.bin,
             p.composite,
-            p.resolve,
             p.backward_tiles,
             p.backward_sum,
             p.backward_chain,
