@@ -11,7 +11,7 @@ use plenoptic_io::view_color::interpolate_lanes;
 use rayon::prelude::*;
 
 use crate::camera::ViewCamera;
-use crate::cpu::has_avx2;
+use crate::cpu::{has_avx2, prefetch};
 use crate::pixels::{render_supersampled, resolve};
 use crate::zbuffer::ZBuffer;
 use crate::{Error, PointShape, ViewImage, ViewOptions};
@@ -208,6 +208,9 @@ struct Shader<'a> {
 /// Points [`Shader::shade`] colours at once (one AVX2 vector of f32).
 const SHADE_LANES: usize = 8;
 
+/// How many points ahead [`Shader::shade`] asks for the colours it will read.
+const PREFETCH_AHEAD: usize = 32;
+
 impl Shader<'_> {
     /// Colours the points `(index in the cloud, rank)` of `points` into `out`, [`SHADE_LANES`]
     /// at a time: the AVX2 instantiation where the CPU has it, else the portable one (the
@@ -232,7 +235,21 @@ impl Shader<'_> {
     #[inline(always)]
     fn shade_portable(&self, points: &[(u32, u32)], out: &mut [[f32; 3]]) {
         let cloud = self.cloud;
-        for (group, out) in points.chunks(SHADE_LANES).zip(out.chunks_mut(SHADE_LANES)) {
+        for (g, (group, out)) in points
+            .chunks(SHADE_LANES)
+            .zip(out.chunks_mut(SHADE_LANES))
+            .enumerate()
+        {
+            // The colours of the points PREFETCH_AHEAD places on are requested now, so they are
+            // in the cache when their group comes (the points are a sparse subset of the cloud).
+            let ahead = (g * SHADE_LANES + PREFETCH_AHEAD..(g + 1) * SHADE_LANES + PREFETCH_AHEAD)
+                .filter_map(|k| points.get(k));
+            for &(index, _) in ahead {
+                let i = index as usize;
+                prefetch(cloud.camera_colors_of(i));
+                prefetch(std::slice::from_ref(&cloud.positions[i]));
+                prefetch(std::slice::from_ref(&cloud.colors[i]));
+            }
             // A short last group repeats its first point in the spare lanes.
             let index = |l: usize| group.get(l).unwrap_or(&group[0]).0 as usize;
             let colours = interpolate_lanes(
