@@ -164,9 +164,16 @@ const PROBE_MAX_STEPS: u32 = 48;
 /// of the time budget (or [`PROBE_MAX_STEPS`] are timed).
 const PROBE_BUDGET_SHARE: f64 = 0.005;
 
+/// A run whose steps, at the speed of the first [`PROBE_STEPS`] timed, would take no more than
+/// this share of its time budget cannot be cut short by it, even with the splat budget's extra
+/// branch steps: the probe stops there rather than time more (at a paper-scale frame those cost
+/// about 5 s). The run still re-estimates its pace as it goes.
+const PROBE_EASY_FIT: f64 = 0.5;
+
 /// The number of steps a run will take: its iteration count, or, with a time budget, the steps
 /// that fit in the budget at the speed of steps timed on a throw-away trainer after an untimed
-/// one ([`PROBE_STEPS`] of them, more on fast steps: [`PROBE_BUDGET_SHARE`]; the probe's time
+/// one ([`PROBE_STEPS`] of them, more on fast steps ([`PROBE_BUDGET_SHARE`]) unless the run
+/// fits in the budget with room to spare ([`PROBE_EASY_FIT`]); the probe's time
 /// is taken from the budget; the arithmetic is [`splat_train::schedule::steps_in_budget`]).
 /// With a coarse warm-up the probe times steps on the reduced views first, then on the full
 /// ones, and the warm-up's share of the steps counts at its own speed. Returns the steps, the
@@ -200,23 +207,30 @@ fn step_budget(
     let mut probe = Trainer::new(splats.clone(), Arc::clone(views), probe_cfg)?;
     let setup = t0.elapsed();
     // One untimed step, then steps timed until there are enough; returns their time and count.
-    let time_steps = |probe: &mut Trainer| {
+    // `run_step_s` turns the step time timed so far into the run's mean step time (a lower bound
+    // of it while only the warm-up's size is timed).
+    let time_steps = |probe: &mut Trainer, run_step_s: &dyn Fn(f64) -> f64| {
         probe.run_until(probe.iteration() + 1, |_| {});
         let t = Instant::now();
         let mut timed = 0;
-        while timed < PROBE_MAX_STEPS && (timed < PROBE_STEPS || t.elapsed() < enough) {
+        while keep_timing(timed, t.elapsed(), enough, |step_s| {
+            run_step_s(step_s) * f64::from(tc.iterations) > PROBE_EASY_FIT * budget.as_secs_f64()
+        }) {
             probe.run_until(probe.iteration() + 1, |_| {});
             timed += 1;
         }
         (t.elapsed(), timed)
     };
-    let first = time_steps(&mut probe);
+    // A full-size step takes at least as long as a warm-up step.
+    let first = time_steps(&mut probe, &|step_s| step_s);
     let ((timed, timed_steps), coarse) = match tc.warmup {
         Some(w) => {
             probe.end_warmup();
-            let full = time_steps(&mut probe);
             let share = (f64::from(w.until) / f64::from(tc.iterations.max(1))).min(1.0);
             let coarse_s = first.0.as_secs_f64() / f64::from(first.1);
+            let full = time_steps(&mut probe, &|full_s| {
+                splat_train::schedule::mean_step_s(full_s, Some((share, coarse_s)))
+            });
             (full, Some((share, coarse_s)))
         }
         None => (first, None),
@@ -235,6 +249,21 @@ fn step_budget(
         coarse_step_s: coarse.map(|(_, c)| c),
     };
     Ok((steps, Some(left), Some(pace)))
+}
+
+/// Whether the time-budget probe times one more step of a size, after `timed` steps took
+/// `elapsed`: always up to [`PROBE_STEPS`], never beyond [`PROBE_MAX_STEPS`], and in between
+/// while they have taken less than `enough` and the run, at their mean step time, `may_bind`
+/// (could come near its budget).
+fn keep_timing(
+    timed: u32,
+    elapsed: Duration,
+    enough: Duration,
+    may_bind: impl Fn(f64) -> bool,
+) -> bool {
+    timed < PROBE_MAX_STEPS
+        && (timed < PROBE_STEPS
+            || (elapsed < enough && may_bind(elapsed.as_secs_f64() / f64::from(timed))))
 }
 
 /// What a finished run produced.
@@ -1750,5 +1779,40 @@ pub fn input_info(path: &Path, model: &Model) -> InputInfo {
             capture_cameras: m.num_cameras,
             bytes,
         },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Steps a probe times when each takes `step` and the run at that speed may bind or not.
+    fn timed_steps(step: Duration, enough: Duration, binds: bool) -> u32 {
+        let mut timed = 0;
+        while keep_timing(timed, step * timed, enough, |s| {
+            assert!((s - step.as_secs_f64()).abs() < 1e-9, "mean step {s}");
+            binds
+        }) {
+            timed += 1;
+        }
+        timed
+    }
+
+    #[test]
+    fn the_probe_times_more_steps_only_where_the_budget_may_bind() {
+        let enough = Duration::from_secs(3);
+        // Slow steps: the minimum either way, since four of them already take the share.
+        let slow = Duration::from_secs(1);
+        assert_eq!(timed_steps(slow, enough, true), PROBE_STEPS);
+        assert_eq!(timed_steps(slow, enough, false), PROBE_STEPS);
+        // 125 ms steps: timed until they have taken the share (24 of them), unless the run
+        // fits easily.
+        let paper = Duration::from_millis(125);
+        assert_eq!(timed_steps(paper, enough, true), 24);
+        assert_eq!(timed_steps(paper, enough, false), PROBE_STEPS);
+        // Millisecond steps: capped.
+        let fast = Duration::from_millis(1);
+        assert_eq!(timed_steps(fast, enough, true), PROBE_MAX_STEPS);
+        assert_eq!(timed_steps(fast, enough, false), PROBE_STEPS);
     }
 }
