@@ -1,7 +1,7 @@
 //! Point clouds drawn as the PccAppRenderer draws them: voxel cubes (or discs), z-buffered,
 //! coloured towards the viewer.
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Mutex, PoisonError};
 
 use camera_model::Camera;
@@ -53,6 +53,9 @@ pub(crate) struct PreparedCloud<'a> {
     /// frame listed in random order spent half its drawing time waiting for positions from memory
     /// (docs/benchmarks/views.md).
     positions: Vec<Vec3>,
+    /// The centre of each run of [`RUN`] consecutive positions (a small patch of surface, the
+    /// order being Morton's): the cube pass draws the runs nearest first.
+    run_centres: Vec<Vec3>,
     opts: ViewOptions,
     /// Per-view buffers of views already drawn, for the next views to reuse.
     buffers: ViewBuffersPool,
@@ -114,10 +117,11 @@ impl<'a> PreparedCloud<'a> {
         opts.validate()?;
         check_cloud(cloud)?;
         let order = plenoptic_io::morton_order(&cloud.positions);
-        let positions = order
+        let positions: Vec<Vec3> = order
             .par_iter()
             .map(|&i| cloud.positions[i as usize])
             .collect();
+        let run_centres = run_centres(&positions);
         let mut rank_of = vec![0; order.len()];
         for (rank, &i) in order.iter().enumerate() {
             rank_of[i as usize] = rank as u32;
@@ -127,6 +131,7 @@ impl<'a> PreparedCloud<'a> {
             capture: cloud.camera_positions(),
             rank_of,
             positions,
+            run_centres,
             opts: opts.for_cloud(cloud),
             buffers: ViewBuffersPool::default(),
         })
@@ -148,7 +153,13 @@ impl<'a> PreparedCloud<'a> {
             colours,
         } = &mut buffers;
         match opts.point_shape {
-            PointShape::Cube => draw_cubes(&self.positions, &view, 0.5 * opts.point_size, zbuf),
+            PointShape::Cube => draw_cubes(
+                &self.positions,
+                &self.run_centres,
+                &view,
+                0.5 * opts.point_size,
+                zbuf,
+            ),
             PointShape::Disc => {
                 draw_discs(&self.positions, &view, disc_radius(opts.point_size), zbuf)
             }
@@ -296,14 +307,47 @@ fn disc_radius(point_size: f32) -> f32 {
     std::f32::consts::LN_2.sqrt() * point_size
 }
 
-/// Visibility pass for cubes of half-side `h` centred on `positions`: each pixel whose centre
-/// ray hits a cube records the entry depth (camera z) of the nearest hit and the cube's index.
-fn draw_cubes(positions: &[Vec3], view: &ViewCamera, h: f32, zbuf: &ZBuffer) {
-    draw_cubes_using(positions, view, h, zbuf, has_avx2());
+/// Points in a run that the cube pass orders as one (by the run's centre).
+const RUN: usize = 256;
+
+/// Runs a thread of the cube pass takes at a time.
+const RUNS_TAKEN: usize = 4;
+
+/// The centres of the runs of [`RUN`] consecutive `positions` (the middle of each run's box).
+fn run_centres(positions: &[Vec3]) -> Vec<Vec3> {
+    positions
+        .par_chunks(RUN)
+        .map(|run| {
+            let (lo, hi) = run.iter().fold(
+                (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+                |(lo, hi), &p| (lo.min(p), hi.max(p)),
+            );
+            0.5 * (lo + hi)
+        })
+        .collect()
+}
+
+/// Visibility pass for cubes of half-side `h` centred on `positions` (whose runs of [`RUN`]
+/// have the centres `runs`): each pixel whose centre ray hits a cube records the entry depth
+/// (camera z) of the nearest hit and the cube's index.
+fn draw_cubes(positions: &[Vec3], runs: &[Vec3], view: &ViewCamera, h: f32, zbuf: &ZBuffer) {
+    draw_cubes_using(positions, runs, view, h, zbuf, has_avx2());
 }
 
 /// [`draw_cubes`] with the AVX2 instantiation or without it.
-fn draw_cubes_using(positions: &[Vec3], view: &ViewCamera, h: f32, zbuf: &ZBuffer, avx2: bool) {
+///
+/// The runs are drawn nearest first, handed out in that order to the threads that draw the
+/// view, so by the time a run on the far side of the object comes, the near side usually covers
+/// its cubes' rectangles and most of them are skipped ([`ZBuffer::all_nearer`]). The z-buffer
+/// ends the same in any order: it keeps the least (depth, rank) key of each pixel.
+fn draw_cubes_using(
+    positions: &[Vec3],
+    runs: &[Vec3],
+    view: &ViewCamera,
+    h: f32,
+    zbuf: &ZBuffer,
+    avx2: bool,
+) {
     let r = view.rotation;
     // Camera-space half-extents of a world-axis-aligned cube: |R|·(h, h, h).
     let extent = Vec3::new(
@@ -317,11 +361,38 @@ fn draw_cubes_using(positions: &[Vec3], view: &ViewCamera, h: f32, zbuf: &ZBuffe
         extent,
         zbuf,
     };
-    positions
-        .par_chunks(CHUNK)
+    let depth = |c: Vec3| (view.rotation * c + view.translation).z;
+    let mut order: Vec<(f32, u32)> = runs
+        .iter()
         .enumerate()
-        .for_each(|(chunk, points)| cubes.draw(points, chunk * CHUNK, avx2));
+        .map(|(run, &c)| (depth(c), run as u32))
+        .collect();
+    order.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    // Each thread takes the nearest runs not yet taken, a few at a time (rayon's halving of a
+    // range would start the second thread half-way back).
+    let next = AtomicUsize::new(0);
+    (0..rayon::current_num_threads())
+        .into_par_iter()
+        .for_each(|_| {
+            loop {
+                let k = next.fetch_add(RUNS_TAKEN, Ordering::Relaxed);
+                if k >= order.len() {
+                    break;
+                }
+                for &(_, run) in &order[k..(k + RUNS_TAKEN).min(order.len())] {
+                    let first = run as usize * RUN;
+                    let points = &positions[first..(first + RUN).min(positions.len())];
+                    cubes.draw(points, first, avx2);
+                }
+            }
+        });
 }
+
+/// A cube's entry depth along a pixel ray is at least the near side of its camera-space box;
+/// this factor keeps the bound below the entry depths as the slab test rounds them (a few
+/// units in the last place of f32, from the ray's direction and the divisions), so a cube
+/// skipped by it could not have won a pixel.
+const DEPTH_BOUND_SLACK: f32 = 1.0 - 1e-5;
 
 /// What every cube of one view's visibility pass shares.
 struct Cubes<'a> {
@@ -364,6 +435,16 @@ impl Cubes<'_> {
             let Some((x0, x1, y0, y1)) = view.pixel_range(c - extent, c + extent) else {
                 continue;
             };
+            // A cube behind everything its rectangle already holds cannot win a pixel: skip
+            // its slab tests (the z-buffer ends the same whatever the order of the cubes).
+            if self.zbuf.all_nearer(
+                (c.z - extent.z) * DEPTH_BOUND_SLACK,
+                (x0 as usize, x1 as usize),
+                (y0 as usize, y1 as usize),
+                w,
+            ) {
+                continue;
+            }
             let rank = (first + j) as u32;
             // Slab test in world axes, relative to the camera centre for precision.
             let rel = p - view.center;
@@ -505,6 +586,69 @@ mod tests {
         }
     }
 
+    /// The nearest (depth, index) of every pixel by brute force: every cube against every pixel
+    /// ray, in index order, nothing skipped, with the slab test's own arithmetic.
+    fn brute_force_z_buffer(points: &[Vec3], view: &ViewCamera, h: f32) -> Vec<Option<(u32, u32)>> {
+        (0..view.height)
+            .flat_map(|y| (0..view.width).map(move |x| (x, y)))
+            .map(|(x, y)| {
+                let d = view.world_ray(x, y);
+                let inv = d.recip();
+                let mut best: Option<(u32, u32)> = None;
+                for (i, &p) in points.iter().enumerate() {
+                    let c = view.rotation * p + view.translation;
+                    if c.z - h * 2.0 <= 0.0 {
+                        continue;
+                    }
+                    let rel = p - view.center;
+                    let (t0, t1) = ((rel - h) * inv, (rel + h) * inv);
+                    let near = t0.min(t1).max_element();
+                    let far = t0.max(t1).min_element();
+                    let key = (near.to_bits(), i as u32);
+                    if near <= far && near > 0.0 && best.is_none_or(|b| key < b) {
+                        best = Some(key);
+                    }
+                }
+                best
+            })
+            .collect()
+    }
+
+    #[test]
+    fn skipped_cubes_could_not_have_won_a_pixel() {
+        // Two voxel spheres, one behind the other and both with far sides, drawn nearest run
+        // first with the cubes behind what the z-buffer holds skipped: every pixel keeps what
+        // testing every cube against every pixel gives. Cubes of one and of two voxels, from
+        // views in front, oblique and from behind.
+        let mut pts = voxel_sphere(9.0);
+        pts.extend(
+            voxel_sphere(7.0)
+                .iter()
+                .map(|p| *p + Vec3::new(6.0, 3.0, -30.0)),
+        );
+        for (eye, h) in [
+            (DVec3::new(0.0, 0.0, 90.0), 0.5),
+            (DVec3::new(50.0, 30.0, 60.0), 1.0),
+            (DVec3::new(-20.0, 10.0, -110.0), 0.5),
+        ] {
+            let cam = camera(eye, DVec3::new(2.0, 1.0, -12.0), 96, 96, 25.0);
+            let view = ViewCamera::new(&cam).unwrap();
+            let zbuf = ZBuffer::new(view.pixels());
+            draw_cubes(&pts, &run_centres(&pts), &view, h, &zbuf);
+            let expected = brute_force_z_buffer(&pts, &view, h);
+            let mut covered = 0;
+            for (pixel, want) in expected.iter().enumerate() {
+                let got = zbuf.get(pixel).map(|(z, id)| (z.to_bits(), id));
+                assert_eq!(got, *want, "pixel {pixel} seen from {eye}");
+                covered += usize::from(want.is_some());
+            }
+            assert!(
+                covered > 1000,
+                "the spheres cover {covered} pixels only from {eye}"
+            );
+        }
+    }
+
     #[test]
     fn avx2_and_portable_cube_passes_write_the_same_z_buffer() {
         // A voxel sphere with a shifted, oblique camera (cubes straddling pixel centres, rays
@@ -518,8 +662,9 @@ mod tests {
             let cam = camera(eye, DVec3::new(0.3, -0.2, 0.1), w, w, 40.0);
             let view = ViewCamera::new(&cam).unwrap();
             let (portable, vector) = (ZBuffer::new(view.pixels()), ZBuffer::new(view.pixels()));
-            draw_cubes_using(&pts, &view, h, &portable, false);
-            draw_cubes_using(&pts, &view, h, &vector, has_avx2());
+            let runs = run_centres(&pts);
+            draw_cubes_using(&pts, &runs, &view, h, &portable, false);
+            draw_cubes_using(&pts, &runs, &view, h, &vector, has_avx2());
             let mut covered = 0;
             for pixel in 0..view.pixels() {
                 let (a, b) = (portable.get(pixel), vector.get(pixel));

@@ -49,6 +49,25 @@ impl ZBuffer {
         }
     }
 
+    /// Whether every pixel of the rectangle `xs` × `ys` (inclusive ranges, rows `width` wide)
+    /// already holds a primitive nearer than `depth` (positive): then nothing at `depth` or
+    /// beyond can be inserted there.
+    #[inline]
+    pub fn all_nearer(
+        &self,
+        depth: f32,
+        (x0, x1): (usize, usize),
+        (y0, y1): (usize, usize),
+        width: usize,
+    ) -> bool {
+        let bound = u64::from(depth.to_bits()) << 32;
+        (y0..=y1).all(|y| {
+            self.cells[y * width + x0..=y * width + x1]
+                .iter()
+                .all(|c| c.load(Ordering::Relaxed) < bound)
+        })
+    }
+
     /// The nearest (depth, id) at `pixel`, if any primitive covers it.
     #[inline]
     pub fn get(&self, pixel: usize) -> Option<(f32, u32)> {
