@@ -49,25 +49,35 @@ pub fn interpolate_lanes<const N: usize>(
     let pairs = colors.map(|c| c.len().min(cameras.len()));
     let mut sum = [[0.0f32; 3]; N];
     let mut total = [0.0f32; N];
-    for (k, &camera) in cameras.iter().enumerate() {
-        if pairs.iter().all(|&n| n <= k) {
-            break;
-        }
-        let mut cosine = [0.0f32; N];
-        for l in 0..N {
-            cosine[l] = (camera - points[l])
-                .normalize_or_zero()
-                .dot(view_dir[l])
-                .max(0.0);
-        }
-        let w = powi_lanes(cosine, exponent);
-        for l in 0..N {
-            // A lane whose colours have run out adds nothing (not even a zero).
-            if k < pairs[l] {
+    // Every lane with a colour for every camera (a plenoptic frame's points all have): the
+    // lanes' colours sliced to the cameras once, so the loop below has no per-lane condition
+    // and no bounds check, and vectorises across the lanes.
+    if pairs.iter().all(|&n| n == cameras.len()) {
+        let colors: [&[[f32; 3]]; N] = std::array::from_fn(|l| &colors[l][..cameras.len()]);
+        for (k, &camera) in cameras.iter().enumerate() {
+            let w = powi_lanes(cosines(camera, &points, &view_dir), exponent);
+            for l in 0..N {
                 let color = colors[l][k];
                 total[l] += w[l];
                 for c in 0..3 {
                     sum[l][c] += w[l] * color[c];
+                }
+            }
+        }
+    } else {
+        for (k, &camera) in cameras.iter().enumerate() {
+            if pairs.iter().all(|&n| n <= k) {
+                break;
+            }
+            let w = powi_lanes(cosines(camera, &points, &view_dir), exponent);
+            for l in 0..N {
+                // A lane whose colours have run out adds nothing (not even a zero).
+                if k < pairs[l] {
+                    let color = colors[l][k];
+                    total[l] += w[l];
+                    for c in 0..3 {
+                        sum[l][c] += w[l] * color[c];
+                    }
                 }
             }
         }
@@ -80,6 +90,26 @@ pub fn interpolate_lanes<const N: usize>(
         out[l] = sum[l].map(|s| s / total[l]);
     }
     out
+}
+
+/// max(0, cos) between point→`camera` and `view_dir` for each lane: glam's `normalize_or_zero`
+/// and `dot` written out component by component (the same operations in the same order, so the
+/// same bits) with the zero direction a select instead of a branch, so the lanes vectorise.
+#[inline(always)]
+fn cosines<const N: usize>(camera: Vec3, points: &[Vec3; N], view_dir: &[Vec3; N]) -> [f32; N] {
+    let mut cosine = [0.0f32; N];
+    for l in 0..N {
+        let d = camera - points[l];
+        let rcp = 1.0 / ((d.x * d.x) + (d.y * d.y) + (d.z * d.z)).sqrt();
+        let unit = if rcp.is_finite() && rcp > 0.0 {
+            d * rcp
+        } else {
+            Vec3::ZERO
+        };
+        let v = view_dir[l];
+        cosine[l] = ((unit.x * v.x) + (unit.y * v.y) + (unit.z * v.z)).max(0.0);
+    }
+    cosine
 }
 
 /// The weight of one camera from unit directions point→camera and point→viewer.
@@ -251,6 +281,19 @@ mod tests {
                 lanes[l].map(f32::to_bits),
                 alone.map(f32::to_bits),
                 "lane {l}"
+            );
+        }
+        // Every lane with all 13 colours takes the loop without per-lane conditions: the same
+        // bits again.
+        let full: [&[[f32; 3]]; 8] = [&colors; 8];
+        let lanes_full =
+            interpolate_lanes(points, viewers, &cameras, full, mains, DEFAULT_EXPONENT);
+        for l in 0..8 {
+            let alone = interpolate(points[l], viewers[l], &cameras, &colors, mains[l], 10);
+            assert_eq!(
+                lanes_full[l].map(f32::to_bits),
+                alone.map(f32::to_bits),
+                "lane {l} with every colour"
             );
         }
         // And against the formula written out in f64 for an ordinary lane.
