@@ -228,16 +228,19 @@ fn a_time_budget_counts_the_warmup_at_its_own_speed() {
     );
 }
 
-#[test]
-fn steps_of_a_thrown_away_branch_stay_counted_and_a_warmup_can_end_early() {
+/// A trainer of the budgeted run's model and views for 40 steps, no time budget, the first
+/// `until` of them a twofold warm-up.
+fn forty_steps_warming_up_until(until: u32) -> Trainer {
     let (init, train, mut cfg) = budgeted_run(BUDGET_S);
     cfg.time_budget = None;
     cfg.iterations = 40;
-    cfg.warmup = Some(Warmup {
-        factor: 2,
-        until: 20,
-    });
-    let mut t = Trainer::new(init, train, cfg).unwrap();
+    cfg.warmup = Some(Warmup { factor: 2, until });
+    Trainer::new(init, train, cfg).unwrap()
+}
+
+#[test]
+fn steps_of_a_thrown_away_branch_stay_counted_and_a_warmup_can_end_early() {
+    let mut t = forty_steps_warming_up_until(20);
     let mut coarse = Vec::new();
     t.run_until(5, |p| coarse.push(p.step.coarse));
     let branch = t.snapshot();
@@ -258,15 +261,8 @@ fn steps_of_a_thrown_away_branch_stay_counted_and_a_warmup_can_end_early() {
 /// of the first size counts again.
 #[test]
 fn steps_at_the_initial_size_are_counted_apart() {
-    let (init, train, mut cfg) = budgeted_run(BUDGET_S);
-    let n = init.len();
-    cfg.time_budget = None;
-    cfg.iterations = 40;
-    cfg.warmup = Some(Warmup {
-        factor: 2,
-        until: 4,
-    });
-    let mut t = Trainer::new(init, train, cfg).unwrap();
+    let mut t = forty_steps_warming_up_until(4);
+    let n = t.splats().len();
     t.run_until(6, |_| {});
     let whole = t.snapshot();
     let keep: Vec<bool> = (0..n).map(|i| i % 2 == 0).collect();
