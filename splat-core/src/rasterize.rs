@@ -331,7 +331,7 @@ impl Rasterizer {
                     };
                     let list = &bins.list[start..end];
                     let counts = composite_tile(list, proj, ext, o, &mut NoWeights, avx2);
-                    images.write_tile(ext, t, d, rgb);
+                    images.write_tile(ext, t, d, rgb, avx2);
                     counts
                 },
             )
@@ -368,8 +368,37 @@ impl<'a> OutputImages<'a> {
     }
 
     /// Writes the pixels of the tile at `ext` from its tile-major transmittance, depth sums
-    /// and colours.
-    fn write_tile(&self, ext: (i32, i32, i32, i32), t: &[f32], d: &[f32], rgb: &[[f32; 3]]) {
+    /// and colours: the AVX2 instantiation where `avx2` (the CPU has it), else the portable one
+    /// (the same IEEE operations, so the images are bit-identical either way).
+    fn write_tile(
+        &self,
+        ext: (i32, i32, i32, i32),
+        t: &[f32],
+        d: &[f32],
+        rgb: &[[f32; 3]],
+        avx2: bool,
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        if avx2 {
+            // SAFETY: `avx2` is only true when `has_avx2()` is, so the CPU supports the enabled features.
+            #[allow(unsafe_code)]
+            return unsafe { self.write_tile_avx2(ext, t, d, rgb) };
+        }
+        let _ = avx2;
+        self.write_tile_impl(ext, t, d, rgb);
+    }
+
+    /// [`OutputImages::write_tile_impl`] compiled with AVX2: its per-row loops (a division and
+    /// a select per pixel, interleaved colour stores) then run 8 pixels a vector op, where
+    /// the portable build does one; as scalar code they were a sixth of the compositing.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn write_tile_avx2(&self, ext: (i32, i32, i32, i32), t: &[f32], d: &[f32], rgb: &[[f32; 3]]) {
+        self.write_tile_impl(ext, t, d, rgb);
+    }
+
+    #[inline(always)]
+    fn write_tile_impl(&self, ext: (i32, i32, i32, i32), t: &[f32], d: &[f32], rgb: &[[f32; 3]]) {
         let (x0, y0, tw, th) = (
             ext.0 as usize,
             ext.1 as usize,
@@ -390,15 +419,19 @@ impl<'a> OutputImages<'a> {
                     self.depth.run(first, first + tw),
                 )
             };
-            for lx in 0..tw {
-                let k = ly * ts + lx;
-                let (t, c) = (t[k], rgb[k]);
-                for ch in 0..3 {
-                    rgb_out[3 * lx + ch] = c[ch] + t * bg[ch];
-                }
+            let row = ly * ts..ly * ts + tw;
+            let (t, d, rgb) = (&t[row.clone()], &d[row.clone()], &rgb[row]);
+            for ((o, c), &t) in rgb_out.chunks_exact_mut(3).zip(rgb).zip(t) {
+                o[0] = c[0] + t * bg.x;
+                o[1] = c[1] + t * bg.y;
+                o[2] = c[2] + t * bg.z;
+            }
+            for ((a_out, z_out), (&t, &d)) in
+                alpha_out.iter_mut().zip(depth_out).zip(t.iter().zip(d))
+            {
                 let a = 1.0 - t;
-                alpha_out[lx] = a;
-                depth_out[lx] = if a > DEPTH_MIN_ALPHA { d[k] / a } else { 0.0 };
+                *a_out = a;
+                *z_out = if a > DEPTH_MIN_ALPHA { d / a } else { 0.0 };
             }
         }
     }
