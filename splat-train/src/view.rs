@@ -190,18 +190,27 @@ impl View {
     /// every pixel is computed alone, so the result does not depend on the thread count.
     pub fn target_into(&self, out: &mut Vec<f32>, background: [f32; 3]) {
         out.resize(self.image.len(), 0.0);
-        let chunks = out
-            .par_chunks_mut(3 * TARGET_CHUNK)
-            .zip(self.image.par_chunks(3 * TARGET_CHUNK));
+        out.par_chunks_mut(3 * TARGET_CHUNK)
+            .enumerate()
+            .for_each(|(c, o)| self.target_part_into(c * TARGET_CHUNK, o, background));
+    }
+
+    /// The view's colour over `background` for as many pixels as `out` holds (3 values each),
+    /// from pixel `first` on: what [`View::target_into`] writes there, for callers that work
+    /// through a view a part at a time without its whole target in memory.
+    ///
+    /// # Panics
+    /// If those pixels run past the view's image.
+    pub fn target_part_into(&self, first: usize, out: &mut [f32], background: [f32; 3]) {
+        let n = out.len() / 3;
+        let image = &self.image[3 * first..3 * (first + n)];
         match &self.mask {
-            Some(mask) => chunks
-                .zip(mask.par_chunks(TARGET_CHUNK))
-                .for_each(|((o, img), m)| composite_into(o, img, m, background)),
-            None => chunks.for_each(|(o, img)| {
-                for (o, &u) in o.iter_mut().zip(img) {
+            Some(mask) => composite_into(out, image, &mask[first..first + n], background),
+            None => {
+                for (o, &u) in out.iter_mut().zip(image) {
                     *o = from_unorm16(u);
                 }
-            }),
+            }
         }
     }
 }
