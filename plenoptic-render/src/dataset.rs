@@ -135,7 +135,7 @@ where
         points_without_tracks(points.positions.iter().zip(&points.colors).map(|(p, c)| {
             (
                 p.as_dvec3(),
-                c.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8),
+                c.map(|v| crate::output::quantise(v, 255.0) as u8),
             )
         }));
     // Three independent files, written at once: at a paper-scale frame's 3M points they are

@@ -48,9 +48,15 @@ pub fn write_view_images(
     Ok(files)
 }
 
-/// Quantises [0, 1] to `max` with rounding (values outside are clamped).
-fn quantise(v: f32, max: f32) -> f32 {
-    (v.clamp(0.0, 1.0) * max).round()
+/// Quantises [0, 1] to an integer in 0..=`max` with rounding (values outside are clamped, NaN
+/// gives 0): `(v·max).round()`, without `round`'s libm call, which took about 1 % of a
+/// paper-scale frame's views (3M values a view). For x = v·max in [0, 65535] the truncation to
+/// an integer and the fraction left (`x − whole`) are exact in f32, so comparing the fraction
+/// with ½ rounds half up exactly as `round` does for non-negative values.
+pub(crate) fn quantise(v: f32, max: f32) -> u32 {
+    let x = v.clamp(0.0, 1.0) * max;
+    let whole = x as u32;
+    whole + u32::from(x - whole as f32 >= 0.5)
 }
 
 /// Writes the colour of a view as an RGB PNG, atomically.
@@ -224,6 +230,31 @@ mod tests {
         for (i, &v) in rgb.as_raw().iter().enumerate() {
             assert_eq!(v, (img.rgb[i] * 65535.0).round() as u16);
         }
+    }
+
+    /// The libm-free rounding equals `round` of the clamped product: at and around every half
+    /// step of both depths, over a stride through every f32 in [0, 1], and outside it.
+    #[test]
+    fn quantise_rounds_as_round_does() {
+        let reference = |v: f32, max: f32| (v.clamp(0.0, 1.0) * max).round() as u32;
+        for max in [255.0_f32, 65535.0] {
+            for k in 0..max as u32 {
+                let half = (k as f32 + 0.5) / max;
+                for v in [half.next_down(), half, half.next_up(), k as f32 / max] {
+                    assert_eq!(quantise(v, max), reference(v, max), "{v} × {max}");
+                }
+            }
+            for bits in (0..=1.0_f32.to_bits()).step_by(101) {
+                let v = f32::from_bits(bits);
+                assert_eq!(quantise(v, max), reference(v, max), "{v} × {max}");
+            }
+            for v in [-1.0, -0.0, 1.0, 1.5, f32::INFINITY, f32::NEG_INFINITY] {
+                assert_eq!(quantise(v, max), reference(v, max), "{v} × {max}");
+            }
+            assert_eq!(quantise(f32::NAN, max), 0);
+        }
+        // The value just below ½, whose `x + ½` rounds up to 1 in f32.
+        assert_eq!(quantise(0.5_f32.next_down(), 1.0), 0);
     }
 
     #[test]
