@@ -139,30 +139,32 @@ impl Loss {
     }
 }
 
+/// Pixels per parallel task of [`alpha_l1`].
+const ALPHA_CHUNK: usize = 4096;
+
 /// Mean absolute error of an alpha map against a target mask (16-bit fractions of one, as a
-/// [`View`](crate::View) holds it); adds `weight · ∂/∂alpha` into `d_alpha` and returns the
-/// unweighted error.
+/// [`View`](crate::View) holds it); writes `weight · ∂/∂alpha` into `d_alpha` and returns the
+/// unweighted error. Each chunk's mask is expanded to f32 and run through the colour's L1
+/// kernel ([`l1_chunk`]: the same sign rule, its sums in lanes and vectorised), where a scalar
+/// loop with one running f64 sum and two branches a pixel took 0.7 ms of every 1024² step.
 pub fn alpha_l1(alpha: &[f32], mask: &[u16], weight: f32, d_alpha: &mut [f32]) -> f64 {
     let n = alpha.len();
     let k = weight / n as f32;
+    let avx2 = splat_core::has_avx2();
     // Partial sums per chunk, added in order so the value does not depend on scheduling.
     let partials: Vec<f64> = d_alpha
-        .par_chunks_mut(4096)
-        .zip(alpha.par_chunks(4096).zip(mask.par_chunks(4096)))
+        .par_chunks_mut(ALPHA_CHUNK)
+        .zip(
+            alpha
+                .par_chunks(ALPHA_CHUNK)
+                .zip(mask.par_chunks(ALPHA_CHUNK)),
+        )
         .map(|(d, (a, m))| {
-            let mut sum = 0.0f64;
-            for ((d, &a), &m) in d.iter_mut().zip(a).zip(m) {
-                let e = a - crate::view::from_unorm16(m);
-                sum += f64::from(e.abs());
-                *d = if e > 0.0 {
-                    k
-                } else if e < 0.0 {
-                    -k
-                } else {
-                    0.0
-                };
+            let mut target = [0.0_f32; ALPHA_CHUNK];
+            for (t, &m) in target.iter_mut().zip(m) {
+                *t = crate::view::from_unorm16(m);
             }
-            sum
+            l1_chunk(d, a, &target[..m.len()], k, avx2).0
         })
         .collect();
     partials.iter().sum::<f64>() / n as f64
@@ -218,5 +220,44 @@ mod tests {
         let e = alpha_l1(&alpha, &mask, 3.0, &mut d);
         assert!((e - 0.1).abs() < 1e-7);
         assert_eq!(d, [1.0, -1.0, 0.0]);
+    }
+
+    /// Over several chunks and a partial last one (the vector loops and their tails): the
+    /// value is the f64 mean of |alpha − mask| and each gradient is exactly ±k or 0.
+    #[test]
+    fn alpha_loss_over_many_chunks_matches_a_scalar_reference() {
+        let n = 3 * ALPHA_CHUNK + 1234;
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(3);
+        let mask: Vec<u16> = (0..n)
+            .map(|i| if i % 5 == 0 { 0 } else { rng.random() })
+            .collect();
+        let alpha: Vec<f32> = (0..n)
+            .map(|i| match i % 3 {
+                0 => crate::view::from_unorm16(mask[i]),
+                _ => rng.random(),
+            })
+            .collect();
+        let (weight, mut d) = (0.1_f32, vec![9.0_f32; n]);
+        let e = alpha_l1(&alpha, &mask, weight, &mut d);
+        let k = weight / n as f32;
+        let mut sum = 0.0_f64;
+        for i in 0..n {
+            let err = alpha[i] - crate::view::from_unorm16(mask[i]);
+            sum += f64::from(err.abs());
+            let want = if err > 0.0 {
+                k
+            } else if err < 0.0 {
+                -k
+            } else {
+                0.0
+            };
+            assert_eq!(d[i].to_bits(), want.to_bits(), "pixel {i}");
+        }
+        assert!(
+            (e - sum / n as f64).abs() <= 1e-12 * e,
+            "{e} {}",
+            sum / n as f64
+        );
+        assert!(d.iter().filter(|&&g| g == 0.0).count() >= n / 3);
     }
 }
