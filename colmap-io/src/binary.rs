@@ -343,22 +343,31 @@ pub(crate) fn images_bytes(images: &BTreeMap<u32, ImageRecord>) -> Vec<u8> {
     out
 }
 
-/// Bytes of `points3D.bin`.
-pub(crate) fn points3d_bytes(points: &BTreeMap<u64, Point3D>) -> Vec<u8> {
-    let mut out = Vec::new();
-    put_u64(&mut out, points.len() as u64);
-    for (&id, p) in points {
-        put_u64(&mut out, id);
-        for v in p.xyz.to_array() {
-            put_f64(&mut out, v);
+/// Bytes of `points3D.bin`: the count, then the records in id order, encoded in parallel
+/// ([`crate::io::encode_points_in_parallel`]); the pieces concatenated are the file.
+pub(crate) fn points3d_bytes(points: &BTreeMap<u64, Point3D>) -> Vec<Vec<u8>> {
+    let mut count = Vec::new();
+    put_u64(&mut count, points.len() as u64);
+    let mut pieces = vec![count];
+    pieces.extend(crate::io::encode_points_in_parallel(points, |chunk| {
+        let tracks: usize = chunk.iter().map(|(_, p)| p.track.len()).sum();
+        let mut out = Vec::with_capacity(
+            chunk.len() * POINT3D_MIN as usize + tracks * TRACK_ELEMENT_SIZE as usize,
+        );
+        for &(&id, p) in chunk {
+            put_u64(&mut out, id);
+            for v in p.xyz.to_array() {
+                put_f64(&mut out, v);
+            }
+            out.extend_from_slice(&p.rgb);
+            put_f64(&mut out, p.error);
+            put_u64(&mut out, p.track.len() as u64);
+            for t in &p.track {
+                out.extend_from_slice(&t.image_id.to_le_bytes());
+                out.extend_from_slice(&t.point2d_idx.to_le_bytes());
+            }
         }
-        out.extend_from_slice(&p.rgb);
-        put_f64(&mut out, p.error);
-        put_u64(&mut out, p.track.len() as u64);
-        for t in &p.track {
-            out.extend_from_slice(&t.image_id.to_le_bytes());
-            out.extend_from_slice(&t.point2d_idx.to_le_bytes());
-        }
-    }
-    out
+        out
+    }));
+    pieces
 }

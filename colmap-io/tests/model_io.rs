@@ -131,6 +131,60 @@ fn text_and_binary_round_trips_are_exact() {
     );
 }
 
+/// The point files are encoded in parallel pieces of 32,768 points: a model of several pieces
+/// (tracks of varying length, ids with gaps) must come back whole, its records in id order in
+/// both files, each text line and binary record where a serial writer would put it.
+#[test]
+fn many_points_written_in_pieces_keep_their_order() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut rec = sample();
+    rec.points3d = (0..100_000u64)
+        .map(|i| {
+            let id = 1 + 3 * i + i % 2; // gaps of 3 and 4
+            let f = i as f64;
+            let point = Point3D {
+                xyz: DVec3::new(f / 7.0, -f * 1e-9, 1e6 + f / 3.0),
+                rgb: [(i % 256) as u8, (i / 256 % 256) as u8, 7],
+                error: if i % 5 == 0 { -1.0 } else { f / 11.0 },
+                track: Vec::new(),
+            };
+            (id, point)
+        })
+        .collect();
+    // The sample's points, whose tracks the sample's images observe, among them.
+    let observed: Vec<(u64, Point3D)> = sample().points3d.into_iter().collect();
+    for (id, p) in observed {
+        rec.points3d.insert(id, p);
+    }
+    assert!(rec.points3d.len() > 3 * 32_768);
+    let (txt, bin) = (tmp.path().join("txt"), tmp.path().join("bin"));
+    write_model(&txt, &rec, Format::Text).unwrap();
+    write_model(&bin, &rec, Format::Binary).unwrap();
+    assert_eq!(read_model(&txt).unwrap(), rec);
+    assert_eq!(read_model(&bin).unwrap(), rec);
+
+    // Text: after the three header lines, line k is the k-th point in id order.
+    let text = std::fs::read_to_string(txt.join("points3D.txt")).unwrap();
+    let ids: Vec<u64> = text
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .map(|l| l.split(' ').next().unwrap().parse().unwrap())
+        .collect();
+    assert_eq!(ids, rec.points3d.keys().copied().collect::<Vec<_>>());
+    assert_eq!(text.lines().filter(|l| l.starts_with('#')).count(), 3);
+
+    // Binary: the count, then each record's id where the records before it end.
+    let bytes = std::fs::read(bin.join("points3D.bin")).unwrap();
+    let u64_at = |at: usize| u64::from_le_bytes(bytes[at..at + 8].try_into().unwrap());
+    assert_eq!(u64_at(0), rec.points3d.len() as u64);
+    let mut at = 8;
+    for (&id, p) in &rec.points3d {
+        assert_eq!(u64_at(at), id, "record at byte {at}");
+        at += 8 + 24 + 3 + 8 + 8 + 8 * p.track.len();
+    }
+    assert_eq!(at, bytes.len());
+}
+
 #[test]
 fn every_image_line_is_followed_by_its_points2d_line() {
     let tmp = tempfile::tempdir().unwrap();
