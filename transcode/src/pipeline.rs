@@ -16,10 +16,10 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use camera_model::Camera;
-use glam::Vec3;
 use plenoptic_io::Model;
 use splat_core::Splats;
 use splat_train::eval::{EvalOptions, Metrics, RenderedView, evaluate_views};
+use splat_train::init::SurfaceIndex;
 use splat_train::schedule::Pace;
 use splat_train::{BudgetConfig, BudgetSearch, TrainConfig, Trainer, View, from_unorm16};
 
@@ -732,10 +732,9 @@ fn reference_views(
 pub struct Surfaces {
     /// The points splats are initialised on.
     pub init: SurfacePoints,
-    /// The surface the evaluator measures splat distances to: the cloud, or dense mesh samples.
-    pub distance: Vec<Vec3>,
-    /// The median spacing of `distance`'s points.
-    pub spacing: f32,
+    /// The surface the evaluator measures splat distances to: the cloud, or dense mesh samples,
+    /// indexed once (`None` when it has no points).
+    pub distance: Option<SurfaceIndex>,
 }
 
 impl Surfaces {
@@ -762,11 +761,9 @@ impl Surfaces {
             cfg.training.seed,
         );
         let distance = distance.unwrap_or_else(|| init.positions.clone());
-        let spacing = init::point_spacing(&distance);
         Self {
             init,
-            distance,
-            spacing,
+            distance: SurfaceIndex::new(distance),
         }
     }
 }
@@ -1099,7 +1096,7 @@ fn colour_solve(
         let (m, _) = evaluate_views(
             s,
             &refs.heldout,
-            Some((&surfaces.distance, surfaces.spacing)),
+            surfaces.distance.as_ref(),
             &cfg.eval_options(),
         )?;
         Ok(HeldoutScore::from(&m))
@@ -1350,7 +1347,7 @@ fn evaluate(
     Ok(evaluate_views(
         splats,
         &refs.heldout,
-        Some((&surfaces.distance, surfaces.spacing)),
+        surfaces.distance.as_ref(),
         &cfg.eval_options(),
     )?)
 }

@@ -24,7 +24,7 @@ pub mod breakdown;
 
 pub use breakdown::{ErrorBreakdown, MASKED_ALPHA, RegionError};
 
-use crate::init::PointIndex;
+use crate::init::SurfaceIndex;
 use crate::metrics::{psnr, psnr_from_mse, ssim};
 use crate::view::View;
 
@@ -413,7 +413,7 @@ pub struct EvalOptions {
 pub fn evaluate_views(
     splats: &Splats,
     views: &[View],
-    surface: Option<(&[Vec3], f32)>,
+    surface: Option<&SurfaceIndex>,
     opts: &EvalOptions,
 ) -> Result<(Metrics, Vec<RenderedView>), EvalError> {
     let covered: Vec<usize> = views.iter().map(covered_pixels).collect();
@@ -484,9 +484,7 @@ pub fn evaluate_views(
         alpha_iou: mean(|v| v.alpha_iou),
         hole_alpha: mean(|v| v.hole_alpha),
         free_alpha: mean(|v| v.free_alpha),
-        surface: surface.and_then(|(points, spacing)| {
-            surface_distance(splats, points, spacing, opts.floater_spacings)
-        }),
+        surface: surface.and_then(|s| surface_distance(splats, s, opts.floater_spacings)),
         splats: splats.len(),
         views: per_view,
     };
@@ -526,26 +524,25 @@ pub fn coverage_errors(rendered: &[f32], reference: &[f32]) -> (f64, f64) {
     (hole / nh.max(1) as f64, free / nf.max(1) as f64)
 }
 
-/// Opacity-weighted distance of splat centres to the nearest surface point; `None` without
-/// splats or surface points.
+/// Opacity-weighted distance of splat centres to the nearest point of `surface`, floaters
+/// judged in units of its spacing; `None` without splats.
 #[must_use]
 pub fn surface_distance(
     splats: &Splats,
-    surface: &[Vec3],
-    spacing: f32,
+    surface: &SurfaceIndex,
     floater_spacings: f64,
 ) -> Option<SurfaceDistance> {
-    let index = PointIndex::new(surface)?;
     if splats.is_empty() {
         return None;
     }
+    let spacing = surface.spacing();
     let mut d: Vec<(f64, f64)> = splats
         .means
         .par_iter()
         .zip(&splats.opacity_logits)
         .map(|(m, &o)| {
             (
-                f64::from(index.nearest_distance(*m)),
+                f64::from(surface.nearest_distance(*m)),
                 f64::from(splat_core::sigmoid(o)),
             )
         })
@@ -647,7 +644,9 @@ mod tests {
                 &[[0.0; 3]],
             );
         }
-        let d = surface_distance(&s, &surface, 1.0, 2.0).unwrap();
+        let surface = SurfaceIndex::new(surface).unwrap();
+        assert_eq!(surface.spacing(), 1.0);
+        let d = surface_distance(&s, &surface, 2.0).unwrap();
         assert!((d.mean - 10.5 / 3.0).abs() < 1e-5, "{}", d.mean);
         assert!((d.floater_share - 1.0 / 3.0).abs() < 1e-9);
         assert_eq!(d.floaters, 1);

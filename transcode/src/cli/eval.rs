@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Context as _;
 use splat_init as init;
 use splat_train::eval::evaluate_views;
+use splat_train::init::SurfaceIndex;
 use transcode::config::Config;
 
 use super::config::{Overrides, flat, require_file};
@@ -48,18 +49,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 plenoptic_io::Model::Cloud(c) => c.positions,
                 plenoptic_io::Model::Mesh(m) => init::sample_mesh(&m, 200_000, 0).positions,
             };
-            let spacing = init::point_spacing(&points);
-            Some((points, spacing))
+            SurfaceIndex::new(points)
         }
         None => None,
     };
-    let (metrics, _) = evaluate_views(
-        &splats,
-        &views,
-        surface.as_ref().map(|(p, s)| (p.as_slice(), *s)),
-        &config.eval_options(),
-    )
-    .with_context(|| format!("cannot evaluate against {}", args.reference.display()))?;
+    let (metrics, _) = evaluate_views(&splats, &views, surface.as_ref(), &config.eval_options())
+        .with_context(|| format!("cannot evaluate against {}", args.reference.display()))?;
     println!("{} views, {} splats", views.len(), metrics.splats);
     println!("view                 PSNR black  PSNR white  SSIM black  SSIM white  alpha IoU");
     for v in &metrics.views {
