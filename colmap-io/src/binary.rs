@@ -5,6 +5,7 @@
 //! corrupt header cannot make the reader reserve more memory than the file could fill.
 
 use std::collections::BTreeMap;
+use std::collections::btree_map::Range;
 use std::path::Path;
 
 use glam::{DVec2, DVec3};
@@ -343,31 +344,33 @@ pub(crate) fn images_bytes(images: &BTreeMap<u32, ImageRecord>) -> Vec<u8> {
     out
 }
 
-/// Bytes of `points3D.bin`: the count, then the records in id order, encoded in parallel
-/// ([`crate::io::encode_points_in_parallel`]); the pieces concatenated are the file.
-pub(crate) fn points3d_bytes(points: &BTreeMap<u64, Point3D>) -> Vec<Vec<u8>> {
+/// The head of `points3D.bin`: the number of points. The records follow, encoded by
+/// [`points3d_records`] ([`crate::io::write_points`]).
+pub(crate) fn points3d_head(points: &BTreeMap<u64, Point3D>) -> Vec<u8> {
     let mut count = Vec::new();
     put_u64(&mut count, points.len() as u64);
-    let mut pieces = vec![count];
-    pieces.extend(crate::io::encode_points_in_parallel(points, |chunk| {
-        let tracks: usize = chunk.iter().map(|(_, p)| p.track.len()).sum();
-        let mut out = Vec::with_capacity(
-            chunk.len() * POINT3D_MIN as usize + tracks * TRACK_ELEMENT_SIZE as usize,
-        );
-        for &(&id, p) in chunk {
-            put_u64(&mut out, id);
-            for v in p.xyz.to_array() {
-                put_f64(&mut out, v);
-            }
-            out.extend_from_slice(&p.rgb);
-            put_f64(&mut out, p.error);
-            put_u64(&mut out, p.track.len() as u64);
-            for t in &p.track {
-                out.extend_from_slice(&t.image_id.to_le_bytes());
-                out.extend_from_slice(&t.point2d_idx.to_le_bytes());
-            }
+    count
+}
+
+/// Bytes of the `points3D.bin` records of a run of points, in id order.
+pub(crate) fn points3d_records(run: Range<'_, u64, Point3D>) -> Vec<u8> {
+    let (records, tracks) = run
+        .clone()
+        .fold((0, 0), |(n, t), (_, p)| (n + 1, t + p.track.len()));
+    let mut out =
+        Vec::with_capacity(records * POINT3D_MIN as usize + tracks * TRACK_ELEMENT_SIZE as usize);
+    for (&id, p) in run {
+        put_u64(&mut out, id);
+        for v in p.xyz.to_array() {
+            put_f64(&mut out, v);
         }
-        out
-    }));
-    pieces
+        out.extend_from_slice(&p.rgb);
+        put_f64(&mut out, p.error);
+        put_u64(&mut out, p.track.len() as u64);
+        for t in &p.track {
+            out.extend_from_slice(&t.image_id.to_le_bytes());
+            out.extend_from_slice(&t.point2d_idx.to_le_bytes());
+        }
+    }
+    out
 }

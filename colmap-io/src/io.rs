@@ -1,6 +1,7 @@
 //! Reading and writing whole models in a folder, in either encoding.
 
 use std::collections::BTreeMap;
+use std::collections::btree_map::Range;
 use std::io::Write;
 use std::path::Path;
 
@@ -126,54 +127,68 @@ pub fn write_model(dir: &Path, rec: &Reconstruction, format: Format) -> Result<(
     }
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let path = |name: &str| dir.join(format!("{name}.{}", format.extension()));
-    let (cameras, images, points) = match format {
+    let (cameras, images, head, records): (_, _, _, EncodeRun) = match format {
         Format::Text => (
             text::cameras_text(&rec.cameras).into_bytes(),
             text::images_text(&rec.images)
                 .map_err(Error::Invalid)?
                 .into_bytes(),
-            text::points3d_text(&rec.points3d)
-                .into_iter()
-                .map(String::into_bytes)
-                .collect(),
+            text::points3d_head(&rec.points3d),
+            text::points3d_lines,
         ),
         Format::Binary => (
             binary::cameras_bytes(&rec.cameras),
             binary::images_bytes(&rec.images),
-            binary::points3d_bytes(&rec.points3d),
+            binary::points3d_head(&rec.points3d),
+            binary::points3d_records,
         ),
     };
     write_file(&path("cameras"), &cameras)?;
     write_file(&path("images"), &images)?;
-    write_pieces(&path("points3D"), &points)
+    write_points(&path("points3D"), &head, &rec.points3d, records)
 }
 
 /// Points of `points3D` that one parallel task encodes: a paper-scale frame's 3M points make a
 /// 100 MB text file whose number formatting takes over a second on one core.
 pub(crate) const POINTS_PER_TASK: usize = 1 << 15;
 
-/// The entries of `points` in id order, encoded [`POINTS_PER_TASK`] at a time in parallel by
-/// `encode`; the pieces concatenated in order are the file's records.
-pub(crate) fn encode_points_in_parallel<T, F>(points: &BTreeMap<u64, Point3D>, encode: F) -> Vec<T>
-where
-    T: Send,
-    F: Fn(&[(&u64, &Point3D)]) -> T + Sync + Send,
-{
-    let entries: Vec<(&u64, &Point3D)> = points.iter().collect();
-    entries.par_chunks(POINTS_PER_TASK).map(encode).collect()
+/// Encodes a run of points (consecutive ids) as their records in a `points3D` file.
+pub(crate) type EncodeRun = fn(Range<'_, u64, Point3D>) -> Vec<u8>;
+
+/// Tasks encoded before their pieces are written: what is held at once is this many pieces
+/// (about 20 MB of text), not the whole file.
+const TASKS_PER_BATCH: usize = 8;
+
+/// Writes `head` and then the records of `points` in id order to `path` atomically (like
+/// [`write_file`]): runs of [`POINTS_PER_TASK`] points, each taken as a key range of the map,
+/// are encoded by `encode` in parallel a batch at a time and written in order.
+pub(crate) fn write_points(
+    path: &Path,
+    head: &[u8],
+    points: &BTreeMap<u64, Point3D>,
+    encode: EncodeRun,
+) -> Result<(), Error> {
+    let firsts: Vec<u64> = points.keys().step_by(POINTS_PER_TASK).copied().collect();
+    let run = |k: usize| match firsts.get(k + 1) {
+        Some(&end) => points.range(firsts[k]..end),
+        None => points.range(firsts[k]..),
+    };
+    atomic_output::write_atomic_with(path, |w| {
+        w.write_all(head)?;
+        for batch in (0..firsts.len()).step_by(TASKS_PER_BATCH) {
+            let tasks = batch..(batch + TASKS_PER_BATCH).min(firsts.len());
+            let pieces: Vec<Vec<u8>> = tasks.into_par_iter().map(|k| encode(run(k))).collect();
+            for piece in &pieces {
+                w.write_all(piece)?;
+            }
+        }
+        Ok(())
+    })
+    .map_err(|e| Error::io(path, e))
 }
 
 /// Writes `bytes` to `path` atomically (see [`atomic_output::write_atomic`]), so readers never
 /// see a half-written file; the error names the file.
 pub(crate) fn write_file(path: &Path, bytes: &[u8]) -> Result<(), Error> {
     atomic_output::write_atomic(path, bytes).map_err(|e| Error::io(path, e))
-}
-
-/// Writes the concatenation of `pieces` to `path` atomically, like [`write_file`], without
-/// first copying them into one buffer.
-pub(crate) fn write_pieces(path: &Path, pieces: &[Vec<u8>]) -> Result<(), Error> {
-    atomic_output::write_atomic_with(path, |w| {
-        pieces.iter().try_for_each(|piece| w.write_all(piece))
-    })
-    .map_err(|e| Error::io(path, e))
 }

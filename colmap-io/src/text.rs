@@ -5,6 +5,7 @@
 //! text ↔ binary conversions are exact.
 
 use std::collections::BTreeMap;
+use std::collections::btree_map::Range;
 use std::fmt::Write as _;
 use std::path::Path;
 use std::str::FromStr;
@@ -371,9 +372,9 @@ pub(crate) fn images_text(images: &BTreeMap<u32, ImageRecord>) -> Result<String,
     Ok(s)
 }
 
-/// Text of `points3D.txt`: the header, then the point lines in id order, formatted in parallel
-/// ([`crate::io::encode_points_in_parallel`]); the pieces concatenated are the file.
-pub(crate) fn points3d_text(points: &BTreeMap<u64, Point3D>) -> Vec<String> {
+/// The header of `points3D.txt`. The point lines follow, formatted by [`points3d_lines`]
+/// ([`crate::io::write_points`]).
+pub(crate) fn points3d_head(points: &BTreeMap<u64, Point3D>) -> Vec<u8> {
     let total: usize = points.values().map(|p| p.track.len()).sum();
     let mean = if points.is_empty() {
         0.0
@@ -388,18 +389,20 @@ pub(crate) fn points3d_text(points: &BTreeMap<u64, Point3D>) -> Vec<String> {
         "# Number of points: {}, mean track length: {mean}",
         points.len()
     );
-    let mut pieces = vec![header];
-    pieces.extend(crate::io::encode_points_in_parallel(points, |chunk| {
-        let mut s = String::with_capacity(chunk.len() * POINT_LINE_BYTES);
-        for &(id, p) in chunk {
-            push_point3d_line(&mut s, *id, p);
-        }
-        s
-    }));
-    pieces
+    header.into_bytes()
 }
 
-/// About the length of a point line with an empty track (the pieces' first allocation).
+/// The `points3D.txt` lines of a run of points, in id order.
+pub(crate) fn points3d_lines(run: Range<'_, u64, Point3D>) -> Vec<u8> {
+    let mut s = String::with_capacity(crate::io::POINTS_PER_TASK * POINT_LINE_BYTES);
+    for (&id, p) in run {
+        push_point3d_line(&mut s, id, p);
+    }
+    s.into_bytes()
+}
+
+/// About the length of a point line with an empty track (the pieces' first allocation, of
+/// which only what is written is ever touched).
 const POINT_LINE_BYTES: usize = 80;
 
 /// One line of `points3D.txt`. Integers go through `itoa` rather than `write!`: with the floats

@@ -131,14 +131,15 @@ fn text_and_binary_round_trips_are_exact() {
     );
 }
 
-/// The point files are encoded in parallel pieces of 32,768 points: a model of several pieces
-/// (tracks of varying length, ids with gaps) must come back whole, its records in id order in
-/// both files, each text line and binary record where a serial writer would put it.
+/// The point files are encoded in parallel pieces of 32,768 points, eight pieces a batch: a
+/// model of several batches (tracks of varying length, ids with gaps) must come back whole, its
+/// records in id order in both files, each text line and binary record where a serial writer
+/// would put it.
 #[test]
 fn many_points_written_in_pieces_keep_their_order() {
     let tmp = tempfile::tempdir().unwrap();
     let mut rec = sample();
-    rec.points3d = (0..100_000u64)
+    rec.points3d = (0..300_000u64)
         .map(|i| {
             let id = 1 + 3 * i + i % 2; // gaps of 3 and 4
             let f = i as f64;
@@ -156,7 +157,7 @@ fn many_points_written_in_pieces_keep_their_order() {
     for (id, p) in observed {
         rec.points3d.insert(id, p);
     }
-    assert!(rec.points3d.len() > 3 * 32_768);
+    assert!(rec.points3d.len() > 9 * 32_768);
     let (txt, bin) = (tmp.path().join("txt"), tmp.path().join("bin"));
     write_model(&txt, &rec, Format::Text).unwrap();
     write_model(&bin, &rec, Format::Binary).unwrap();
