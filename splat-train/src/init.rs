@@ -179,12 +179,17 @@ mod tests {
     use super::*;
     use rand::{RngExt, SeedableRng};
 
+    /// `n` random points in a thin slab [0, 1]² × [0, 0.1].
+    fn slab_points(rng: &mut impl rand::Rng, n: usize) -> Vec<glam::Vec3> {
+        (0..n)
+            .map(|_| glam::Vec3::new(rng.random(), rng.random(), rng.random::<f32>() * 0.1))
+            .collect()
+    }
+
     #[test]
     fn surface_index_measures_what_the_free_functions_do() {
         let mut rng = rand_pcg::Pcg64::seed_from_u64(11);
-        let pts: Vec<glam::Vec3> = (0..3_000)
-            .map(|_| glam::Vec3::new(rng.random(), rng.random(), rng.random::<f32>() * 0.1))
-            .collect();
+        let pts = slab_points(&mut rng, 3_000);
         let surface = SurfaceIndex::new(pts.clone()).unwrap();
         assert_eq!(surface.points(), &pts[..]);
         assert_eq!(surface.spacing().to_bits(), point_spacing(&pts).to_bits());
@@ -202,9 +207,7 @@ mod tests {
     #[test]
     fn matches_brute_force() {
         let mut rng = rand_pcg::Pcg64::seed_from_u64(5);
-        let pts: Vec<glam::Vec3> = (0..300)
-            .map(|_| glam::Vec3::new(rng.random(), rng.random(), rng.random::<f32>() * 0.1))
-            .collect();
+        let pts = slab_points(&mut rng, 300);
         let ours = scales_from_knn(&pts);
         for (i, p) in pts.iter().enumerate() {
             let mut d: Vec<f64> = pts
