@@ -123,20 +123,21 @@ fn spacing_in(index: &PointIndex, points: &[glam::Vec3]) -> f32 {
     d[d.len() / 2]
 }
 
-/// A surface that splat distances are measured to (`eval::surface_distance`): its points,
-/// their nearest-neighbour index and median spacing, built once. A paper-scale cloud's 3M
-/// points take most of a second to index on one thread, and a run measures the spacing and two
-/// evaluations' distances against the same surface.
+/// A surface that splat distances are measured to (`eval::surface_distance`): the
+/// nearest-neighbour index of its points and their median spacing, built once. A paper-scale
+/// cloud's 3M points take most of a second to index on one thread, and a run measures the
+/// spacing and two evaluations' distances against the same surface. The index keeps its own
+/// copy of the points, so the caller's are not held too.
 pub struct SurfaceIndex {
-    points: Vec<glam::Vec3>,
     index: PointIndex,
+    points: usize,
     spacing: f32,
 }
 
 impl std::fmt::Debug for SurfaceIndex {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("SurfaceIndex")
-            .field("points", &self.points.len())
+            .field("points", &self.points)
             .field("spacing", &self.spacing)
             .finish_non_exhaustive()
     }
@@ -145,20 +146,26 @@ impl std::fmt::Debug for SurfaceIndex {
 impl SurfaceIndex {
     /// Indexes `points`; `None` for an empty or unindexable set.
     #[must_use]
-    pub fn new(points: Vec<glam::Vec3>) -> Option<Self> {
-        let index = PointIndex::new(&points)?;
-        let spacing = spacing_in(&index, &points);
+    pub fn new(points: &[glam::Vec3]) -> Option<Self> {
+        let index = PointIndex::new(points)?;
+        let spacing = spacing_in(&index, points);
         Some(Self {
-            points,
             index,
+            points: points.len(),
             spacing,
         })
     }
 
-    /// The surface's points.
+    /// How many points the surface has.
     #[must_use]
-    pub fn points(&self) -> &[glam::Vec3] {
-        &self.points
+    pub fn len(&self) -> usize {
+        self.points
+    }
+
+    /// Whether the surface has no points (never: [`SurfaceIndex::new`] refuses an empty set).
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.points == 0
     }
 
     /// The median distance from a point to its nearest other point ([`point_spacing`]).
@@ -190,8 +197,8 @@ mod tests {
     fn surface_index_measures_what_the_free_functions_do() {
         let mut rng = rand_pcg::Pcg64::seed_from_u64(11);
         let pts = slab_points(&mut rng, 3_000);
-        let surface = SurfaceIndex::new(pts.clone()).unwrap();
-        assert_eq!(surface.points(), &pts[..]);
+        let surface = SurfaceIndex::new(&pts).unwrap();
+        assert_eq!(surface.len(), pts.len());
         assert_eq!(surface.spacing().to_bits(), point_spacing(&pts).to_bits());
         for _ in 0..200 {
             let q = glam::Vec3::new(rng.random(), rng.random(), rng.random());
@@ -201,7 +208,7 @@ mod tests {
                 .fold(f32::INFINITY, f32::min);
             assert!((surface.nearest_distance(q) - brute).abs() <= 1e-6 * (1.0 + brute));
         }
-        assert!(SurfaceIndex::new(Vec::new()).is_none());
+        assert!(SurfaceIndex::new(&[]).is_none());
     }
 
     #[test]

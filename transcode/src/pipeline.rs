@@ -760,11 +760,9 @@ impl Surfaces {
             cfg.init.splats.unwrap_or(cfg.init.mesh_samples),
             cfg.training.seed,
         );
-        let distance = distance.unwrap_or_else(|| init.positions.clone());
-        Self {
-            init,
-            distance: SurfaceIndex::new(distance),
-        }
+        // A cloud's own points are the surface: indexed where they are, not copied.
+        let distance = SurfaceIndex::new(distance.as_deref().unwrap_or(&init.positions));
+        Self { init, distance }
     }
 }
 

@@ -644,7 +644,7 @@ mod tests {
                 &[[0.0; 3]],
             );
         }
-        let surface = SurfaceIndex::new(surface).unwrap();
+        let surface = SurfaceIndex::new(&surface).unwrap();
         assert_eq!(surface.spacing(), 1.0);
         let d = surface_distance(&s, &surface, 2.0).unwrap();
         assert!((d.mean - 10.5 / 3.0).abs() < 1e-5, "{}", d.mean);

@@ -49,7 +49,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 plenoptic_io::Model::Cloud(c) => c.positions,
                 plenoptic_io::Model::Mesh(m) => init::sample_mesh(&m, 200_000, 0).positions,
             };
-            SurfaceIndex::new(points)
+            SurfaceIndex::new(&points)
         }
         None => None,
     };
