@@ -394,16 +394,12 @@ pub(crate) fn points3d_head(points: &BTreeMap<u64, Point3D>) -> Vec<u8> {
 
 /// The `points3D.txt` lines of a run of points, in id order.
 pub(crate) fn points3d_lines(run: Range<'_, u64, Point3D>) -> Vec<u8> {
-    let mut s = String::with_capacity(crate::io::POINTS_PER_TASK * POINT_LINE_BYTES);
+    let mut s = String::new();
     for (&id, p) in run {
         push_point3d_line(&mut s, id, p);
     }
     s.into_bytes()
 }
-
-/// About the length of a point line with an empty track (the pieces' first allocation, of
-/// which only what is written is ever touched).
-const POINT_LINE_BYTES: usize = 80;
 
 /// One line of `points3D.txt`. Integers go through `itoa` rather than `write!`: with the floats
 /// fast, `core::fmt`'s machinery around each integer was most of a line's time.
