@@ -369,6 +369,8 @@ def compare(report: dict) -> dict:
             "masked_psnr_white": m["masked_psnr_white"],
             "ssim_black": m["ssim_black"],
             "ssim_white": m["ssim_white"],
+            "far_share": m["surface"].get("far_share") if m.get("surface") else None,
+            "interior_share": m["surface"].get("interior_share") if m.get("surface") else None,
             "floater_share": m["surface"]["floater_share"] if m.get("surface") else None,
             "floaters": m["surface"]["floaters"] if m.get("surface") else None,
             "first_within_0_5_db_of_sfm_final": first_reaching(r["heldout_curve"], target),
@@ -437,14 +439,16 @@ def markdown(result: dict) -> str:
         "## Training",
         "",
         "| init | splats | held-out PSNR black / white (dB) | masked black / white (dB) | SSIM black | "
-        "floater share | first step within 0.5 dB of SfM's final | training time |",
+        "opacity beyond 2 spacings (inside the object / floaters) | "
+        "first step within 0.5 dB of SfM's final | training time |",
         "|---|---|---|---|---|---|---|---|",
     ]
     for mode in ("surface", "sparse"):
         m = c["models"][mode]
         first = m["first_within_0_5_db_of_sfm_final"]
         first_s = f"{first['iteration']} ({first['elapsed_s']:.0f} s)" if first else "never"
-        floats = "–" if m["floater_share"] is None else f"{100 * m['floater_share']:.1f} %"
+        pct = lambda x: "–" if x is None else f"{100 * x:.1f} %"
+        floats = f"{pct(m['far_share'])} ({pct(m['interior_share'])} / {pct(m['floater_share'])})"
         lines.append(
             f"| {'surface' if mode == 'surface' else 'COLMAP points3D'} | {m['splats']:,} | "
             f"{m['psnr_black']:.2f} / {m['psnr_white']:.2f} | {m['masked_psnr_black']:.2f} / "

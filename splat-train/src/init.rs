@@ -81,6 +81,17 @@ impl PointIndex {
             .sqrt()
     }
 
+    /// Distance from `p` to the nearest indexed point, and that point's index.
+    #[must_use]
+    pub fn nearest(&self, p: glam::Vec3) -> (f32, usize) {
+        let found = self
+            .tree
+            .query(&p.to_array())
+            .nearest_one::<SquaredEuclidean<f32>>()
+            .execute();
+        (found.distance.sqrt(), found.item as usize)
+    }
+
     /// Indices of the `k` nearest indexed points to `p` (nearest first; includes `p` itself if
     /// indexed).
     #[must_use]
@@ -124,34 +135,55 @@ fn spacing_in(index: &PointIndex, points: &[glam::Vec3]) -> f32 {
 }
 
 /// A surface that splat distances are measured to (`eval::surface_distance`): the
-/// nearest-neighbour index of its points and their median spacing, built once. A paper-scale
-/// cloud's 3M points take most of a second to index on one thread, and a run measures the
-/// spacing and two evaluations' distances against the same surface. The index keeps its own
-/// copy of the points, so the caller's are not held too.
+/// nearest-neighbour index of its points, the points themselves and, when the input has them,
+/// their outward normals, and their median spacing, built once. A paper-scale cloud's 3M
+/// points take most of a second to index on one thread, and a run measures the spacing and two
+/// evaluations' distances against the same surface.
 pub struct SurfaceIndex {
     index: PointIndex,
-    points: usize,
+    points: Vec<glam::Vec3>,
+    normals: Option<Vec<glam::Vec3>>,
     spacing: f32,
+}
+
+/// The surface point nearest to a query ([`SurfaceIndex::nearest`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NearestSurfacePoint {
+    /// Distance from the query to the point.
+    pub distance: f32,
+    /// The point.
+    pub position: glam::Vec3,
+    /// Its normal, where the surface has normals (not necessarily of unit length).
+    pub normal: Option<glam::Vec3>,
 }
 
 impl std::fmt::Debug for SurfaceIndex {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("SurfaceIndex")
-            .field("points", &self.points)
+            .field("points", &self.points.len())
+            .field("oriented", &self.normals.is_some())
             .field("spacing", &self.spacing)
             .finish_non_exhaustive()
     }
 }
 
 impl SurfaceIndex {
-    /// Indexes `points`; `None` for an empty or unindexable set.
+    /// Indexes `points`, with their outward `normals` where the input has them; `None` for an
+    /// empty or unindexable set.
+    ///
+    /// # Panics
+    /// If `normals` is not one per point (a caller bug).
     #[must_use]
-    pub fn new(points: &[glam::Vec3]) -> Option<Self> {
+    pub fn new(points: &[glam::Vec3], normals: Option<&[glam::Vec3]>) -> Option<Self> {
+        if let Some(n) = normals {
+            assert_eq!(n.len(), points.len(), "SurfaceIndex: one normal per point");
+        }
         let index = PointIndex::new(points)?;
         let spacing = spacing_in(&index, points);
         Some(Self {
             index,
-            points: points.len(),
+            points: points.to_vec(),
+            normals: normals.map(<[glam::Vec3]>::to_vec),
             spacing,
         })
     }
@@ -159,13 +191,19 @@ impl SurfaceIndex {
     /// How many points the surface has.
     #[must_use]
     pub fn len(&self) -> usize {
-        self.points
+        self.points.len()
     }
 
     /// Whether the surface has no points (never: [`SurfaceIndex::new`] refuses an empty set).
     #[must_use]
     pub fn is_empty(&self) -> bool {
-        self.points == 0
+        self.points.is_empty()
+    }
+
+    /// Whether the surface has normals, so that a side of it can be told from the other.
+    #[must_use]
+    pub fn is_oriented(&self) -> bool {
+        self.normals.is_some()
     }
 
     /// The median distance from a point to its nearest other point ([`point_spacing`]).
@@ -178,6 +216,17 @@ impl SurfaceIndex {
     #[must_use]
     pub fn nearest_distance(&self, p: glam::Vec3) -> f32 {
         self.index.nearest_distance(p)
+    }
+
+    /// The surface point nearest to `p`, with its normal where the surface has normals.
+    #[must_use]
+    pub fn nearest(&self, p: glam::Vec3) -> NearestSurfacePoint {
+        let (distance, i) = self.index.nearest(p);
+        NearestSurfacePoint {
+            distance,
+            position: self.points[i],
+            normal: self.normals.as_ref().map(|n| n[i]),
+        }
     }
 }
 
@@ -197,7 +246,7 @@ mod tests {
     fn surface_index_measures_what_the_free_functions_do() {
         let mut rng = rand_pcg::Pcg64::seed_from_u64(11);
         let pts = slab_points(&mut rng, 3_000);
-        let surface = SurfaceIndex::new(&pts).unwrap();
+        let surface = SurfaceIndex::new(&pts, None).unwrap();
         assert_eq!(surface.len(), pts.len());
         assert_eq!(surface.spacing().to_bits(), point_spacing(&pts).to_bits());
         for _ in 0..200 {
@@ -207,8 +256,25 @@ mod tests {
                 .map(|p| p.distance(q))
                 .fold(f32::INFINITY, f32::min);
             assert!((surface.nearest_distance(q) - brute).abs() <= 1e-6 * (1.0 + brute));
+            let nearest = surface.nearest(q);
+            assert_eq!(
+                nearest.distance.to_bits(),
+                surface.nearest_distance(q).to_bits()
+            );
+            assert!((nearest.position.distance(q) - brute).abs() <= 1e-6 * (1.0 + brute));
+            assert!(pts.contains(&nearest.position) && nearest.normal.is_none());
         }
-        assert!(SurfaceIndex::new(&[]).is_none());
+        assert!(!surface.is_oriented());
+        // Normals are handed back with their own point: here each normal encodes its point.
+        let normals: Vec<glam::Vec3> = pts.iter().map(|p| 2.0 * *p + 1.0).collect();
+        let oriented = SurfaceIndex::new(&pts, Some(&normals)).unwrap();
+        assert!(oriented.is_oriented());
+        for _ in 0..50 {
+            let q = glam::Vec3::new(rng.random(), rng.random(), rng.random());
+            let n = oriented.nearest(q);
+            assert_eq!(n.normal, Some(2.0 * n.position + 1.0));
+        }
+        assert!(SurfaceIndex::new(&[], None).is_none());
     }
 
     #[test]

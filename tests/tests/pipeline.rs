@@ -160,12 +160,13 @@ fn pipeline_on_a_small_plenoptic_cloud() {
         sparse.psnr_black
     );
     // Surface splats move in training but stay on the surface: within half a point spacing on
-    // average, none of them a floater.
+    // average, none of them beyond the threshold (so none inside the object or floating).
     let d = m.surface.as_ref().unwrap();
     assert!(
-        d.mean < 0.5 * d.spacing && d.p95 < d.spacing && d.floater_share == 0.0,
+        d.mean < 0.5 * d.spacing && d.p95 < d.spacing && d.far == 0 && d.far_share == 0.0,
         "{d:?}"
     );
+    assert_eq!((d.interior, d.floaters), (0, 0), "{d:?}");
     assert_eq!(main.init.sh_degree, outcome.report.runs[1].init.sh_degree);
 
     // `transcode eval`'s path: the training views read back from the dataset folder (PNG, masks,

@@ -749,9 +749,7 @@ impl Surfaces {
     pub fn of(model: Model, cfg: &Config) -> Self {
         let distance = match &model {
             Model::Cloud(_) => None,
-            Model::Mesh(m) => {
-                Some(init::sample_mesh(m, 200_000, cfg.training.seed ^ 0x5eed).positions)
-            }
+            Model::Mesh(m) => Some(init::sample_mesh(m, 200_000, cfg.training.seed ^ 0x5eed)),
         };
         // Mesh samples: K of them when `--splats K` is given, so that K means splats for meshes too.
         let init = SurfacePoints::from_owned_model(
@@ -760,8 +758,9 @@ impl Surfaces {
             cfg.init.splats.unwrap_or(cfg.init.mesh_samples),
             cfg.training.seed,
         );
-        // A cloud's own points are the surface: indexed where they are, not copied.
-        let distance = SurfaceIndex::new(distance.as_deref().unwrap_or(&init.positions));
+        // A cloud's own points (and normals, where its file has them) are the surface.
+        let surface = distance.as_ref().unwrap_or(&init);
+        let distance = SurfaceIndex::new(&surface.positions, surface.normals.as_deref());
         Self { init, distance }
     }
 }

@@ -21,8 +21,10 @@ use serde::{Deserialize, Serialize};
 use splat_core::{Rasterizer, RenderCamera, RenderOptions, Splats};
 
 pub mod breakdown;
+pub mod surface;
 
 pub use breakdown::{ErrorBreakdown, MASKED_ALPHA, RegionError};
+pub use surface::{SurfaceDistance, surface_distance};
 
 use crate::init::SurfaceIndex;
 use crate::metrics::{psnr, psnr_from_mse, ssim};
@@ -311,23 +313,6 @@ pub struct ViewMetrics {
     pub covered_pixels: usize,
 }
 
-/// Opacity-weighted distance of splat centres to the input surface.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct SurfaceDistance {
-    /// Point spacing of the surface points (file units) used as the unit below.
-    pub spacing: f64,
-    /// Weighted mean distance (file units).
-    pub mean: f64,
-    /// Weighted 95th percentile distance (file units).
-    pub p95: f64,
-    /// Share of the total opacity in splats farther than `threshold` ("floaters").
-    pub floater_share: f64,
-    /// The floater threshold: `floater_spacings` × spacing.
-    pub threshold: f64,
-    /// Number of splats farther than `threshold`.
-    pub floaters: usize,
-}
-
 /// All metrics of a model on held-out views.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Metrics {
@@ -524,71 +509,6 @@ pub fn coverage_errors(rendered: &[f32], reference: &[f32]) -> (f64, f64) {
     (hole / nh.max(1) as f64, free / nf.max(1) as f64)
 }
 
-/// Opacity-weighted distance of splat centres to the nearest point of `surface`, floaters
-/// judged in units of its spacing; `None` without splats.
-#[must_use]
-pub fn surface_distance(
-    splats: &Splats,
-    surface: &SurfaceIndex,
-    floater_spacings: f64,
-) -> Option<SurfaceDistance> {
-    if splats.is_empty() {
-        return None;
-    }
-    let spacing = surface.spacing();
-    let mut d: Vec<(f64, f64)> = splats
-        .means
-        .par_iter()
-        .zip(&splats.opacity_logits)
-        .map(|(m, &o)| {
-            (
-                f64::from(surface.nearest_distance(*m)),
-                f64::from(splat_core::sigmoid(o)),
-            )
-        })
-        .collect();
-    let total: f64 = d.iter().map(|x| x.1).sum();
-    let threshold = floater_spacings * f64::from(spacing);
-    let floaters = d.iter().filter(|x| x.0 > threshold).count();
-    if total <= 0.0 {
-        return Some(SurfaceDistance {
-            spacing: f64::from(spacing),
-            mean: 0.0,
-            p95: 0.0,
-            floater_share: 0.0,
-            threshold,
-            floaters,
-        });
-    }
-    let mean = d.iter().map(|x| x.0 * x.1).sum::<f64>() / total;
-    // Adding 0.0 turns the empty sum's −0.0 into 0.0.
-    let beyond = d
-        .iter()
-        .filter(|x| x.0 > threshold)
-        .map(|x| x.1)
-        .sum::<f64>()
-        / total
-        + 0.0;
-    d.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let mut acc = 0.0;
-    let mut p95 = d.last().map_or(0.0, |x| x.0);
-    for (dist, w) in &d {
-        acc += w;
-        if acc >= 0.95 * total {
-            p95 = *dist;
-            break;
-        }
-    }
-    Some(SurfaceDistance {
-        spacing: f64::from(spacing),
-        mean,
-        p95,
-        floater_share: beyond,
-        threshold,
-        floaters,
-    })
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -628,29 +548,6 @@ mod tests {
         assert_eq!(iou(&[0.0; 3], &[0.0; 3], 0.5), 1.0);
         let (hole, free) = coverage_errors(&[0.5, 1.0, 0.25, 0.0], &[1.0, 1.0, 0.0, 0.0]);
         assert_eq!((hole, free), (0.25, 0.125));
-    }
-
-    #[test]
-    fn surface_distance_weights_by_opacity() {
-        // Surface: points on the x axis at spacing 1; splats at distance 0, 0.5 and 10.
-        let surface: Vec<Vec3> = (0..100).map(|i| Vec3::new(i as f32, 0.0, 0.0)).collect();
-        let mut s = Splats::new(0);
-        for (y, o) in [(0.0f32, 0.5f32), (0.5, 0.5), (10.0, 0.5)] {
-            s.push(
-                Vec3::new(50.0, y, 0.0),
-                Vec3::ZERO,
-                [1.0, 0.0, 0.0, 0.0],
-                splat_core::logit(o),
-                &[[0.0; 3]],
-            );
-        }
-        let surface = SurfaceIndex::new(&surface).unwrap();
-        assert_eq!(surface.spacing(), 1.0);
-        let d = surface_distance(&s, &surface, 2.0).unwrap();
-        assert!((d.mean - 10.5 / 3.0).abs() < 1e-5, "{}", d.mean);
-        assert!((d.floater_share - 1.0 / 3.0).abs() < 1e-9);
-        assert_eq!(d.floaters, 1);
-        assert!((d.p95 - 10.0).abs() < 1e-5);
     }
 
     /// A `w`×1 view straight down the z axis with the given coverage, grey where covered.

@@ -45,11 +45,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let surface = match &args.surface {
         Some(path) => {
             let model = plenoptic_io::load(path).map_err(flat)?;
-            let points = match model {
-                plenoptic_io::Model::Cloud(c) => c.positions,
-                plenoptic_io::Model::Mesh(m) => init::sample_mesh(&m, 200_000, 0).positions,
+            let (points, normals) = match model {
+                plenoptic_io::Model::Cloud(c) => (c.positions, c.normals),
+                plenoptic_io::Model::Mesh(m) => {
+                    let samples = init::sample_mesh(&m, 200_000, 0);
+                    (samples.positions, samples.normals)
+                }
             };
-            SurfaceIndex::new(&points)
+            SurfaceIndex::new(&points, normals.as_deref())
         }
         None => None,
     };
@@ -85,12 +88,26 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     if let Some(d) = &metrics.surface {
         println!(
-            "distance to surface: mean {:.4}, p95 {:.4} (spacing {:.4}); {} floaters beyond {:.4} hold {:.2}% of the opacity",
+            "distance to surface: mean {:.4}, p95 {:.4} (spacing {:.4}); {} splats beyond {:.4} hold {:.2}% of the opacity",
             d.mean,
             d.p95,
             d.spacing,
-            d.floaters,
+            d.far,
             d.threshold,
+            100.0 * d.far_share
+        );
+        let interior = if d.oriented {
+            format!(
+                "{} inside the object ({:.2}%)",
+                d.interior,
+                100.0 * d.interior_share
+            )
+        } else {
+            "none told inside (the surface has no normals)".to_string()
+        };
+        println!(
+            "of them: {interior}; {} floaters out of their 3-sigma reach of the surface ({:.2}%)",
+            d.floaters,
             100.0 * d.floater_share
         );
     }

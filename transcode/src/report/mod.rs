@@ -335,7 +335,7 @@ fn metrics_table(h: &mut String, report: &Report, names: &[String]) {
     }
     h.push_str("</tr>\n");
     type Row = (&'static str, fn(&RunReport) -> String);
-    let rows: [Row; 23] = [
+    let rows: [Row; 24] = [
         ("PSNR, black background (dB)", |r| {
             format!("{:.2}", r.metrics.psnr_black)
         }),
@@ -387,13 +387,21 @@ fn metrics_table(h: &mut String, report: &Report, names: &[String]) {
         ("distance to surface, 95th pct (spacings)", |r| {
             surface(r, |s| s.p95 / s.spacing.max(f64::MIN_POSITIVE))
         }),
-        ("floaters (beyond threshold)", |r| {
-            r.metrics
-                .surface
-                .as_ref()
-                .map_or("–".into(), |s| s.floaters.to_string())
+        ("splats beyond the threshold (count, opacity share)", |r| {
+            surface_count(r, |s| (s.far, s.far_share))
         }),
-        ("floater opacity share", |r| surface(r, |s| s.floater_share)),
+        ("of them inside the object", |r| {
+            surface_count(r, |s| {
+                if s.oriented {
+                    (s.interior, s.interior_share)
+                } else {
+                    (0, f64::NAN)
+                }
+            })
+        }),
+        ("of them floaters (out of 3σ reach of the surface)", |r| {
+            surface_count(r, |s| (s.floaters, s.floater_share))
+        }),
         ("iterations", |r| r.iterations.to_string()),
         ("training time (s)", |r| format!("{:.1}", r.train_seconds)),
         ("step time, probe / run (ms)", |r| {
@@ -508,6 +516,21 @@ fn surface(r: &RunReport, f: fn(&splat_train::eval::SurfaceDistance) -> f64) -> 
         .surface
         .as_ref()
         .map_or("–".into(), |s| format!("{:.3}", f(s)))
+}
+
+/// A count of splats and their opacity share from the run's surface distance ("–" without one;
+/// a share that is not a number stands for a figure the surface cannot give: no normals).
+fn surface_count(
+    r: &RunReport,
+    f: fn(&splat_train::eval::SurfaceDistance) -> (usize, f64),
+) -> String {
+    r.metrics
+        .surface
+        .as_ref()
+        .map_or("–".into(), |s| match f(s) {
+            (_, share) if share.is_nan() => "– (no normals)".into(),
+            (count, share) => format!("{count} ({:.1} %)", 100.0 * share),
+        })
 }
 
 fn timings_table(h: &mut String, report: &Report, names: &[String]) {
