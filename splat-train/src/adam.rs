@@ -271,16 +271,13 @@ impl AdamStep {
             };
         }
         let n = p.len().min(g.len()).min(m.len()).min(v.len());
-        let (b1, b2, eps) = (self.b1, self.b2, self.eps);
         for start in (0..n).step_by(block) {
             let len = block.min(n - start);
             let range = start..start + len;
             let (p, g) = (&mut p[range.clone()], &g[range.clone()]);
             let (m, v, rates) = (&mut m[range.clone()], &mut v[range], &table[..len]);
             for i in 0..len {
-                m[i] = b1 * m[i] + (1.0 - b1) * g[i];
-                v[i] = b2 * v[i] + (1.0 - b2) * g[i] * g[i];
-                p[i] -= rates[i] * self.inv_bc1 * m[i] / (v[i].sqrt() * self.inv_bc2_sqrt + eps);
+                self.value(&mut p[i], g[i], &mut m[i], &mut v[i], rates[i]);
             }
         }
     }
@@ -291,15 +288,21 @@ impl AdamStep {
         if rate == 0.0 {
             return;
         }
-        let (b1, b2, eps) = (self.b1, self.b2, self.eps);
         let n = p.len().min(g.len()).min(m.len()).min(v.len());
         let (p, g, m, v) = (&mut p[..n], &g[..n], &mut m[..n], &mut v[..n]);
         for i in 0..n {
-            m[i] = b1 * m[i] + (1.0 - b1) * g[i];
-            v[i] = b2 * v[i] + (1.0 - b2) * g[i] * g[i];
-            // PyTorch: p −= lr/bc1 · m / (√v/√bc2 + eps).
-            p[i] -= rate * self.inv_bc1 * m[i] / (v[i].sqrt() * self.inv_bc2_sqrt + eps);
+            self.value(&mut p[i], g[i], &mut m[i], &mut v[i], rate);
         }
+    }
+
+    /// The update of one value `p` with its moments `m`, `v` by its gradient `g` at `rate`:
+    /// the one place of Adam's formula (PyTorch's, in its order).
+    #[inline(always)]
+    fn value(&self, p: &mut f32, g: f32, m: &mut f32, v: &mut f32, rate: f32) {
+        *m = self.b1 * *m + (1.0 - self.b1) * g;
+        *v = self.b2 * *v + (1.0 - self.b2) * g * g;
+        // PyTorch: p −= lr/bc1 · m / (√v/√bc2 + eps).
+        *p -= rate * self.inv_bc1 * *m / (v.sqrt() * self.inv_bc2_sqrt + self.eps);
     }
 }
 
