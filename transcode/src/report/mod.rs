@@ -388,19 +388,19 @@ fn metrics_table(h: &mut String, report: &Report, names: &[String]) {
             surface(r, |s| s.p95 / s.spacing.max(f64::MIN_POSITIVE))
         }),
         ("splats beyond the threshold (count, opacity share)", |r| {
-            surface_count(r, |s| (s.far, s.far_share))
+            surface_text(r, |s| count_and_share(s.far, s.far_share))
         }),
         ("of them inside the object", |r| {
-            surface_count(r, |s| {
+            surface_text(r, |s| {
                 if s.oriented {
-                    (s.interior, s.interior_share)
+                    count_and_share(s.interior, s.interior_share)
                 } else {
-                    (0, f64::NAN)
+                    "– (no normals)".into()
                 }
             })
         }),
         ("of them floaters (out of 3σ reach of the surface)", |r| {
-            surface_count(r, |s| (s.floaters, s.floater_share))
+            surface_text(r, |s| count_and_share(s.floaters, s.floater_share))
         }),
         ("iterations", |r| r.iterations.to_string()),
         ("training time (s)", |r| format!("{:.1}", r.train_seconds)),
@@ -518,19 +518,14 @@ fn surface(r: &RunReport, f: fn(&splat_train::eval::SurfaceDistance) -> f64) -> 
         .map_or("–".into(), |s| format!("{:.3}", f(s)))
 }
 
-/// A count of splats and their opacity share from the run's surface distance ("–" without one;
-/// a share that is not a number stands for a figure the surface cannot give: no normals).
-fn surface_count(
-    r: &RunReport,
-    f: fn(&splat_train::eval::SurfaceDistance) -> (usize, f64),
-) -> String {
-    r.metrics
-        .surface
-        .as_ref()
-        .map_or("–".into(), |s| match f(s) {
-            (_, share) if share.is_nan() => "– (no normals)".into(),
-            (count, share) => format!("{count} ({:.1} %)", 100.0 * share),
-        })
+/// A cell from the run's surface distance ("–" without one).
+fn surface_text(r: &RunReport, f: fn(&splat_train::eval::SurfaceDistance) -> String) -> String {
+    r.metrics.surface.as_ref().map_or("–".into(), f)
+}
+
+/// A count of splats and their share of the opacity.
+fn count_and_share(count: usize, share: f64) -> String {
+    format!("{count} ({:.1} %)", 100.0 * share)
 }
 
 fn timings_table(h: &mut String, report: &Report, names: &[String]) {
