@@ -21,6 +21,7 @@
 
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
+use std::time::Instant;
 
 use glam::{Mat3, Quat, Vec3};
 use splat_core::{Splats, sigmoid};
@@ -239,9 +240,45 @@ pub struct BudgetRound {
     /// both branches train for the same time.
     #[serde(default)]
     pub steps_pruned: u32,
+    /// Where the round's wall time went (zero in rounds saved before it was measured).
+    #[serde(default)]
+    pub seconds: RoundSeconds,
+}
+
+/// The wall time of one round, by what it was spent on (seconds).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct RoundSeconds {
+    /// Scoring every splat's contribution, planning the merges and applying them.
+    pub planning: f64,
+    /// The control branch's training steps (the trainer's clock).
+    pub control: f64,
+    /// The merged branch's training steps (the trainer's clock).
+    pub merged: f64,
+    /// Scoring both branches on the held-out views.
+    pub scoring: f64,
+}
+
+impl RoundSeconds {
+    /// The whole round.
+    #[must_use]
+    pub fn total(&self) -> f64 {
+        self.planning + self.control + self.merged + self.scoring
+    }
 }
 
 impl BudgetRound {
+    /// The training time of the branch the round threw away: the control's when the merged
+    /// branch was kept, the merged branch's when it was refused (none when the control ran out
+    /// of time: training goes on from it).
+    #[must_use]
+    pub fn discarded_seconds(&self) -> f64 {
+        if self.accepted {
+            self.seconds.control
+        } else {
+            self.seconds.merged
+        }
+    }
+
     /// What the pruning cost (dB): the larger of its costs on black and on white, so that no
     /// background loses more than the search allows (a merge can sharpen a dark object's
     /// silhouettes, which only white shows, while blurring its texture, which black shows);
@@ -348,6 +385,8 @@ impl BudgetSearch {
             return Err(fail("no budget search is planned".into()));
         };
         let n = trainer.splats().len();
+        let planning = Instant::now();
+        let mut seconds = RoundSeconds::default();
         let contributions = trainer.contributions();
         let keep = self.next_keep(cfg.keep);
         let target_count = ((n as f64 * keep).round() as usize).max(cfg.min_splats.min(n));
@@ -363,6 +402,7 @@ impl BudgetSearch {
             self.exhausted = true;
             return Ok(None);
         }
+        seconds.planning = planning.elapsed().as_secs_f64();
         let target = iteration + plan.trial;
         let start = trainer.snapshot();
         let started_s = trainer.report(false).elapsed_s;
@@ -377,8 +417,11 @@ impl BudgetSearch {
                 break;
             }
             times.push(control.elapsed_s - started_s);
+            let scoring = Instant::now();
             kept.add(heldout_psnr(trainer.splats())?);
+            seconds.scoring += scoring.elapsed().as_secs_f64();
         }
+        seconds.control = control.elapsed_s - started_s;
         let kept_mean = kept.mean();
         let mut round = BudgetRound {
             iteration,
@@ -391,16 +434,19 @@ impl BudgetSearch {
             accepted: false,
             out_of_time: control.iterations < target,
             steps_pruned: 0,
+            seconds,
         };
         if round.out_of_time {
             self.rounds.push(round);
             return Ok(Some(round));
         }
+        let merging = Instant::now();
         let kept = trainer.swap_snapshot(start).map_err(fail)?;
         let keep = merges.apply(trainer.state_mut(), &contributions);
         trainer
             .prune(&keep)
             .map_err(|e| fail(format!("pruning: {e}")))?;
+        round.seconds.planning += merging.elapsed().as_secs_f64();
         let equal_time = trainer.config().time_budget.is_some();
         // The pruned branch, scored at the same steps, or under a time budget at the same
         // training times: there the branches get equal time, and the smaller model's faster
@@ -423,8 +469,11 @@ impl BudgetSearch {
             if pruned.stopped_by_budget || (!equal_time && pruned.iterations < at) {
                 break;
             }
+            let scoring = Instant::now();
             pruned_scores.add(heldout_psnr(trainer.splats())?);
+            round.seconds.scoring += scoring.elapsed().as_secs_f64();
         }
+        round.seconds.merged = pruned.elapsed_s - before;
         round.steps_pruned = pruned.iterations - iteration;
         round.out_of_time = pruned_scores.count < SCORE_POINTS;
         if pruned_scores.count > 0 {
@@ -813,6 +862,7 @@ mod tests {
             accepted: false,
             out_of_time: false,
             steps_pruned: 5,
+            seconds: RoundSeconds::default(),
         };
         assert!((round.drop_db().unwrap() - 0.4).abs() < 1e-9);
         let better_on_white = BudgetRound {
@@ -1080,6 +1130,7 @@ mod tests {
             accepted,
             out_of_time,
             steps_pruned: 10,
+            seconds: RoundSeconds::default(),
         };
         let mut search = BudgetSearch {
             plan: BudgetConfig::default().plan(10_000),

@@ -709,6 +709,9 @@ fn a_refused_budget_round_changes_nothing() {
             .unwrap()
             .unwrap();
         assert!(!round.accepted && !round.out_of_time);
+        // Refused: the merged branch's steps were thrown away.
+        assert!(round.seconds.merged > 0.0);
+        assert_eq!(round.discarded_seconds(), round.seconds.merged);
         assert_eq!((round.iteration, round.splats), (20 + 15 * k, 300));
         let wanted = 300.0 * keep;
         assert!(
@@ -748,19 +751,41 @@ fn accepted_budget_rounds_shrink_the_model() {
         exhausted: false,
     };
     let mut scored = 0;
+    // Each score takes at least this long, so the rounds' scoring time has a floor to check.
+    let pause = std::time::Duration::from_millis(3);
     while t.iteration() < 80 {
         while search.due(t.iteration()) {
-            search
+            let clock = t.report(false).elapsed_s;
+            let round = search
                 .run_round(
                     &mut t,
                     &cfg,
                     &mut |s: &Splats| {
                         scored += 1;
+                        std::thread::sleep(pause);
                         heldout_psnr(s, &held)
                     },
                     &mut |_| {},
                 )
+                .unwrap()
                 .unwrap();
+            // Both branches' steps are the trainer's clock over the round, which the scores
+            // and the planning do not advance.
+            let spent = t.report(false).elapsed_s - clock;
+            let time = round.seconds;
+            assert!(
+                (time.control + time.merged - spent).abs() <= 1e-9 * spent.max(1.0),
+                "{time:?} against {spent} s on the trainer's clock"
+            );
+            assert!(
+                time.control > 0.0 && time.merged > 0.0 && time.planning > 0.0,
+                "{time:?}"
+            );
+            let floor = 2.0 * f64::from(splat_train::SCORE_POINTS) * pause.as_secs_f64();
+            assert!(time.scoring >= floor, "{time:?}: scoring under {floor} s");
+            assert!((time.total() - (time.planning + spent + time.scoring)).abs() < 1e-9);
+            // The merged branch was kept, so the control's steps were thrown away.
+            assert_eq!(round.discarded_seconds(), time.control);
         }
         t.run_until(t.iteration() + 1, |_| {});
     }

@@ -1665,7 +1665,7 @@ fn budget_round(
         _ => "not measured".into(),
     };
     observer(Event::Note(format!(
-        "splat budget, step {}: {} → {} splats {cost}; {}",
+        "splat budget, step {}: {} → {} splats {cost}; {} ({:.1} s)",
         round.iteration,
         round.splats,
         round.candidate,
@@ -1677,7 +1677,8 @@ fn budget_round(
             "over the tolerance, kept the whole model; the search ends"
         } else {
             "over the tolerance, kept the whole model; the next round merges fewer"
-        }
+        },
+        round.seconds.total(),
     )));
     Ok(())
 }

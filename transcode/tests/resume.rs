@@ -251,6 +251,18 @@ fn a_run_killed_at_random_moments_resumes_to_the_same_model() {
     );
     let html = std::fs::read_to_string(killed.join("report/report.html")).unwrap();
     assert!(html.contains("Splat budget: held-out PSNR against splats and size"));
+    // Each round says where its time went, and the report sums it up.
+    for r in report["runs"][0]["budget"]["rounds"].as_array().unwrap() {
+        let t = &r["seconds"];
+        for part in ["planning", "control", "merged", "scoring"] {
+            let s = t[part].as_f64().unwrap();
+            assert!(s.is_finite() && s > 0.0, "{part} of {r}");
+        }
+    }
+    assert!(
+        html.contains("The rounds took"),
+        "no time sentence in the budget section"
+    );
     // The held-out curves too: the same steps and scores (points after a checkpoint were taken
     // again from the same splats), only the training times differ.
     let whole_report: serde_json::Value =

@@ -4,6 +4,8 @@
 
 use std::fmt::Write as _;
 
+use splat_train::BudgetRound;
+
 use super::{RunReport, human_bytes};
 use crate::plot::{self, esc};
 
@@ -127,7 +129,7 @@ fn table(h: &mut String, run: &RunReport, name: &str) {
     h.push_str(
         "<table><tr><th>step</th><th>splats</th><th>merged to</th><th>control PSNR, black / white (dB)</th><th>merged PSNR, black / white (dB)</th><th>cost (dB)</th>\
          <th>steps of the merged branch</th><th>PLY / SPZ of the merged size</th>\
-         <th>decision</th></tr>\n",
+         <th>decision</th><th>time (s): planning, control, merged, scoring</th></tr>\n",
     );
     for r in &run.budget.rounds {
         let sizes = format!(
@@ -145,7 +147,7 @@ fn table(h: &mut String, run: &RunReport, name: &str) {
         let _ = writeln!(
             h,
             "<tr><td>{}</td><td>{}</td><td>{}</td><td>{:.2} / {}</td><td>{} / {}</td><td>{}</td>\
-             <td>{}</td><td>{sizes}</td><td>{decision}</td></tr>",
+             <td>{}</td><td>{sizes}</td><td>{decision}</td><td>{}</td></tr>",
             r.iteration,
             r.splats,
             r.candidate,
@@ -156,6 +158,7 @@ fn table(h: &mut String, run: &RunReport, name: &str) {
                 .map_or("–".into(), |p| format!("{p:.2}")),
             r.drop_db().map_or("–".into(), |d| format!("{d:+.3}")),
             r.steps_pruned,
+            round_seconds(r),
         );
     }
     let m = &run.metrics;
@@ -163,7 +166,7 @@ fn table(h: &mut String, run: &RunReport, name: &str) {
         h,
         "<tr><th>chosen, trained to the end</th><td>{n}</td><td></td><td colspan=\"2\">black \
          {:.2}, white {:.2}, masked {:.2} / {:.2}</td><td></td><td></td><td>{} / {}</td><td></td>\
-         </tr></table>",
+         <td></td></tr></table>",
         m.psnr_black,
         m.psnr_white,
         m.masked_psnr_black,
@@ -171,4 +174,41 @@ fn table(h: &mut String, run: &RunReport, name: &str) {
         human_bytes(run.model_bytes),
         spz.map_or("–".into(), human_bytes),
     );
+    if let Some(time) = rounds_time(&run.budget.rounds) {
+        let _ = writeln!(h, "<p>{time}</p>");
+    }
+}
+
+/// A round's time cell: "–" for rounds saved before their time was measured.
+fn round_seconds(r: &BudgetRound) -> String {
+    let t = &r.seconds;
+    if t.total() <= 0.0 {
+        return "–".into();
+    }
+    format!(
+        "{:.1}: {:.1}, {:.1}, {:.1}, {:.1}",
+        t.total(),
+        t.planning,
+        t.control,
+        t.merged,
+        t.scoring
+    )
+}
+
+/// The sentence on what the rounds cost in time, or nothing when none was measured.
+fn rounds_time(rounds: &[BudgetRound]) -> Option<String> {
+    let total: f64 = rounds.iter().map(|r| r.seconds.total()).sum();
+    if total <= 0.0 {
+        return None;
+    }
+    let sum = |f: fn(&BudgetRound) -> f64| -> f64 { rounds.iter().map(f).sum() };
+    Some(format!(
+        "The rounds took {:.1} s: {:.1} s scoring the splats' contributions and merging, {:.1} s \
+         scoring the branches on the held-out views, and {:.1} s training the branches that \
+         were thrown away.",
+        total,
+        sum(|r| r.seconds.planning),
+        sum(|r| r.seconds.scoring),
+        sum(BudgetRound::discarded_seconds),
+    ))
 }
