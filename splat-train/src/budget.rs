@@ -71,6 +71,11 @@ pub struct BudgetConfig {
     /// median spacings. More levels let one round merge a flat region into fewer, larger splats,
     /// at some cost in held-out PSNR on textured surfaces (docs/pipeline.md).
     pub merge_levels: u32,
+    /// Once accepted rounds have spent some of `tolerance_db`, the search ends when less than
+    /// this is left (dB): a round's measured cost moves by about as much with the steps it is
+    /// scored at, so such a round would be decided by that noise, and it costs a trial of
+    /// training thrown away either way.
+    pub least_left_db: f64,
     /// After training: the held-out PSNR (dB) dropping SH bands may cost, within what the rounds
     /// left of `tolerance_db` ([`crate::sh_bands::choose_bands`]).
     pub bands_tolerance_db: f64,
@@ -98,6 +103,7 @@ impl Default for BudgetConfig {
             min_splats: 256,
             merge_levels: 3,
             splats_per_pixel: 2.0,
+            least_left_db: 0.05,
             bands_tolerance_db: 0.05,
             static_sh_rms: 0.002,
         }
@@ -134,6 +140,9 @@ impl BudgetConfig {
         }
         if !(self.bands_tolerance_db.is_finite() && self.bands_tolerance_db >= 0.0) {
             return bad("bands_tolerance_db", "must be a finite number ≥ 0");
+        }
+        if !(self.least_left_db.is_finite() && self.least_left_db >= 0.0) {
+            return bad("least_left_db", "must be a finite number ≥ 0");
         }
         if !(self.static_sh_rms.is_finite() && self.static_sh_rms >= 0.0) {
             return bad("static_sh_rms", "must be a finite number ≥ 0");
@@ -303,6 +312,10 @@ pub struct BudgetSearch {
     /// Whether a round found nothing left to merge (the search is then over).
     #[serde(default)]
     pub exhausted: bool,
+    /// Whether the accepted rounds left less than [`BudgetConfig::least_left_db`] of the
+    /// tolerance (the search is then over).
+    #[serde(default)]
+    pub tolerance_spent: bool,
 }
 
 impl BudgetSearch {
@@ -318,11 +331,13 @@ impl BudgetSearch {
     }
 
     /// Whether no more rounds will run: no plan, all planned rounds done, nothing left to
-    /// merge, a round ran out of time, or [`MAX_REFUSED_ROUNDS`] rounds were refused.
+    /// merge, too little of the tolerance left, a round ran out of time, or
+    /// [`MAX_REFUSED_ROUNDS`] rounds were refused.
     #[must_use]
     pub fn finished(&self) -> bool {
         let Some(plan) = self.plan else { return true };
         self.exhausted
+            || self.tolerance_spent
             || self.rounds.len() as u32 >= plan.rounds
             || self.rounds.last().is_some_and(|r| r.out_of_time)
             || self.refused() >= MAX_REFUSED_ROUNDS
@@ -358,8 +373,9 @@ impl BudgetSearch {
     /// before them: they are run again, identically).
     pub fn rewind(&mut self, iteration: u32) {
         self.rounds.retain(|r| r.iteration < iteration);
-        // Where the search found nothing to merge is found again.
+        // Where the search found nothing to merge, or spent its tolerance, is found again.
         self.exhausted = false;
+        self.tolerance_spent = false;
     }
 
     /// Runs the due round on `trainer`: scores its splats, trains both branches
@@ -488,6 +504,8 @@ impl BudgetSearch {
             trainer.restore_snapshot(kept).map_err(fail)?;
         }
         self.rounds.push(round);
+        let spent = self.spent_db();
+        self.tolerance_spent = spent > 0.0 && cfg.tolerance_db - spent < cfg.least_left_db;
         Ok(Some(round))
     }
 }
@@ -1198,6 +1216,12 @@ mod tests {
             }),
             "budget.splats_per_pixel"
         );
+        for least_left_db in [-0.01, f64::INFINITY] {
+            assert_eq!(
+                key(BudgetConfig { least_left_db, ..c }),
+                "budget.least_left_db"
+            );
+        }
         for merge_levels in [0, MAX_MERGE_LEVELS + 1] {
             assert_eq!(
                 key(BudgetConfig { merge_levels, ..c }),

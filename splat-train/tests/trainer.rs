@@ -686,6 +686,7 @@ fn a_refused_budget_round_changes_nothing() {
         }),
         rounds: Vec::new(),
         exhausted: false,
+        tolerance_spent: false,
     };
     // A negative tolerance refuses every prune.
     let cfg = BudgetConfig {
@@ -727,6 +728,62 @@ fn a_refused_budget_round_changes_nothing() {
     assert_eq!(branched.splats(), straight.splats());
 }
 
+/// Once accepted rounds have spent part of the tolerance and less than `least_left_db` is
+/// left, the search ends: here every positive cost leaves too little, so the search runs until
+/// the first round that costs anything and stops after it; with nothing required to be left it
+/// runs all its rounds.
+#[test]
+fn a_search_ends_when_too_little_tolerance_is_left() {
+    let truth = random_model(400, 21);
+    let train = render_views(&truth, &cameras(12, 48, 40, 0.0), "train");
+    let held = render_views(&truth, &cameras(3, 48, 40, 0.5), "held");
+    let init = initial_model(&truth, 0.02, 22);
+    for least_left_db in [1e9, 0.0] {
+        let mut t = Trainer::new(init.clone(), train.clone(), base_config(80)).unwrap();
+        let cfg = BudgetConfig {
+            tolerance_db: 1e9,
+            least_left_db,
+            min_splats: 10,
+            ..BudgetConfig::default()
+        };
+        let mut search = BudgetSearch {
+            plan: Some(BudgetPlan {
+                first: 10,
+                trial: 10,
+                rounds: 3,
+            }),
+            ..BudgetSearch::default()
+        };
+        while t.iteration() < 80 {
+            while search.due(t.iteration()) {
+                search
+                    .run_round(
+                        &mut t,
+                        &cfg,
+                        &mut |s: &Splats| heldout_psnr(s, &held),
+                        &mut |_| {},
+                    )
+                    .unwrap();
+            }
+            t.run_until(t.iteration() + 1, |_| {});
+        }
+        let costs: Vec<f64> = search.rounds.iter().map(|r| r.drop_db().unwrap()).collect();
+        assert!(search.rounds.iter().all(|r| r.accepted), "{costs:?}");
+        if least_left_db > 0.0 {
+            let first_cost = costs.iter().position(|&c| c > 0.0);
+            assert_eq!(
+                Some(costs.len() - 1),
+                first_cost,
+                "the search goes on to the first round that costs: {costs:?}"
+            );
+            assert!(search.tolerance_spent && search.finished());
+        } else {
+            assert_eq!(costs.len(), 3, "{costs:?}");
+            assert!(!search.tolerance_spent);
+        }
+    }
+}
+
 /// Accepted rounds merge the model down by `keep` each time, count the removed splats as
 /// pruned, and record what each cost; the held-out PSNR is taken on both branches.
 #[test]
@@ -749,6 +806,7 @@ fn accepted_budget_rounds_shrink_the_model() {
         }),
         rounds: Vec::new(),
         exhausted: false,
+        tolerance_spent: false,
     };
     let mut scored = 0;
     // Each score takes at least this long, so the rounds' scoring time has a floor to check.

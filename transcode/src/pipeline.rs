@@ -1671,6 +1671,8 @@ fn budget_round(
         round.candidate,
         if round.out_of_time {
             "out of time, kept the whole model"
+        } else if round.accepted && budget.search.tolerance_spent {
+            "merged; too little of the tolerance is left for another round, the search ends"
         } else if round.accepted {
             "merged"
         } else if budget.search.finished() {

@@ -44,7 +44,8 @@ pub(super) fn section(h: &mut String, runs: &[RunReport], names: &[String]) {
          the means; a round costs what the worse background lost. A pruned branch is kept while \
          the rounds' costs add up to no more than the tolerance \
          (<code>budget.tolerance_db</code>, <code>--budget-tolerance</code>); after a refused \
-         round the next one merges half as many splats, and the third refusal ends the search. \
+         round the next one merges half as many splats, and the third refusal ends the search, \
+         as does a tolerance spent to within <code>budget.least_left_db</code>. \
          Lines join each round's two branches (solid: kept, \
          dashed: refused); the circle is the chosen model after all its training. Sizes of the \
          branches are the final model's files scaled by splat count.</p>\n",
