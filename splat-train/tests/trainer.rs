@@ -728,32 +728,44 @@ fn a_refused_budget_round_changes_nothing() {
     assert_eq!(branched.splats(), straight.splats());
 }
 
+/// The budget tests' scene: a 400-splat truth seen by 12 training and 3 held-out views, and a
+/// jittered copy to train from.
+fn budget_scene() -> (Splats, Vec<View>, Vec<View>) {
+    let truth = random_model(400, 21);
+    let train = render_views(&truth, &cameras(12, 48, 40, 0.0), "train");
+    let held = render_views(&truth, &cameras(3, 48, 40, 0.5), "held");
+    (initial_model(&truth, 0.02, 22), train, held)
+}
+
+/// A search of three rounds of 10 steps from step 10, whose tolerance (1e9 dB) takes any cost.
+fn three_rounds(least_left_db: f64) -> (BudgetSearch, BudgetConfig) {
+    let search = BudgetSearch {
+        plan: Some(BudgetPlan {
+            first: 10,
+            trial: 10,
+            rounds: 3,
+        }),
+        ..BudgetSearch::default()
+    };
+    let cfg = BudgetConfig {
+        tolerance_db: 1e9,
+        least_left_db,
+        min_splats: 10,
+        ..BudgetConfig::default()
+    };
+    (search, cfg)
+}
+
 /// Once accepted rounds have spent part of the tolerance and less than `least_left_db` is
 /// left, the search ends: here every positive cost leaves too little, so the search runs until
 /// the first round that costs anything and stops after it; with nothing required to be left it
 /// runs all its rounds.
 #[test]
 fn a_search_ends_when_too_little_tolerance_is_left() {
-    let truth = random_model(400, 21);
-    let train = render_views(&truth, &cameras(12, 48, 40, 0.0), "train");
-    let held = render_views(&truth, &cameras(3, 48, 40, 0.5), "held");
-    let init = initial_model(&truth, 0.02, 22);
+    let (init, train, held) = budget_scene();
     for least_left_db in [1e9, 0.0] {
         let mut t = Trainer::new(init.clone(), train.clone(), base_config(80)).unwrap();
-        let cfg = BudgetConfig {
-            tolerance_db: 1e9,
-            least_left_db,
-            min_splats: 10,
-            ..BudgetConfig::default()
-        };
-        let mut search = BudgetSearch {
-            plan: Some(BudgetPlan {
-                first: 10,
-                trial: 10,
-                rounds: 3,
-            }),
-            ..BudgetSearch::default()
-        };
+        let (mut search, cfg) = three_rounds(least_left_db);
         while t.iteration() < 80 {
             while search.due(t.iteration()) {
                 search
@@ -788,26 +800,10 @@ fn a_search_ends_when_too_little_tolerance_is_left() {
 /// pruned, and record what each cost; the held-out PSNR is taken on both branches.
 #[test]
 fn accepted_budget_rounds_shrink_the_model() {
-    let truth = random_model(400, 21);
-    let train = render_views(&truth, &cameras(12, 48, 40, 0.0), "train");
-    let held = render_views(&truth, &cameras(3, 48, 40, 0.5), "held");
-    let init = initial_model(&truth, 0.02, 22);
+    let (init, train, held) = budget_scene();
     let mut t = Trainer::new(init, train, base_config(80)).unwrap();
-    let cfg = BudgetConfig {
-        tolerance_db: 1e9,
-        min_splats: 10,
-        ..BudgetConfig::default()
-    };
-    let mut search = BudgetSearch {
-        plan: Some(BudgetPlan {
-            first: 10,
-            trial: 10,
-            rounds: 3,
-        }),
-        rounds: Vec::new(),
-        exhausted: false,
-        tolerance_spent: false,
-    };
+    // Nothing need be left of the tolerance: every round runs.
+    let (mut search, cfg) = three_rounds(0.0);
     let mut scored = 0;
     // Each score takes at least this long, so the rounds' scoring time has a floor to check.
     let pause = std::time::Duration::from_millis(3);
