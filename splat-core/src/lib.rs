@@ -47,6 +47,7 @@ mod error;
 pub mod export;
 pub mod frame;
 pub mod glb;
+mod lanes;
 pub mod ply;
 mod project;
 mod projected;

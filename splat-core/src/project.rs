@@ -1,13 +1,18 @@
 //! Per-splat projection: covariance from scale and rotation, EWA projection to the image
 //! (Zwicker et al. 2002, as in Inria's `forward.cu::computeCov2D`), conic, 3σ extent, colour,
 //! and the exact backward of all of it.
+//!
+//! The forward runs eight splats at a time in vector lanes ([`project8`]), lane by lane the IEEE
+//! operations of a projection one splat at a time (kept in the tests as `reference::project`,
+//! which checks the bits); what the backward needs of it is stored in lanes too ([`ChainLanes`]).
 
 use glam::{Mat3, Quat, Vec2, Vec3};
 
 use crate::constants::{DILATION, EXTENT_SIGMAS, FOV_CLAMP_MARGIN, MIN_ALPHA, NEAR_PLANE};
+use crate::lanes::{D8, F8, Mask, Real, WIDTH, and, array};
 use crate::projected::{Projected, quad_bound};
 use crate::{
-    RenderCamera, RenderOptions, Splats, all_finite, normalize_quat, num_sh_coeffs, sh, sigmoid,
+    MIN_QUAT_NORM, RenderCamera, RenderOptions, Splats, all_finite, num_sh_coeffs, sh, sigmoid,
 };
 
 /// Why a splat was not drawn.
@@ -68,7 +73,17 @@ impl ViewConsts {
     }
 }
 
+/// What the tiles draw of a splat, and where.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Drawn {
+    pub out: Projected,
+    /// Tile rectangle [x0, x1) × [y0, y1).
+    pub rect: [u32; 4],
+    pub radius: u32,
+}
+
 /// One splat's projection: what the tiles draw, where, and what the backward pass chains through.
+#[cfg(test)]
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Intermediates {
     pub out: Projected,
@@ -102,8 +117,56 @@ pub(crate) struct Chain {
     color_raw: Vec3,
 }
 
-fn finite3(v: Vec3) -> bool {
-    v.is_finite()
+/// The [`Chain`]s of eight consecutive splats, field by field in lanes (splat 8·g + l in lane l
+/// of group g): the projection stores whole vectors, the backward reads one lane at a time.
+/// Storing one splat's chain from lanes cost the projection about as much as its arithmetic.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct ChainLanes {
+    /// (x, y, z, w).
+    quat: [F8; 4],
+    quat_norm: F8,
+    quat_zero: Mask,
+    scale: [F8; 3],
+    /// Columns.
+    rot: [[F8; 3]; 3],
+    /// Columns.
+    mc: [[F8; 3]; 3],
+    p_cam: [F8; 3],
+    u: [F8; 2],
+    clamped: [Mask; 2],
+    t_rows: [[F8; 3]; 2],
+    comp: F8,
+    sigmoid_o: F8,
+    dir: [F8; 3],
+    dir_len: F8,
+    color_raw: [F8; 3],
+}
+
+impl ChainLanes {
+    /// The chain of lane `l`.
+    #[inline(always)]
+    pub(crate) fn lane(&self, l: usize) -> Chain {
+        let v3 = |a: &[F8; 3]| Vec3::new(a[0].0[l], a[1].0[l], a[2].0[l]);
+        let m3 = |m: &[[F8; 3]; 3]| Mat3::from_cols(v3(&m[0]), v3(&m[1]), v3(&m[2]));
+        let q = &self.quat;
+        Chain {
+            quat: Quat::from_xyzw(q[0].0[l], q[1].0[l], q[2].0[l], q[3].0[l]),
+            quat_norm: self.quat_norm.0[l],
+            quat_zero: self.quat_zero[l],
+            scale: v3(&self.scale),
+            rot: m3(&self.rot),
+            mc: m3(&self.mc),
+            p_cam: v3(&self.p_cam),
+            u: Vec2::new(self.u[0].0[l], self.u[1].0[l]),
+            clamped: [self.clamped[0][l], self.clamped[1][l]],
+            t_rows: [v3(&self.t_rows[0]), v3(&self.t_rows[1])],
+            comp: self.comp.0[l],
+            sigmoid_o: self.sigmoid_o.0[l],
+            dir: v3(&self.dir),
+            dir_len: self.dir_len.0[l],
+            color_raw: v3(&self.color_raw),
+        }
+    }
 }
 
 /// The 2-D covariance Σ₂ = T·Tᵀ + 0.3·I of a splat and its determinants, in f64.
@@ -118,21 +181,28 @@ fn finite3(v: Vec3) -> bool {
 /// exact in f64, and the f64 range holds the determinant of splats whose axes are up to ~10³⁸ px
 /// (f32 overflowed at ~10¹⁰ px). About twenty f64 operations per splat and view, against the
 /// per-pixel work of the tiles: no measurable cost.
-struct Cov2 {
+struct Cov2<T> {
     /// Σ₂ before dilation: s₀₀, s₀₁, s₁₁.
-    s: [f64; 3],
+    s: [T; 3],
     /// det(T·Tᵀ).
-    det0: f64,
+    det0: T,
     /// det(T·Tᵀ + 0.3·I).
-    det: f64,
+    det: T,
 }
 
-impl Cov2 {
-    fn new([t0, t1]: [Vec3; 2]) -> Self {
-        let (t0, t1) = (t0.as_dvec3(), t1.as_dvec3());
-        let s = [t0.length_squared(), t0.dot(t1), t1.length_squared()];
-        let det0 = t0.cross(t1).length_squared();
-        let d = f64::from(DILATION);
+impl<T: Real<Scalar = f64>> Cov2<T> {
+    /// From the rows t₀, t₁ of T, widened to f64 (one splat, or eight in lanes).
+    #[inline(always)]
+    fn new([t0, t1]: [[T; 3]; 2]) -> Self {
+        let dot = |a: [T; 3], b: [T; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+        let s = [dot(t0, t0), dot(t0, t1), dot(t1, t1)];
+        let cross = [
+            t0[1] * t1[2] - t1[1] * t0[2],
+            t0[2] * t1[0] - t1[2] * t0[0],
+            t0[0] * t1[1] - t1[0] * t0[1],
+        ];
+        let det0 = dot(cross, cross);
+        let d = T::splat(f64::from(DILATION));
         Self {
             s,
             det0,
@@ -141,23 +211,25 @@ impl Cov2 {
     }
 
     /// The conic Σ₂⁻¹ (a, b, c) of the dilated covariance.
-    fn conic(&self) -> [f64; 3] {
-        let d = f64::from(DILATION);
+    #[inline(always)]
+    fn conic(&self) -> [T; 3] {
+        let d = T::splat(f64::from(DILATION));
         let [s00, s01, s11] = self.s;
         [(s11 + d) / self.det, -s01 / self.det, (s00 + d) / self.det]
     }
 
     /// The inverse of the covariance before dilation (infinite when it is singular).
-    fn conic0(&self) -> [f64; 3] {
+    fn conic0(&self) -> [T; 3] {
         let [s00, s01, s11] = self.s;
         [s11 / self.det0, -s01 / self.det0, s00 / self.det0]
     }
 
     /// The larger eigenvalue of the dilated covariance (Inria floors the discriminant at 0.1).
-    fn lambda_max(&self) -> f64 {
-        let d = f64::from(DILATION);
-        let mid = 0.5 * (self.s[0] + self.s[2]) + d;
-        mid + (mid * mid - self.det).max(0.1).sqrt()
+    #[inline(always)]
+    fn lambda_max(&self) -> T {
+        let d = T::splat(f64::from(DILATION));
+        let mid = T::splat(0.5) * (self.s[0] + self.s[2]) + d;
+        mid + (mid * mid - self.det).max(T::splat(0.1)).sqrt()
     }
 }
 
@@ -207,148 +279,277 @@ fn tiles_reached(centre: f32, h: f64, n: u32) -> (u32, u32) {
     (first, end)
 }
 
-/// Projects splat `i`; returns its intermediates or why it is culled.
+/// The tile rectangle [x0, x1) × [y0, y1) of Inria's square of half-width `radius` (pixels)
+/// around `xy`, clamped to the view's `tiles`.
 #[inline(always)]
-pub(crate) fn project(splats: &Splats, i: usize, v: &ViewConsts) -> Result<Intermediates, Cull> {
-    let mean = splats.means[i];
-    let ls = splats.log_scales[i];
-    let [qw, qx, qy, qz] = splats.rotations[i];
-    let logit = splats.opacity_logits[i];
-    let k = splats.coeffs_per_splat();
-    let coeffs = &splats.sh[i * k..i * k + num_sh_coeffs(v.degree)];
-    let inputs_finite = finite3(mean)
-        && finite3(ls)
-        && [qw, qx, qy, qz, logit].iter().all(|x| x.is_finite())
-        && all_finite(coeffs.as_flattened());
-    if !inputs_finite {
-        return Err(Cull::NonFinite);
-    }
-    let p_cam = v.rot * mean + v.trans;
-    if !finite3(p_cam) {
-        return Err(Cull::NonFinite);
-    }
-    if p_cam.z <= NEAR_PLANE {
-        return Err(Cull::Hidden);
-    }
-    let sigmoid_o = sigmoid(logit);
-    // A splat with o < 1/255 can never pass the alpha threshold anywhere: skip it early.
-    if sigmoid_o < MIN_ALPHA {
-        return Err(Cull::Hidden);
-    }
-
-    // Σ = R S Sᵀ Rᵀ (Inria `computeCov3D`), carried as the factor M_c = W R S in camera space.
-    // A zero quaternion carries no rotation: it is drawn as the identity, with no gradient.
-    let (quat, quat_norm, quat_zero) = match normalize_quat([qw, qx, qy, qz]) {
-        Some((q, n)) => (q, n, false),
-        None => (Quat::IDENTITY, 0.0, true),
-    };
-    let rot = Mat3::from_quat(quat);
-    let scale = ls.exp();
-    let m = Mat3::from_cols(
-        rot.x_axis * scale.x,
-        rot.y_axis * scale.y,
-        rot.z_axis * scale.z,
-    );
-    let mc = v.rot * m;
-
-    // EWA: J evaluated at the clamped x/z, y/z (Inria clamps to 1.3·tan(fov/2)).
-    let z = p_cam.z;
-    let ux_raw = p_cam.x / z;
-    let uy_raw = p_cam.y / z;
-    let ux = ux_raw.clamp(-v.lim_x.0, v.lim_x.1);
-    let uy = uy_raw.clamp(-v.lim_y.0, v.lim_y.1);
-    let clamped = [ux != ux_raw, uy != uy_raw];
-    let j0 = Vec3::new(v.fx / z, 0.0, -v.fx * ux / z);
-    let j1 = Vec3::new(0.0, v.fy / z, -v.fy * uy / z);
-    let mct = mc.transpose();
-    let t_rows = [mct * j0, mct * j1];
-    if !(finite3(t_rows[0]) && finite3(t_rows[1])) {
-        return Err(Cull::NonFinite);
-    }
-    let cov = Cov2::new(t_rows);
-    if cov.det <= 0.0 {
-        return Err(Cull::Hidden);
-    }
-    let comp = if v.antialiased {
-        (cov.det0 / cov.det).sqrt() as f32
-    } else {
-        1.0
-    };
-    let opacity = sigmoid_o * comp;
-    if opacity < MIN_ALPHA {
-        return Err(Cull::Hidden);
-    }
-    let conic = cov.conic().map(|x| x as f32);
-
-    // Inria's extent: 3·√λmax with λ from the dilated covariance, and its tile rectangle.
-    let radius_f = (f64::from(EXTENT_SIGMAS) * cov.lambda_max().sqrt()).ceil() as f32;
-    let xy = [v.fx * ux_raw + v.cx - 0.5, v.fy * uy_raw + v.cy - 0.5];
-    if !(xy[0].is_finite() && xy[1].is_finite() && radius_f.is_finite()) {
-        return Err(Cull::NonFinite);
-    }
+fn square_tiles(xy: [f32; 2], radius: f32, [tiles_x, tiles_y]: [u32; 2]) -> [u32; 4] {
     let ts = crate::TILE_SIZE as f32;
-    let rect_coord = |p: f32, lo: bool, n: u32| -> u32 {
+    let coord = |p: f32, lo: bool, n: u32| -> u32 {
         let t = if lo {
-            ((p - radius_f) / ts).floor()
+            ((p - radius) / ts).floor()
         } else {
-            ((p + radius_f + ts - 1.0) / ts).floor()
+            ((p + radius + ts - 1.0) / ts).floor()
         };
         t.clamp(0.0, n as f32) as u32
     };
-    let rect = [
-        rect_coord(xy[0], true, v.tiles_x),
-        rect_coord(xy[0], false, v.tiles_x),
-        rect_coord(xy[1], true, v.tiles_y),
-        rect_coord(xy[1], false, v.tiles_y),
-    ];
-    let rect = within_reach(rect, xy, conic, quad_bound(opacity), [v.tiles_x, v.tiles_y]);
-    if radius_f <= 0.0 || rect[0] >= rect[1] || rect[2] >= rect[3] {
-        return Err(Cull::Hidden);
+    [
+        coord(xy[0], true, tiles_x),
+        coord(xy[0], false, tiles_x),
+        coord(xy[1], true, tiles_y),
+        coord(xy[1], false, tiles_y),
+    ]
+}
+
+/// `m·p` for one matrix and a vector in lanes, in glam's order of operations
+/// (`Mat3::mul_vec3`).
+#[inline(always)]
+fn mat_vec(m: Mat3, p: [F8; 3]) -> [F8; 3] {
+    array(|c| {
+        F8::splat(m.x_axis[c]) * p[0]
+            + F8::splat(m.y_axis[c]) * p[1]
+            + F8::splat(m.z_axis[c]) * p[2]
+    })
+}
+
+/// Why each lane is not drawn so far: the first reason found wins, as the early returns of a
+/// projection one splat at a time would have it.
+struct Culls([Option<Cull>; WIDTH]);
+
+impl Culls {
+    /// Marks `why` on the lanes not yet culled where `fails` holds.
+    #[inline(always)]
+    fn mark(&mut self, fails: Mask, why: Cull) {
+        for (c, f) in self.0.iter_mut().zip(fails) {
+            if c.is_none() && f {
+                *c = Some(why);
+            }
+        }
     }
 
-    // Colour from SH towards the viewer: dir = normalize(mean − camera centre), + 0.5, clamp at 0.
-    let d = mean - v.center;
-    let dir_len = d.length();
-    let dir = d / dir_len;
-    let (color_raw, color) = if v.linear_colour {
-        let c = sh::eval(v.degree, dir, coeffs);
-        (c, c)
-    } else {
-        let raw = sh::eval(v.degree, dir, coeffs) + 0.5;
-        (raw, raw.max(Vec3::ZERO))
-    };
-    if !finite3(color) {
-        return Err(Cull::NonFinite);
+    /// Marks `why` on the lanes not yet culled where `holds` does not.
+    #[inline(always)]
+    fn unless(&mut self, holds: Mask, why: Cull) {
+        self.mark(holds.map(|h| !h), why);
     }
-    Ok(Intermediates {
-        out: Projected {
-            xy,
-            conic,
-            opacity,
-            color: color.into(),
-            depth: z,
-            q_max: quad_bound(opacity),
-        },
-        rect,
-        radius: radius_f as u32,
-        chain: Chain {
-            quat,
-            quat_norm,
-            quat_zero,
-            scale,
-            rot,
-            mc,
-            p_cam,
-            u: Vec2::new(ux, uy),
-            clamped,
-            t_rows,
-            comp,
-            sigmoid_o,
-            dir,
-            dir_len,
-            color_raw,
-        },
-    })
+}
+
+/// Projects the splats `idx` (eight, repeats allowed) at once in vector lanes: lane by lane the
+/// same IEEE operations in the same order as the projection of one splat at a time
+/// (`reference::project` in the tests, which checks the bits), with the per-lane library calls
+/// (`expf` of the opacity and scales, `logf` of the alpha bound) and the tile rectangle left
+/// scalar. Stores the eight chains in `chain` and hands `emit` what the tiles draw of each of
+/// the first `lanes_used` lanes, or why the splat is culled (straight into the caller's
+/// arrays: an array of results in between cost a copy).
+#[inline(always)]
+#[allow(clippy::too_many_lines)]
+#[allow(clippy::needless_range_loop)] // a lane's index reads several arrays of lanes
+pub(crate) fn project8(
+    splats: &Splats,
+    idx: [usize; WIDTH],
+    lanes_used: usize,
+    v: &ViewConsts,
+    chain: &mut ChainLanes,
+    mut emit: impl FnMut(usize, Result<Drawn, Cull>),
+) {
+    let k = splats.coeffs_per_splat();
+    let n_coeffs = num_sh_coeffs(v.degree);
+    let coeffs = |l: usize| &splats.sh[idx[l] * k..idx[l] * k + n_coeffs];
+    let mean: [F8; 3] = array(|c| F8::from_fn(|l| splats.means[idx[l]][c]));
+    let ls: [F8; 3] = array(|c| F8::from_fn(|l| splats.log_scales[idx[l]][c]));
+    // (w, x, y, z), as stored.
+    let q: [F8; 4] = array(|c| F8::from_fn(|l| splats.rotations[idx[l]][c]));
+    let logit = F8::from_fn(|l| splats.opacity_logits[idx[l]]);
+
+    let (zero, one, half) = (F8::splat(0.0), F8::splat(1.0), F8::splat(0.5));
+    let mut culls = Culls([None; WIDTH]);
+    let mut inputs_finite: Mask = array(|l| all_finite(coeffs(l).as_flattened()));
+    for x in mean.iter().chain(&ls).chain(&q).chain([&logit]) {
+        inputs_finite = and(inputs_finite, x.finite());
+    }
+    culls.unless(inputs_finite, Cull::NonFinite);
+    let p_cam: [F8; 3] = {
+        let r = mat_vec(v.rot, mean);
+        array(|c| r[c] + F8::splat(v.trans[c]))
+    };
+    culls.unless(
+        and(and(p_cam[0].finite(), p_cam[1].finite()), p_cam[2].finite()),
+        Cull::NonFinite,
+    );
+    let z = p_cam[2];
+    culls.mark(z.test(F8::splat(NEAR_PLANE), |a, b| a <= b), Cull::Hidden);
+    let sigmoid_o = logit.map(sigmoid);
+    culls.mark(
+        sigmoid_o.test(F8::splat(MIN_ALPHA), |a, b| a < b),
+        Cull::Hidden,
+    );
+
+    // `normalize_quat`: divided by the largest magnitude, then by the length, whose sum of
+    // squares glam's SSE2 `Quat::length` groups as (x² + z²) + (y² + w²).
+    let mut largest = F8::splat(0.0);
+    for c in q {
+        largest = largest.max(c.map(f32::abs));
+    }
+    let has_largest = and(largest.finite(), largest.test(F8::splat(0.0), |a, b| a > b));
+    let [uw, ux_q, uy_q, uz_q] = array(|c| q[c] / largest);
+    let length = ((ux_q * ux_q + uz_q * uz_q) + (uy_q * uy_q + uw * uw)).sqrt();
+    let norm = largest * length;
+    let normal = and(
+        has_largest,
+        norm.test(F8::splat(MIN_QUAT_NORM), |a, b| a > b),
+    );
+    let identity = [one, zero, zero, zero];
+    let [w, x, y, zq] =
+        array(|c| F8::select(normal, [uw, ux_q, uy_q, uz_q][c] / length, identity[c]));
+    let quat_norm = F8::select(normal, norm, F8::splat(0.0));
+
+    // `Mat3::from_quat`.
+    let (x2, y2, z2) = (x + x, y + y, zq + zq);
+    let (xx, xy, xz) = (x * x2, x * y2, x * z2);
+    let (yy, yz, zz) = (y * y2, y * z2, zq * z2);
+    let (wx, wy, wz) = (w * x2, w * y2, w * z2);
+    let rot = [
+        [one - (yy + zz), xy + wz, xz - wy],
+        [xy - wz, one - (xx + zz), yz + wx],
+        [xz + wy, yz - wx, one - (xx + yy)],
+    ];
+    let scale: [F8; 3] = {
+        let s: [Vec3; WIDTH] = array(|l| Vec3::new(ls[0].0[l], ls[1].0[l], ls[2].0[l]).exp());
+        array(|c| F8::from_fn(|l| s[l][c]))
+    };
+    // M_c = W·(R·S), column by column.
+    let mc: [[F8; 3]; 3] = array(|j| mat_vec(v.rot, array(|c| rot[j][c] * scale[j])));
+
+    let ux_raw = p_cam[0] / z;
+    let uy_raw = p_cam[1] / z;
+    let u = [
+        ux_raw.map(|u| u.clamp(-v.lim_x.0, v.lim_x.1)),
+        uy_raw.map(|u| u.clamp(-v.lim_y.0, v.lim_y.1)),
+    ];
+    let clamped = [
+        u[0].test(ux_raw, |a, b| a != b),
+        u[1].test(uy_raw, |a, b| a != b),
+    ];
+    let (fx, fy) = (F8::splat(v.fx), F8::splat(v.fy));
+    let j = [
+        [fx / z, zero, -fx * u[0] / z],
+        [zero, fy / z, -fy * u[1] / z],
+    ];
+    // T's rows Mcᵀ·j_r, in glam's order (`mct * j`).
+    let t_rows: [[F8; 3]; 2] =
+        array(|r| array(|c| mc[c][0] * j[r][0] + mc[c][1] * j[r][1] + mc[c][2] * j[r][2]));
+    let mut t_finite = [true; WIDTH];
+    for c in t_rows.as_flattened() {
+        t_finite = and(t_finite, c.finite());
+    }
+    culls.unless(t_finite, Cull::NonFinite);
+    let cov = Cov2::<D8>::new(array(|r| array(|c| t_rows[r][c].to_f64())));
+    culls.mark(cov.det.test(D8::splat(0.0), |a, b| a <= b), Cull::Hidden);
+    let comp = if v.antialiased {
+        (cov.det0 / cov.det).sqrt().to_f32()
+    } else {
+        one
+    };
+    let opacity = sigmoid_o * comp;
+    culls.mark(
+        opacity.test(F8::splat(MIN_ALPHA), |a, b| a < b),
+        Cull::Hidden,
+    );
+    let conic: [F8; 3] = {
+        let c = cov.conic();
+        array(|k| c[k].to_f32())
+    };
+
+    let radius_f = (D8::splat(f64::from(EXTENT_SIGMAS)) * cov.lambda_max().sqrt())
+        .map(f64::ceil)
+        .to_f32();
+    let xy = [
+        fx * ux_raw + F8::splat(v.cx) - half,
+        fy * uy_raw + F8::splat(v.cy) - half,
+    ];
+    culls.unless(
+        and(and(xy[0].finite(), xy[1].finite()), radius_f.finite()),
+        Cull::NonFinite,
+    );
+    let q_max = opacity.map(quad_bound);
+    let tiles = [v.tiles_x, v.tiles_y];
+    let mut rect = [[0_u32; 4]; WIDTH];
+    for (l, rect) in rect.iter_mut().enumerate() {
+        let xy_l = [xy[0].0[l], xy[1].0[l]];
+        let square = square_tiles(xy_l, radius_f.0[l], tiles);
+        let conic_l = [conic[0].0[l], conic[1].0[l], conic[2].0[l]];
+        *rect = within_reach(square, xy_l, conic_l, q_max.0[l], tiles);
+    }
+    let empty: Mask =
+        array(|l| radius_f.0[l] <= 0.0 || rect[l][0] >= rect[l][1] || rect[l][2] >= rect[l][3]);
+    culls.mark(empty, Cull::Hidden);
+
+    // Colour from SH towards the viewer: dir = normalize(mean − camera centre), + 0.5, clamp at 0.
+    let d: [F8; 3] = array(|c| mean[c] - F8::splat(v.center[c]));
+    let dir_len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+    let dir: [F8; 3] = array(|c| d[c] / dir_len);
+    // The coefficients turned into lanes through memory, all before any is read back: built
+    // one lane at a time in registers, each vector waited on its eight stores.
+    let mut lane_coeffs = [[[0.0_f32; WIDTH]; 3]; 16];
+    for l in 0..WIDTH {
+        for (kk, c) in coeffs(l).iter().enumerate() {
+            for ch in 0..3 {
+                lane_coeffs[kk][ch][l] = c[ch];
+            }
+        }
+    }
+    let sh = sh::eval_terms(v.degree, n_coeffs, dir, |kk| {
+        array(|ch| F8(lane_coeffs[kk][ch]))
+    });
+    let (color_raw, color) = if v.linear_colour {
+        (sh, sh)
+    } else {
+        let raw: [F8; 3] = array(|c| sh[c] + half);
+        let shown = array(|c| F8::select(raw[c].test(zero, |a, b| a > b), raw[c], zero));
+        (raw, shown)
+    };
+    culls.unless(
+        and(and(color[0].finite(), color[1].finite()), color[2].finite()),
+        Cull::NonFinite,
+    );
+
+    *chain = ChainLanes {
+        quat: [x, y, zq, w],
+        quat_norm,
+        quat_zero: normal.map(|n| !n),
+        scale,
+        rot,
+        mc,
+        p_cam,
+        u,
+        clamped,
+        t_rows,
+        comp,
+        sigmoid_o,
+        dir,
+        dir_len,
+        color_raw,
+    };
+    for l in 0..lanes_used {
+        if let Some(why) = culls.0[l] {
+            emit(l, Err(why));
+            continue;
+        }
+        emit(
+            l,
+            Ok(Drawn {
+                out: Projected {
+                    xy: [xy[0].0[l], xy[1].0[l]],
+                    conic: [conic[0].0[l], conic[1].0[l], conic[2].0[l]],
+                    opacity: opacity.0[l],
+                    color: [color[0].0[l], color[1].0[l], color[2].0[l]],
+                    depth: z.0[l],
+                    q_max: q_max.0[l],
+                },
+                rect: rect[l],
+                radius: radius_f.0[l] as u32,
+            }),
+        );
+    }
 }
 
 /// What the chain to the parameters needs of a view, kept by the backward pass's sums for the
@@ -450,7 +651,7 @@ pub(crate) fn project_backward(
     // twice), then Σ₂ = T·Tᵀ → G_T = 2·G_Σ·T. In f64 with the forward's `Cov2`: for a thin splat
     // long on screen, Q·T's long column (≈ the axis / λ_max) is far smaller than Q's entries, and
     // f32 lost it (needles' gradients were off by percents).
-    let cov = Cov2::new(it.t_rows);
+    let cov = Cov2::<f64>::new(it.t_rows.map(|t| t.as_dvec3().to_array()));
     let q = cov.conic();
     let gq = [
         f64::from(g.conic[0]),
@@ -567,13 +768,312 @@ fn quat_backward(q: Quat, norm: f32, g: &Mat3) -> [f32; 4] {
     std::array::from_fn(|k| (gn[k] - qn[k] * dot) / norm)
 }
 
+/// The projection one splat at a time, with early returns: the form [`project8`] computes in
+/// lanes, kept as the tests' independent reference for its bits.
+#[cfg(test)]
+pub(crate) mod reference {
+    use glam::{Mat3, Quat, Vec2, Vec3};
+
+    use super::{Chain, Cov2, Cull, Intermediates, ViewConsts, square_tiles, within_reach};
+    use crate::constants::{EXTENT_SIGMAS, MIN_ALPHA, NEAR_PLANE};
+    use crate::projected::{Projected, quad_bound};
+    use crate::{Splats, all_finite, normalize_quat, num_sh_coeffs, sh, sigmoid};
+
+    fn finite3(v: Vec3) -> bool {
+        v.is_finite()
+    }
+
+    /// Projects splat `i`; returns its intermediates or why it is culled.
+    pub(crate) fn project(
+        splats: &Splats,
+        i: usize,
+        v: &ViewConsts,
+    ) -> Result<Intermediates, Cull> {
+        let mean = splats.means[i];
+        let ls = splats.log_scales[i];
+        let [qw, qx, qy, qz] = splats.rotations[i];
+        let logit = splats.opacity_logits[i];
+        let k = splats.coeffs_per_splat();
+        let coeffs = &splats.sh[i * k..i * k + num_sh_coeffs(v.degree)];
+        let inputs_finite = finite3(mean)
+            && finite3(ls)
+            && [qw, qx, qy, qz, logit].iter().all(|x| x.is_finite())
+            && all_finite(coeffs.as_flattened());
+        if !inputs_finite {
+            return Err(Cull::NonFinite);
+        }
+        let p_cam = v.rot * mean + v.trans;
+        if !finite3(p_cam) {
+            return Err(Cull::NonFinite);
+        }
+        if p_cam.z <= NEAR_PLANE {
+            return Err(Cull::Hidden);
+        }
+        let sigmoid_o = sigmoid(logit);
+        // A splat with o < 1/255 can never pass the alpha threshold anywhere: skip it early.
+        if sigmoid_o < MIN_ALPHA {
+            return Err(Cull::Hidden);
+        }
+
+        // Σ = R S Sᵀ Rᵀ (Inria `computeCov3D`), carried as the factor M_c = W R S in camera space.
+        // A zero quaternion carries no rotation: it is drawn as the identity, with no gradient.
+        let (quat, quat_norm, quat_zero) = match normalize_quat([qw, qx, qy, qz]) {
+            Some((q, n)) => (q, n, false),
+            None => (Quat::IDENTITY, 0.0, true),
+        };
+        let rot = Mat3::from_quat(quat);
+        let scale = ls.exp();
+        let m = Mat3::from_cols(
+            rot.x_axis * scale.x,
+            rot.y_axis * scale.y,
+            rot.z_axis * scale.z,
+        );
+        let mc = v.rot * m;
+
+        // EWA: J evaluated at the clamped x/z, y/z (Inria clamps to 1.3·tan(fov/2)).
+        let z = p_cam.z;
+        let ux_raw = p_cam.x / z;
+        let uy_raw = p_cam.y / z;
+        let ux = ux_raw.clamp(-v.lim_x.0, v.lim_x.1);
+        let uy = uy_raw.clamp(-v.lim_y.0, v.lim_y.1);
+        let clamped = [ux != ux_raw, uy != uy_raw];
+        let j0 = Vec3::new(v.fx / z, 0.0, -v.fx * ux / z);
+        let j1 = Vec3::new(0.0, v.fy / z, -v.fy * uy / z);
+        let mct = mc.transpose();
+        let t_rows = [mct * j0, mct * j1];
+        if !(finite3(t_rows[0]) && finite3(t_rows[1])) {
+            return Err(Cull::NonFinite);
+        }
+        let cov = Cov2::<f64>::new(t_rows.map(|t| t.as_dvec3().to_array()));
+        if cov.det <= 0.0 {
+            return Err(Cull::Hidden);
+        }
+        let comp = if v.antialiased {
+            (cov.det0 / cov.det).sqrt() as f32
+        } else {
+            1.0
+        };
+        let opacity = sigmoid_o * comp;
+        if opacity < MIN_ALPHA {
+            return Err(Cull::Hidden);
+        }
+        let conic = cov.conic().map(|x| x as f32);
+
+        // Inria's extent: 3·√λmax with λ from the dilated covariance, and its tile rectangle.
+        let radius_f = (f64::from(EXTENT_SIGMAS) * cov.lambda_max().sqrt()).ceil() as f32;
+        let xy = [v.fx * ux_raw + v.cx - 0.5, v.fy * uy_raw + v.cy - 0.5];
+        if !(xy[0].is_finite() && xy[1].is_finite() && radius_f.is_finite()) {
+            return Err(Cull::NonFinite);
+        }
+        let rect = square_tiles(xy, radius_f, [v.tiles_x, v.tiles_y]);
+        let rect = within_reach(rect, xy, conic, quad_bound(opacity), [v.tiles_x, v.tiles_y]);
+        if radius_f <= 0.0 || rect[0] >= rect[1] || rect[2] >= rect[3] {
+            return Err(Cull::Hidden);
+        }
+
+        // Colour from SH towards the viewer: dir = normalize(mean − camera centre), + 0.5, clamp at 0.
+        let d = mean - v.center;
+        let dir_len = d.length();
+        let dir = d / dir_len;
+        let (color_raw, color) = if v.linear_colour {
+            let c = sh::eval(v.degree, dir, coeffs);
+            (c, c)
+        } else {
+            let raw = sh::eval(v.degree, dir, coeffs) + 0.5;
+            (raw, raw.max(Vec3::ZERO))
+        };
+        if !finite3(color) {
+            return Err(Cull::NonFinite);
+        }
+        Ok(Intermediates {
+            out: Projected {
+                xy,
+                conic,
+                opacity,
+                color: color.into(),
+                depth: z,
+                q_max: quad_bound(opacity),
+            },
+            rect,
+            radius: radius_f as u32,
+            chain: Chain {
+                quat,
+                quat_norm,
+                quat_zero,
+                scale,
+                rot,
+                mc,
+                p_cam,
+                u: Vec2::new(ux, uy),
+                clamped,
+                t_rows,
+                comp,
+                sigmoid_o,
+                dir,
+                dir_len,
+                color_raw,
+            },
+        })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use rand::{RngExt, SeedableRng};
 
-    use super::within_reach;
+    use glam::Vec3;
+
+    use super::{ChainLanes, Cull, Intermediates, ViewConsts, project8, reference, within_reach};
     use crate::TILE_SIZE;
+    use crate::lanes::WIDTH;
     use crate::projected::{quad_bound, random_footprint};
+
+    /// Every field of a projection result as bits, so −0 and NaN payloads count.
+    fn bits(r: &Result<Intermediates, Cull>) -> Vec<u32> {
+        let it = match r {
+            Err(Cull::Hidden) => return vec![1],
+            Err(Cull::NonFinite) => return vec![2],
+            Ok(it) => it,
+        };
+        let c = &it.chain;
+        let mut f: Vec<f32> = Vec::new();
+        let o = &it.out;
+        f.extend(o.xy);
+        f.extend(o.conic);
+        f.extend([o.opacity, o.depth, o.q_max]);
+        f.extend(o.color);
+        f.extend(c.quat.to_array());
+        f.extend([c.quat_norm, c.comp, c.sigmoid_o, c.dir_len]);
+        for v in [
+            c.scale,
+            c.p_cam,
+            c.dir,
+            c.color_raw,
+            c.t_rows[0],
+            c.t_rows[1],
+        ] {
+            f.extend(v.to_array());
+        }
+        f.extend(c.rot.to_cols_array());
+        f.extend(c.mc.to_cols_array());
+        f.extend(c.u.to_array());
+        let mut b: Vec<u32> = f.iter().map(|x| x.to_bits()).collect();
+        b.extend(it.rect);
+        b.extend([
+            it.radius,
+            u32::from(c.quat_zero),
+            u32::from(c.clamped[0]),
+            u32::from(c.clamped[1]),
+        ]);
+        b
+    }
+
+    /// The projection in lanes gives every splat the bits of the one-splat reference,
+    /// culls included: random splats with edge cases mixed in (behind the camera, off screen,
+    /// near-invisible, zero and huge quaternions, needles, NaN and infinite inputs, colours
+    /// below zero), for each SH degree, with and without antialiasing and linear colour, and
+    /// group starts that are not multiples of eight (repeated lanes).
+    #[test]
+    fn eight_lanes_give_the_bits_of_one_splat_at_a_time() {
+        use camera_model::{Camera, Intrinsics, Pose};
+        use glam::DVec3;
+
+        use crate::{RenderCamera, RenderOptions, Splats};
+
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(11);
+        let cam = RenderCamera::try_from(&Camera::new(
+            Intrinsics::from_fov_y(200, 150, 50.0),
+            Pose::look_at(DVec3::new(0.3, 0.2, 4.0), DVec3::ZERO, DVec3::Y),
+        ))
+        .unwrap();
+        let specials = [
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            0.0,
+            -0.0,
+            1e-30,
+            1e30,
+        ];
+        // Drawn, hidden, not finite.
+        let mut outcomes = [0_usize; 3];
+        for degree in 0..=3 {
+            let mut splats = Splats::new(3);
+            for i in 0..2_003 {
+                let mut r = |lo: f32, hi: f32| rng.random_range(lo..hi);
+                let mut mean = Vec3::new(r(-3.0, 3.0), r(-3.0, 3.0), r(-6.0, 3.9));
+                let mut ls = Vec3::new(r(-9.0, 1.0), r(-9.0, 1.0), r(-9.0, 1.0));
+                let mut q = [r(-1.0, 1.0), r(-1.0, 1.0), r(-1.0, 1.0), r(-1.0, 1.0)];
+                let mut logit = r(-8.0, 8.0);
+                let mut sh: Vec<[f32; 3]> = (0..16)
+                    .map(|_| [r(-1.5, 1.5), r(-1.5, 1.5), r(-1.5, 1.5)])
+                    .collect();
+                match i % 13 {
+                    0 => q = q.map(|c| c * 1e-30),
+                    1 => q = [0.0; 4],
+                    2 => q = q.map(|c| c * 1e25),
+                    3 => ls = Vec3::new(r(2.0, 9.0), -12.0, r(-3.0, 0.0)),
+                    4 => mean.z = 3.995,
+                    5 => logit = -9.0,
+                    _ => {}
+                }
+                if i % 29 == 7 {
+                    let bad = specials[(i / 29) % specials.len()];
+                    match (i / 7) % 5 {
+                        0 => mean.x = bad,
+                        1 => ls.y = bad,
+                        2 => q[2] = bad,
+                        3 => logit = bad,
+                        _ => sh[(i / 3) % 16][1] = bad,
+                    }
+                }
+                splats.push(mean, ls, q, logit, &sh);
+            }
+            for (antialiased, linear_colour) in [(false, false), (true, false), (true, true)] {
+                let opts = RenderOptions {
+                    active_sh_degree: degree,
+                    antialiased,
+                    linear_colour,
+                    ..RenderOptions::default()
+                };
+                let v = ViewConsts::new(&cam, &opts, &splats);
+                let n = splats.len();
+                for start in (0..n).step_by(5) {
+                    let idx = std::array::from_fn(|l| (start + l).min(n - 1));
+                    let mut drawn = [Err(Cull::Hidden); WIDTH];
+                    let mut chain = ChainLanes::default();
+                    project8(&splats, idx, WIDTH, &v, &mut chain, |l, r| drawn[l] = r);
+                    let lanes: [_; WIDTH] = std::array::from_fn(|l| {
+                        drawn[l].map(|d| Intermediates {
+                            out: d.out,
+                            rect: d.rect,
+                            radius: d.radius,
+                            chain: chain.lane(l),
+                        })
+                    });
+                    for l in 0..WIDTH {
+                        let one = reference::project(&splats, idx[l], &v);
+                        outcomes[match one {
+                            Ok(_) => 0,
+                            Err(Cull::Hidden) => 1,
+                            Err(Cull::NonFinite) => 2,
+                        }] += 1;
+                        assert_eq!(
+                            bits(&lanes[l]),
+                            bits(&one),
+                            "degree {degree}, antialiased {antialiased}, linear \
+                             {linear_colour}: splat {} in lane {l}",
+                            idx[l]
+                        );
+                    }
+                }
+            }
+        }
+        assert!(
+            outcomes[0] > 10_000 && outcomes[1] > 10_000 && outcomes[2] > 200,
+            "every outcome must occur often: {outcomes:?}"
+        );
+    }
 
     /// Narrowing a splat's tiles must keep every tile holding a pixel with alpha ≥ 1/255
     /// (checked in f64 over a 256² view, around random rotated, stretched splats, some near

@@ -7,7 +7,8 @@ use rayon::prelude::*;
 
 use crate::constants::{MAX_ALPHA, MIN_ALPHA, MIN_TRANSMITTANCE};
 use crate::disjoint::DisjointWrites;
-use crate::project::{Chain, Cull, ProjectedGrad, ViewConsts, project};
+use crate::lanes::WIDTH;
+use crate::project::{ChainLanes, Cull, ProjectedGrad, ViewConsts, project8};
 use crate::projected::Projected;
 use crate::tiles::{Bins, Falloff, HALF_ROWS, LANES, RowSpans, TILE_PIXELS, TILE_SIZE};
 use crate::{Error, RenderCamera, RenderOptions, RenderOutput, Splats};
@@ -62,7 +63,8 @@ pub struct Rasterizer {
     pub(crate) rects: Vec<[u32; 4]>,
     pub(crate) radii: Vec<u32>,
     /// What each visible splat's backward chains through, from the projection.
-    pub(crate) chain: Vec<Chain>,
+    /// The projection's intermediates for the backward, eight splats a group.
+    pub(crate) chain: Vec<ChainLanes>,
     pub(crate) visible: Vec<bool>,
     non_finite: Vec<bool>,
     pub(crate) bins: Bins,
@@ -256,7 +258,7 @@ impl Rasterizer {
         self.proj.resize(n, Projected::default());
         self.rects.resize(n, [0; 4]);
         self.radii.resize(n, 0);
-        self.chain.resize(n, Chain::default());
+        self.chain.resize(n.div_ceil(WIDTH), ChainLanes::default());
         self.visible.resize(n, false);
         self.non_finite.resize(n, false);
         let avx2 = self.use_avx2();
@@ -265,7 +267,7 @@ impl Rasterizer {
             .par_chunks_mut(CHUNK)
             .zip(self.rects.par_chunks_mut(CHUNK))
             .zip(self.radii.par_chunks_mut(CHUNK))
-            .zip(self.chain.par_chunks_mut(CHUNK))
+            .zip(self.chain.par_chunks_mut(CHUNK / WIDTH))
             .zip(self.visible.par_chunks_mut(CHUNK))
             .zip(self.non_finite.par_chunks_mut(CHUNK))
             .enumerate()
@@ -464,23 +466,25 @@ pub fn has_avx2() -> bool {
     }
 }
 
-/// Splats per projection task.
+/// Splats per projection task (whole groups of [`WIDTH`], so each task writes whole chain groups).
 const PROJECT_CHUNK: usize = 1024;
+const _: () = assert!(PROJECT_CHUNK.is_multiple_of(WIDTH));
 
 /// One chunk's slices of the projection outputs, from splat `first` on.
 struct ProjectOut<'a> {
     proj: &'a mut [Projected],
     rects: &'a mut [[u32; 4]],
     radii: &'a mut [u32],
-    chain: &'a mut [Chain],
+    chain: &'a mut [ChainLanes],
     visible: &'a mut [bool],
     non_finite: &'a mut [bool],
 }
 
-/// Projects the splats of one chunk: the AVX2 instantiation where the CPU has it (its floor,
-/// ceil and square roots become single instructions instead of library calls), else the
-/// portable one; the results are bit-identical (those operations are exact or correctly
-/// rounded either way, and there is no FMA contraction).
+/// Projects the splats of one chunk, eight at a time in vector lanes: the AVX2 instantiation
+/// where the CPU has it (eight f32 lanes an instruction; its floor, ceil and square roots single
+/// instructions instead of library calls), else the portable one (SSE2, four lanes); the results
+/// are bit-identical (those operations are exact or correctly rounded either way, and there is
+/// no FMA contraction).
 fn project_chunk(splats: &Splats, v: &ViewConsts, first: usize, out: ProjectOut<'_>, avx2: bool) {
     #[cfg(target_arch = "x86_64")]
     if avx2 {
@@ -501,22 +505,29 @@ fn project_chunk_avx2(splats: &Splats, v: &ViewConsts, first: usize, out: Projec
 
 #[inline(always)]
 fn project_chunk_impl(splats: &Splats, v: &ViewConsts, first: usize, o: ProjectOut<'_>) {
-    for j in 0..o.proj.len() {
-        match project(splats, first + j, v) {
-            Ok(it) => {
-                o.proj[j] = it.out;
-                o.rects[j] = it.rect;
-                o.radii[j] = it.radius;
-                o.chain[j] = it.chain;
-                o.visible[j] = true;
-                o.non_finite[j] = false;
+    let len = o.proj.len();
+    for start in (0..len).step_by(WIDTH) {
+        // The last group of a model that is not a multiple of eight repeats its last splat in
+        // the spare lanes, whose results are dropped.
+        let idx = std::array::from_fn(|l| first + (start + l).min(len - 1));
+        let chain = &mut o.chain[start / WIDTH];
+        project8(splats, idx, (len - start).min(WIDTH), v, chain, |l, r| {
+            let j = start + l;
+            match r {
+                Ok(it) => {
+                    o.proj[j] = it.out;
+                    o.rects[j] = it.rect;
+                    o.radii[j] = it.radius;
+                    o.visible[j] = true;
+                    o.non_finite[j] = false;
+                }
+                Err(c) => {
+                    o.radii[j] = 0;
+                    o.visible[j] = false;
+                    o.non_finite[j] = c == Cull::NonFinite;
+                }
             }
-            Err(c) => {
-                o.radii[j] = 0;
-                o.visible[j] = false;
-                o.non_finite[j] = c == Cull::NonFinite;
-            }
-        }
+        });
     }
 }
 

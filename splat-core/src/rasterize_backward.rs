@@ -15,6 +15,7 @@ use rayon::prelude::*;
 
 use crate::constants::{MAX_ALPHA, MIN_ALPHA};
 use crate::disjoint::DisjointWrites;
+use crate::lanes::WIDTH;
 use crate::project::{ChainView, ProjectedGrad, ViewConsts, project_backward};
 use crate::rasterize::{
     DEPTH_MIN_ALPHA, PREFETCH_AHEAD, lanes_mut, prefetch, tile_extent, tile_major_index,
@@ -211,7 +212,7 @@ impl Rasterizer {
             let p = project_backward(
                 &coeffs[j * k..(j + 1) * k],
                 &cv.v,
-                &self.chain[i],
+                &self.chain[i / WIDTH].lane(i % WIDTH),
                 &self.splat_grads[i],
                 cv.size,
                 &mut g.sh[j * k..(j + 1) * k],

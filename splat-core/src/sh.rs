@@ -7,6 +7,8 @@
 
 use glam::Vec3;
 
+use crate::lanes::Real;
+
 /// Degree-0 constant, 1/(2√π).
 pub const C0: f32 = 0.282_094_8;
 /// Degree-1 constant, √3/(2√π).
@@ -32,33 +34,39 @@ pub const C3: [f32; 7] = [
 
 /// Writes the `(degree + 1)²` basis values at unit direction `dir` into `out[..]`.
 pub fn basis(degree: u32, dir: Vec3, out: &mut [f32]) {
-    let Vec3 { x, y, z } = dir;
-    out[0] = C0;
+    basis_terms(degree, dir.into(), out);
+}
+
+/// [`basis`] on any [`Real`] whose lanes hold f32: a scalar, or eight directions at once.
+#[inline(always)]
+pub(crate) fn basis_terms<T: Real<Scalar = f32>>(degree: u32, [x, y, z]: [T; 3], out: &mut [T]) {
+    let c = T::splat;
+    out[0] = c(C0);
     if degree < 1 {
         return;
     }
-    out[1] = -C1 * y;
-    out[2] = C1 * z;
-    out[3] = -C1 * x;
+    out[1] = c(-C1) * y;
+    out[2] = c(C1) * z;
+    out[3] = c(-C1) * x;
     if degree < 2 {
         return;
     }
     let (xx, yy, zz) = (x * x, y * y, z * z);
-    out[4] = C2[0] * x * y;
-    out[5] = C2[1] * y * z;
-    out[6] = C2[2] * (2.0 * zz - xx - yy);
-    out[7] = C2[3] * x * z;
-    out[8] = C2[4] * (xx - yy);
+    out[4] = c(C2[0]) * x * y;
+    out[5] = c(C2[1]) * y * z;
+    out[6] = c(C2[2]) * (c(2.0) * zz - xx - yy);
+    out[7] = c(C2[3]) * x * z;
+    out[8] = c(C2[4]) * (xx - yy);
     if degree < 3 {
         return;
     }
-    out[9] = C3[0] * y * (3.0 * xx - yy);
-    out[10] = C3[1] * x * y * z;
-    out[11] = C3[2] * y * (4.0 * zz - xx - yy);
-    out[12] = C3[3] * z * (2.0 * zz - 3.0 * xx - 3.0 * yy);
-    out[13] = C3[4] * x * (4.0 * zz - xx - yy);
-    out[14] = C3[5] * z * (xx - yy);
-    out[15] = C3[6] * x * (xx - 3.0 * yy);
+    out[9] = c(C3[0]) * y * (c(3.0) * xx - yy);
+    out[10] = c(C3[1]) * x * y * z;
+    out[11] = c(C3[2]) * y * (c(4.0) * zz - xx - yy);
+    out[12] = c(C3[3]) * z * (c(2.0) * zz - c(3.0) * xx - c(3.0) * yy);
+    out[13] = c(C3[4]) * x * (c(4.0) * zz - xx - yy);
+    out[14] = c(C3[5]) * z * (xx - yy);
+    out[15] = c(C3[6]) * x * (xx - c(3.0) * yy);
 }
 
 /// Writes the basis values into `out` and their gradients with respect to (x, y, z) into `grad`.
@@ -97,13 +105,29 @@ pub fn basis_grad(degree: u32, dir: Vec3, out: &mut [f32], grad: &mut [Vec3]) {
 /// `(degree + 1)²` coefficients.
 #[must_use]
 pub fn eval(degree: u32, dir: Vec3, coeffs: &[[f32; 3]]) -> Vec3 {
-    let mut b = [0.0_f32; 16];
-    basis(degree, dir, &mut b);
-    let n = num_sh_coeffs(degree);
-    b[..n]
-        .iter()
-        .zip(coeffs)
-        .fold(Vec3::ZERO, |acc, (&w, c)| acc + w * Vec3::from(*c))
+    let n = num_sh_coeffs(degree).min(coeffs.len());
+    eval_terms(degree, n, dir.into(), |k| coeffs[k]).into()
+}
+
+/// [`eval`] on any [`Real`] whose lanes hold f32, over the first `n` coefficients, the k-th
+/// given by `coeff(k)` (per channel).
+#[inline(always)]
+pub(crate) fn eval_terms<T: Real<Scalar = f32>>(
+    degree: u32,
+    n: usize,
+    dir: [T; 3],
+    coeff: impl Fn(usize) -> [T; 3],
+) -> [T; 3] {
+    let mut b = [T::splat(0.0); 16];
+    basis_terms(degree, dir, &mut b);
+    let mut acc = [T::splat(0.0); 3];
+    for (k, &w) in b.iter().enumerate().take(n) {
+        let c = coeff(k);
+        for ch in 0..3 {
+            acc[ch] = acc[ch] + w * c[ch];
+        }
+    }
+    acc
 }
 
 /// Returns the colour a splat shows towards a viewer: `max(eval + 0.5, 0)` per channel, as
