@@ -6,7 +6,9 @@
 //! operations of a projection one splat at a time (kept in the tests as `reference::project`,
 //! which checks the bits); what the backward needs of it is stored in lanes too ([`ChainLanes`]).
 
-use glam::{Mat3, Quat, Vec2, Vec3};
+use glam::{Mat3, Vec3};
+#[cfg(test)]
+use glam::{Quat, Vec2};
 
 use crate::constants::{DILATION, EXTENT_SIGMAS, FOV_CLAMP_MARGIN, MIN_ALPHA, NEAR_PLANE};
 use crate::lanes::{D8, F8, Mask, Real, WIDTH, and, array};
@@ -93,8 +95,9 @@ pub(crate) struct Intermediates {
     pub chain: Chain,
 }
 
-/// The intermediates of a splat's projection that its backward needs, kept from the forward
-/// pass so the backward does not project again.
+/// The intermediates of a splat's projection that its backward needs (the tests' one-splat form
+/// of a lane of [`ChainLanes`]).
+#[cfg(test)]
 #[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct Chain {
     quat: Quat,
@@ -117,7 +120,7 @@ pub(crate) struct Chain {
     color_raw: Vec3,
 }
 
-/// The [`Chain`]s of eight consecutive splats, field by field in lanes (splat 8·g + l in lane l
+/// What the backward needs of eight consecutive splats' projections, field by field in lanes (splat 8·g + l in lane l
 /// of group g): the projection stores whole vectors, the backward reads one lane at a time.
 /// Storing one splat's chain from lanes cost the projection about as much as its arithmetic.
 #[derive(Clone, Copy, Debug, Default)]
@@ -127,14 +130,9 @@ pub(crate) struct ChainLanes {
     quat_norm: F8,
     quat_zero: Mask,
     scale: [F8; 3],
-    /// Columns.
-    rot: [[F8; 3]; 3],
-    /// Columns.
-    mc: [[F8; 3]; 3],
     p_cam: [F8; 3],
     u: [F8; 2],
     clamped: [Mask; 2],
-    t_rows: [[F8; 3]; 2],
     comp: F8,
     sigmoid_o: F8,
     dir: [F8; 3],
@@ -142,24 +140,27 @@ pub(crate) struct ChainLanes {
     color_raw: [F8; 3],
 }
 
+#[cfg(test)]
 impl ChainLanes {
-    /// The chain of lane `l`.
+    /// The chain of lane `l` in view `v`.
     #[inline(always)]
-    pub(crate) fn lane(&self, l: usize) -> Chain {
+    pub(crate) fn lane(&self, v: &ViewConsts, l: usize) -> Chain {
         let v3 = |a: &[F8; 3]| Vec3::new(a[0].0[l], a[1].0[l], a[2].0[l]);
         let m3 = |m: &[[F8; 3]; 3]| Mat3::from_cols(v3(&m[0]), v3(&m[1]), v3(&m[2]));
+        let (rot, mc) = cov_factor(v, self.quat, self.scale);
+        let t = t_rows(&mc, &jacobian(v, self.p_cam[2], self.u));
         let q = &self.quat;
         Chain {
             quat: Quat::from_xyzw(q[0].0[l], q[1].0[l], q[2].0[l], q[3].0[l]),
             quat_norm: self.quat_norm.0[l],
             quat_zero: self.quat_zero[l],
             scale: v3(&self.scale),
-            rot: m3(&self.rot),
-            mc: m3(&self.mc),
+            rot: m3(&rot),
+            mc: m3(&mc),
             p_cam: v3(&self.p_cam),
             u: Vec2::new(self.u[0].0[l], self.u[1].0[l]),
             clamped: [self.clamped[0][l], self.clamped[1][l]],
-            t_rows: [v3(&self.t_rows[0]), v3(&self.t_rows[1])],
+            t_rows: [v3(&t[0]), v3(&t[1])],
             comp: self.comp.0[l],
             sigmoid_o: self.sigmoid_o.0[l],
             dir: v3(&self.dir),
@@ -311,6 +312,46 @@ fn mat_vec(m: Mat3, p: [F8; 3]) -> [F8; 3] {
     })
 }
 
+/// The rotation R (columns) of eight splats' unit quaternions (x, y, z, w), as glam's
+/// `Mat3::from_quat` computes it, and the covariance factor M_c = W·(R·S) with S their scales,
+/// column by column: the forward computes it, and the backward again rather than storing 18
+/// floats a splat.
+#[inline(always)]
+fn cov_factor(
+    v: &ViewConsts,
+    [x, y, z, w]: [F8; 4],
+    scale: [F8; 3],
+) -> ([[F8; 3]; 3], [[F8; 3]; 3]) {
+    let one = F8::splat(1.0);
+    let (x2, y2, z2) = (x + x, y + y, z + z);
+    let (xx, xy, xz) = (x * x2, x * y2, x * z2);
+    let (yy, yz, zz) = (y * y2, y * z2, z * z2);
+    let (wx, wy, wz) = (w * x2, w * y2, w * z2);
+    let rot = [
+        [one - (yy + zz), xy + wz, xz - wy],
+        [xy - wz, one - (xx + zz), yz + wx],
+        [xz + wy, yz - wx, one - (xx + yy)],
+    ];
+    let mc = array(|j| mat_vec(v.rot, array(|c| rot[j][c] * scale[j])));
+    (rot, mc)
+}
+
+/// The rows of the EWA Jacobian J at depth `z` and the clamped x/z, y/z `u`.
+#[inline(always)]
+fn jacobian(v: &ViewConsts, z: F8, u: [F8; 2]) -> [[F8; 3]; 2] {
+    let (fx, fy, zero) = (F8::splat(v.fx), F8::splat(v.fy), F8::splat(0.0));
+    [
+        [fx / z, zero, -fx * u[0] / z],
+        [zero, fy / z, -fy * u[1] / z],
+    ]
+}
+
+/// T's rows M_cᵀ·j_r (so Σ₂ = T·Tᵀ before dilation), in glam's order (`mct * j`).
+#[inline(always)]
+fn t_rows(mc: &[[F8; 3]; 3], j: &[[F8; 3]; 2]) -> [[F8; 3]; 2] {
+    array(|r| array(|c| mc[c][0] * j[r][0] + mc[c][1] * j[r][1] + mc[c][2] * j[r][2]))
+}
+
 /// Why each lane is not drawn so far: the first reason found wins, as the early returns of a
 /// projection one splat at a time would have it.
 struct Culls([Option<Cull>; WIDTH]);
@@ -402,22 +443,12 @@ pub(crate) fn project8(
         array(|c| F8::select(normal, [uw, ux_q, uy_q, uz_q][c] / length, identity[c]));
     let quat_norm = F8::select(normal, norm, F8::splat(0.0));
 
-    // `Mat3::from_quat`.
-    let (x2, y2, z2) = (x + x, y + y, zq + zq);
-    let (xx, xy, xz) = (x * x2, x * y2, x * z2);
-    let (yy, yz, zz) = (y * y2, y * z2, zq * z2);
-    let (wx, wy, wz) = (w * x2, w * y2, w * z2);
-    let rot = [
-        [one - (yy + zz), xy + wz, xz - wy],
-        [xy - wz, one - (xx + zz), yz + wx],
-        [xz + wy, yz - wx, one - (xx + yy)],
-    ];
     let scale: [F8; 3] = {
         let s: [Vec3; WIDTH] = array(|l| Vec3::new(ls[0].0[l], ls[1].0[l], ls[2].0[l]).exp());
         array(|c| F8::from_fn(|l| s[l][c]))
     };
-    // M_c = W·(R·S), column by column.
-    let mc: [[F8; 3]; 3] = array(|j| mat_vec(v.rot, array(|c| rot[j][c] * scale[j])));
+    let quat = [x, y, zq, w];
+    let mc = cov_factor(v, quat, scale).1;
 
     let ux_raw = p_cam[0] / z;
     let uy_raw = p_cam[1] / z;
@@ -429,14 +460,7 @@ pub(crate) fn project8(
         u[0].test(ux_raw, |a, b| a != b),
         u[1].test(uy_raw, |a, b| a != b),
     ];
-    let (fx, fy) = (F8::splat(v.fx), F8::splat(v.fy));
-    let j = [
-        [fx / z, zero, -fx * u[0] / z],
-        [zero, fy / z, -fy * u[1] / z],
-    ];
-    // T's rows Mcᵀ·j_r, in glam's order (`mct * j`).
-    let t_rows: [[F8; 3]; 2] =
-        array(|r| array(|c| mc[c][0] * j[r][0] + mc[c][1] * j[r][1] + mc[c][2] * j[r][2]));
+    let t_rows = t_rows(&mc, &jacobian(v, z, u));
     let mut t_finite = [true; WIDTH];
     for c in t_rows.as_flattened() {
         t_finite = and(t_finite, c.finite());
@@ -463,8 +487,8 @@ pub(crate) fn project8(
         .map(f64::ceil)
         .to_f32();
     let xy = [
-        fx * ux_raw + F8::splat(v.cx) - half,
-        fy * uy_raw + F8::splat(v.cy) - half,
+        F8::splat(v.fx) * ux_raw + F8::splat(v.cx) - half,
+        F8::splat(v.fy) * uy_raw + F8::splat(v.cy) - half,
     ];
     culls.unless(
         and(and(xy[0].finite(), xy[1].finite()), radius_f.finite()),
@@ -513,16 +537,13 @@ pub(crate) fn project8(
     );
 
     *chain = ChainLanes {
-        quat: [x, y, zq, w],
+        quat,
         quat_norm,
         quat_zero: normal.map(|n| !n),
         scale,
-        rot,
-        mc,
         p_cam,
         u,
         clamped,
-        t_rows,
         comp,
         sigmoid_o,
         dir,
@@ -597,17 +618,9 @@ impl ProjectedGrad {
     }
 }
 
-/// The parameter gradients of one splat.
-pub(crate) struct ParamGrad {
-    pub mean: Vec3,
-    pub log_scale: Vec3,
-    pub rotation: [f32; 4],
-    pub opacity_logit: f32,
-    pub screen_norm: f32,
-}
-
 /// Product P·G·P of symmetric 2×2 matrices stored as (a, b, c).
-fn sandwich(p: [f64; 3], g: [f64; 3]) -> [f64; 3] {
+#[inline(always)]
+fn sandwich<T: Real>(p: [T; 3], g: [T; 3]) -> [T; 3] {
     // P·G
     let pg00 = p[0] * g[0] + p[1] * g[1];
     let pg01 = p[0] * g[1] + p[1] * g[2];
@@ -620,167 +633,218 @@ fn sandwich(p: [f64; 3], g: [f64; 3]) -> [f64; 3] {
     ]
 }
 
-/// Backward of [`project`]: chains `g` (summed over pixels) to the parameters of the splat whose
-/// SH coefficients are `coeffs`; their gradients are added into `d_sh`.
-pub(crate) fn project_backward(
-    coeffs: &[[f32; 3]],
-    v: &ViewConsts,
-    it: &Chain,
-    g: &ProjectedGrad,
-    image_size: (u32, u32),
-    d_sh: &mut [[f32; 3]],
-) -> ParamGrad {
-    let mut d_mean = Vec3::ZERO;
+/// Gradients of the loss with respect to eight splats' projected quantities, in lanes.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct ProjectedGradLanes {
+    pub xy: [F8; 2],
+    pub conic: [F8; 3],
+    pub opacity: F8,
+    pub color: [F8; 3],
+    pub depth: F8,
+}
 
-    // Colour: clamped channels pass no gradient (Inria's `clamped` flags).
-    let mut d_raw = Vec3::from(g.color);
-    for ch in 0..3 {
-        if !v.linear_colour && it.color_raw[ch] < 0.0 {
-            d_raw[ch] = 0.0;
+impl ProjectedGradLanes {
+    /// The lanes of `grads`.
+    #[inline(always)]
+    pub(crate) fn gather(grads: &[ProjectedGrad; WIDTH]) -> Self {
+        let mut lanes = Self::default();
+        for (l, g) in grads.iter().enumerate() {
+            for c in 0..2 {
+                lanes.xy[c].0[l] = g.xy[c];
+            }
+            for c in 0..3 {
+                lanes.conic[c].0[l] = g.conic[c];
+                lanes.color[c].0[l] = g.color[c];
+            }
+            lanes.opacity.0[l] = g.opacity;
+            lanes.depth.0[l] = g.depth;
         }
-    }
-    let d_dir = sh::eval_backward(v.degree, it.dir, coeffs, d_raw, d_sh);
-    // dir = d/|d| with d = mean − centre.
-    d_mean += (d_dir - it.dir * it.dir.dot(d_dir)) / it.dir_len;
-
-    // Opacity: o_eff = sigmoid(l)·comp.
-    let d_logit = g.opacity * it.comp * it.sigmoid_o * (1.0 - it.sigmoid_o);
-    let d_comp = g.opacity * it.sigmoid_o;
-
-    // Conic = Σ₂⁻¹ → dL/dΣ₂ = −Q·G_Q·Q with G_Q the symmetric matrix gradient (b appears
-    // twice), then Σ₂ = T·Tᵀ → G_T = 2·G_Σ·T. In f64 with the forward's `Cov2`: for a thin splat
-    // long on screen, Q·T's long column (≈ the axis / λ_max) is far smaller than Q's entries, and
-    // f32 lost it (needles' gradients were off by percents).
-    let cov = Cov2::<f64>::new(it.t_rows.map(|t| t.as_dvec3().to_array()));
-    let q = cov.conic();
-    let gq = [
-        f64::from(g.conic[0]),
-        0.5 * f64::from(g.conic[1]),
-        f64::from(g.conic[2]),
-    ];
-    let qgq = sandwich(q, gq);
-    let mut gs = [-qgq[0], -qgq[1], -qgq[2]];
-    if v.antialiased && it.comp > 0.0 {
-        // comp = √(det₀/det₁): d comp = comp/2·tr((Σ₀⁻¹ − Σ₁⁻¹)·dΣ), Σ₀ = Σ₁ − 0.3·I
-        // (comp > 0 implies det₀ > 0 and a finite Σ₀⁻¹).
-        let f = f64::from(d_comp * it.comp * 0.5);
-        let q0 = cov.conic0();
-        for kk in 0..3 {
-            gs[kk] += f * (q0[kk] - q[kk]);
-        }
-    }
-    let [t0, t1] = it.t_rows.map(Vec3::as_dvec3);
-    let gt0 = (2.0 * (gs[0] * t0 + gs[1] * t1)).as_vec3();
-    let gt1 = (2.0 * (gs[1] * t0 + gs[2] * t1)).as_vec3();
-    // T rows = M_cᵀ·j_r → G_j_r = M_c·G_t_r; G_M_c = Σ_r j_r·G_t_rᵀ.
-    let z = it.p_cam.z;
-    let j0 = Vec3::new(v.fx / z, 0.0, -v.fx * it.u.x / z);
-    let j1 = Vec3::new(0.0, v.fy / z, -v.fy * it.u.y / z);
-    let gj0 = it.mc * gt0;
-    let gj1 = it.mc * gt1;
-    // G_M_c (column c = Σ_r j_r·gt_r[c]).
-    let gmc = Mat3::from_cols(
-        j0 * gt0.x + j1 * gt1.x,
-        j0 * gt0.y + j1 * gt1.y,
-        j0 * gt0.z + j1 * gt1.z,
-    );
-
-    // J → camera-space point. J00 = fx/z, J02 = −fx·u/z with u = x/z unless clamped (then fixed).
-    let mut d_p = Vec3::ZERO;
-    d_p.z += -v.fx / (z * z) * gj0.x - v.fy / (z * z) * gj1.y;
-    let (fx, fy) = (v.fx, v.fy);
-    // J02 = −fx·u_x/z.
-    d_p.z += fx * it.u.x / (z * z) * gj0.z;
-    if !it.clamped[0] {
-        // u_x = x/z: ∂J02/∂x = −fx/z², ∂J02/∂z (via u) = fx·x/z³.
-        d_p.x += -fx / (z * z) * gj0.z;
-        d_p.z += fx * it.p_cam.x / (z * z * z) * gj0.z;
-    }
-    d_p.z += fy * it.u.y / (z * z) * gj1.z;
-    if !it.clamped[1] {
-        d_p.y += -fy / (z * z) * gj1.z;
-        d_p.z += fy * it.p_cam.y / (z * z * z) * gj1.z;
-    }
-    // Projected centre: x_pix = fx·x/z + cx (unclamped).
-    d_p.x += g.xy[0] * fx / z;
-    d_p.y += g.xy[1] * fy / z;
-    d_p.z += -g.xy[0] * fx * it.p_cam.x / (z * z) - g.xy[1] * fy * it.p_cam.y / (z * z);
-    d_p.z += g.depth;
-    d_mean += v.rot.transpose() * d_p;
-
-    // M_c = W·R·S.
-    let gm = v.rot.transpose() * gmc;
-    let r = it.rot;
-    let d_scale = Vec3::new(
-        gm.x_axis.dot(r.x_axis),
-        gm.y_axis.dot(r.y_axis),
-        gm.z_axis.dot(r.z_axis),
-    );
-    let d_log_scale = d_scale * it.scale;
-    let g_r = Mat3::from_cols(
-        gm.x_axis * it.scale.x,
-        gm.y_axis * it.scale.y,
-        gm.z_axis * it.scale.z,
-    );
-    let rotation = if it.quat_zero {
-        [0.0; 4]
-    } else {
-        quat_backward(it.quat, it.quat_norm, &g_r)
-    };
-
-    let (w, h) = image_size;
-    let ndc = Vec2::new(g.xy[0] * 0.5 * w as f32, g.xy[1] * 0.5 * h as f32);
-    ParamGrad {
-        mean: d_mean,
-        log_scale: d_log_scale,
-        rotation,
-        opacity_logit: d_logit,
-        screen_norm: ndc.length(),
+        lanes
     }
 }
 
-/// Gradient of R(q/|q|) with respect to the stored quaternion (w, x, y, z), given G_R.
-fn quat_backward(q: Quat, norm: f32, g: &Mat3) -> [f32; 4] {
-    let (w, x, y, z) = (q.w, q.x, q.y, q.z);
-    // g(row, col) with glam's column-major storage.
-    let e = |r: usize, c: usize| g.col(c)[r];
+/// The parameter gradients of eight splats, in lanes.
+pub(crate) struct ParamGradLanes {
+    pub mean: [F8; 3],
+    pub log_scale: [F8; 3],
+    /// (w, x, y, z), as stored.
+    pub rotation: [F8; 4],
+    pub opacity_logit: F8,
+    pub screen_norm: F8,
+}
+
+/// `m·p` for a matrix (columns) and a vector both in lanes, in glam's order (`Mat3::mul_vec3`).
+#[inline(always)]
+fn lanes_mat_vec(m: &[[F8; 3]; 3], p: [F8; 3]) -> [F8; 3] {
+    array(|c| m[0][c] * p[0] + m[1][c] * p[1] + m[2][c] * p[2])
+}
+
+/// Backward of [`project8`] for the splats of one group: chains `g` (summed over pixels) to
+/// their parameters, lane by lane the IEEE operations of the backward one splat at a time
+/// (`reference::project_backward` in the tests, which checks the bits). The SH part is the
+/// caller's: `sh_backward(dir, d_colour)` adds each splat's coefficient gradients where they
+/// belong and returns dL/d(dir) (`sh::eval_backward` one lane at a time: in lanes, moving 48
+/// coefficients and their gradients a splat between lanes and the model's layout cost more
+/// than the arithmetic saved).
+#[inline(always)]
+#[allow(clippy::too_many_lines)]
+pub(crate) fn project_backward8(
+    v: &ViewConsts,
+    it: &ChainLanes,
+    g: &ProjectedGradLanes,
+    image_size: (u32, u32),
+    sh_backward: impl FnOnce(&[F8; 3], [F8; 3]) -> [F8; 3],
+) -> ParamGradLanes {
+    let (zero, half) = (F8::splat(0.0), F8::splat(0.5));
+    // Colour: clamped channels pass no gradient (Inria's `clamped` flags).
+    let d_raw: [F8; 3] = array(|ch| {
+        if v.linear_colour {
+            g.color[ch]
+        } else {
+            F8::select(it.color_raw[ch].test(zero, |a, b| a < b), zero, g.color[ch])
+        }
+    });
+    let d_dir = sh_backward(&it.dir, d_raw);
+    // dir = d/|d| with d = mean − centre.
+    let along = it.dir[0] * d_dir[0] + it.dir[1] * d_dir[1] + it.dir[2] * d_dir[2];
+    let d_mean: [F8; 3] = array(|c| zero + (d_dir[c] - it.dir[c] * along) / it.dir_len);
+
+    // Opacity: o_eff = sigmoid(l)·comp.
+    let d_logit = g.opacity * it.comp * it.sigmoid_o * (F8::splat(1.0) - it.sigmoid_o);
+    let d_comp = g.opacity * it.sigmoid_o;
+
+    // Conic = Σ₂⁻¹ and Σ₂ = T·Tᵀ, in f64 (see `project_backward`'s reference form).
+    let (rot, mc) = cov_factor(v, it.quat, it.scale);
+    let z = it.p_cam[2];
+    let [j0, j1] = jacobian(v, z, it.u);
+    let t: [[D8; 3]; 2] = {
+        let t = t_rows(&mc, &[j0, j1]);
+        array(|r| array(|c| t[r][c].to_f64()))
+    };
+    let cov = Cov2::<D8>::new(t);
+    let q = cov.conic();
+    let gq = [
+        g.conic[0].to_f64(),
+        D8::splat(0.5) * g.conic[1].to_f64(),
+        g.conic[2].to_f64(),
+    ];
+    let qgq = sandwich(q, gq);
+    let mut gs = [-qgq[0], -qgq[1], -qgq[2]];
+    if v.antialiased {
+        let on = it.comp.test(zero, |a, b| a > b);
+        let f = (d_comp * it.comp * half).to_f64();
+        let q0 = cov.conic0();
+        for kk in 0..3 {
+            gs[kk] = D8::select(on, gs[kk] + f * (q0[kk] - q[kk]), gs[kk]);
+        }
+    }
+    let two = D8::splat(2.0);
+    let gt0: [F8; 3] = array(|c| (two * (gs[0] * t[0][c] + gs[1] * t[1][c])).to_f32());
+    let gt1: [F8; 3] = array(|c| (two * (gs[1] * t[0][c] + gs[2] * t[1][c])).to_f32());
+    let (fx, fy) = (F8::splat(v.fx), F8::splat(v.fy));
+    let gj0 = lanes_mat_vec(&mc, gt0);
+    let gj1 = lanes_mat_vec(&mc, gt1);
+    let gmc: [[F8; 3]; 3] = array(|col| array(|r| j0[r] * gt0[col] + j1[r] * gt1[col]));
+
+    let zz = z * z;
+    let mut dp = [zero; 3];
+    dp[2] = dp[2] + (-fx / zz * gj0[0] - fy / zz * gj1[1]);
+    dp[2] = dp[2] + fx * it.u[0] / zz * gj0[2];
+    let free = it.clamped.map(|c| c.map(|c| !c));
+    dp[0] = F8::select(free[0], dp[0] + -fx / zz * gj0[2], dp[0]);
+    dp[2] = F8::select(free[0], dp[2] + fx * it.p_cam[0] / (zz * z) * gj0[2], dp[2]);
+    dp[2] = dp[2] + fy * it.u[1] / zz * gj1[2];
+    dp[1] = F8::select(free[1], dp[1] + -fy / zz * gj1[2], dp[1]);
+    dp[2] = F8::select(free[1], dp[2] + fy * it.p_cam[1] / (zz * z) * gj1[2], dp[2]);
+    dp[0] = dp[0] + g.xy[0] * fx / z;
+    dp[1] = dp[1] + g.xy[1] * fy / z;
+    dp[2] = dp[2] + (-g.xy[0] * fx * it.p_cam[0] / zz - g.xy[1] * fy * it.p_cam[1] / zz);
+    dp[2] = dp[2] + g.depth;
+    let rt = v.rot.transpose();
+    let dm = mat_vec(rt, dp);
+    let mean = array(|c| d_mean[c] + dm[c]);
+
+    // M_c = W·R·S.
+    let gm: [[F8; 3]; 3] = array(|col| mat_vec(rt, gmc[col]));
+    let r = &rot;
+    let d_scale: [F8; 3] = array(|a| gm[a][0] * r[a][0] + gm[a][1] * r[a][1] + gm[a][2] * r[a][2]);
+    let g_r: [[F8; 3]; 3] = array(|col| array(|rr| gm[col][rr] * it.scale[col]));
+    let [x, y, zq, w] = it.quat;
+    let rotation = quat_backward_terms([w, x, y, zq], it.quat_norm, &g_r);
+
+    let (width, height) = image_size;
+    let ndc = [
+        g.xy[0] * half * F8::splat(width as f32),
+        g.xy[1] * half * F8::splat(height as f32),
+    ];
+    ParamGradLanes {
+        mean,
+        log_scale: array(|a| d_scale[a] * it.scale[a]),
+        rotation: array(|c| F8::select(it.quat_zero, zero, rotation[c])),
+        opacity_logit: d_logit,
+        screen_norm: (ndc[0] * ndc[0] + ndc[1] * ndc[1]).sqrt(),
+    }
+}
+
+/// Gradient of R(q/|q|) with respect to the stored quaternion q = (w, x, y, z), given G_R
+/// (columns), on any [`Real`] whose lanes hold f32.
+#[inline(always)]
+fn quat_backward_terms<T: Real<Scalar = f32>>(
+    [w, x, y, z]: [T; 4],
+    norm: T,
+    g: &[[T; 3]; 3],
+) -> [T; 4] {
+    let e = |r: usize, c: usize| g[c][r];
+    let (two, m2) = (T::splat(2.0), T::splat(-2.0));
     let gw =
-        2.0 * (-z * e(0, 1) + y * e(0, 2) + z * e(1, 0) - x * e(1, 2) - y * e(2, 0) + x * e(2, 1));
-    let gx = 2.0
-        * (y * e(0, 1) + z * e(0, 2) + y * e(1, 0) - 2.0 * x * e(1, 1) - w * e(1, 2)
+        two * (-z * e(0, 1) + y * e(0, 2) + z * e(1, 0) - x * e(1, 2) - y * e(2, 0) + x * e(2, 1));
+    let gx = two
+        * (y * e(0, 1) + z * e(0, 2) + y * e(1, 0) - two * x * e(1, 1) - w * e(1, 2)
             + z * e(2, 0)
             + w * e(2, 1)
-            - 2.0 * x * e(2, 2));
-    let gy = 2.0
-        * (-2.0 * y * e(0, 0) + x * e(0, 1) + w * e(0, 2) + x * e(1, 0) + z * e(1, 2)
-            - w * e(2, 0)
+            - two * x * e(2, 2));
+    let gy = two
+        * (m2 * y * e(0, 0) + x * e(0, 1) + w * e(0, 2) + x * e(1, 0) + z * e(1, 2) - w * e(2, 0)
             + z * e(2, 1)
-            - 2.0 * y * e(2, 2));
-    let gz = 2.0
-        * (-2.0 * z * e(0, 0) - w * e(0, 1) + x * e(0, 2) + w * e(1, 0) - 2.0 * z * e(1, 1)
+            - two * y * e(2, 2));
+    let gz = two
+        * (m2 * z * e(0, 0) - w * e(0, 1) + x * e(0, 2) + w * e(1, 0) - two * z * e(1, 1)
             + y * e(1, 2)
             + x * e(2, 0)
             + y * e(2, 1));
     // Through the normalisation q/|q|.
-    let gn = [gw, gx, gy, gz];
-    let qn = [w, x, y, z];
-    let dot: f32 = (0..4).map(|k| gn[k] * qn[k]).sum();
-    std::array::from_fn(|k| (gn[k] - qn[k] * dot) / norm)
+    let dot = gw * w + gx * x + gy * y + gz * z;
+    [
+        (gw - w * dot) / norm,
+        (gx - x * dot) / norm,
+        (gy - y * dot) / norm,
+        (gz - z * dot) / norm,
+    ]
 }
 
-/// The projection one splat at a time, with early returns: the form [`project8`] computes in
-/// lanes, kept as the tests' independent reference for its bits.
 #[cfg(test)]
 pub(crate) mod reference {
     use glam::{Mat3, Quat, Vec2, Vec3};
 
-    use super::{Chain, Cov2, Cull, Intermediates, ViewConsts, square_tiles, within_reach};
+    use super::{
+        Chain, Cov2, Cull, Intermediates, ProjectedGrad, ViewConsts, quat_backward_terms, sandwich,
+        square_tiles, within_reach,
+    };
     use crate::constants::{EXTENT_SIGMAS, MIN_ALPHA, NEAR_PLANE};
     use crate::projected::{Projected, quad_bound};
     use crate::{Splats, all_finite, normalize_quat, num_sh_coeffs, sh, sigmoid};
 
     fn finite3(v: Vec3) -> bool {
         v.is_finite()
+    }
+
+    /// The parameter gradients of one splat.
+    pub(crate) struct ParamGrad {
+        pub mean: Vec3,
+        pub log_scale: Vec3,
+        pub rotation: [f32; 4],
+        pub opacity_logit: f32,
+        pub screen_norm: f32,
     }
 
     /// Projects splat `i`; returns its intermediates or why it is culled.
@@ -915,6 +979,131 @@ pub(crate) mod reference {
             },
         })
     }
+
+    /// Backward of [`project`]: chains `g` (summed over pixels) to the parameters of the splat whose
+    /// SH coefficients are `coeffs`; their gradients are added into `d_sh`.
+    pub(crate) fn project_backward(
+        coeffs: &[[f32; 3]],
+        v: &ViewConsts,
+        it: &Chain,
+        g: &ProjectedGrad,
+        image_size: (u32, u32),
+        d_sh: &mut [[f32; 3]],
+    ) -> ParamGrad {
+        let mut d_mean = Vec3::ZERO;
+
+        // Colour: clamped channels pass no gradient (Inria's `clamped` flags).
+        let mut d_raw = Vec3::from(g.color);
+        for ch in 0..3 {
+            if !v.linear_colour && it.color_raw[ch] < 0.0 {
+                d_raw[ch] = 0.0;
+            }
+        }
+        let d_dir = sh::eval_backward(v.degree, it.dir, coeffs, d_raw, d_sh);
+        // dir = d/|d| with d = mean − centre.
+        d_mean += (d_dir - it.dir * it.dir.dot(d_dir)) / it.dir_len;
+
+        // Opacity: o_eff = sigmoid(l)·comp.
+        let d_logit = g.opacity * it.comp * it.sigmoid_o * (1.0 - it.sigmoid_o);
+        let d_comp = g.opacity * it.sigmoid_o;
+
+        // Conic = Σ₂⁻¹ → dL/dΣ₂ = −Q·G_Q·Q with G_Q the symmetric matrix gradient (b appears
+        // twice), then Σ₂ = T·Tᵀ → G_T = 2·G_Σ·T. In f64 with the forward's `Cov2`: for a thin splat
+        // long on screen, Q·T's long column (≈ the axis / λ_max) is far smaller than Q's entries, and
+        // f32 lost it (needles' gradients were off by percents).
+        let cov = Cov2::<f64>::new(it.t_rows.map(|t| t.as_dvec3().to_array()));
+        let q = cov.conic();
+        let gq = [
+            f64::from(g.conic[0]),
+            0.5 * f64::from(g.conic[1]),
+            f64::from(g.conic[2]),
+        ];
+        let qgq = sandwich(q, gq);
+        let mut gs = [-qgq[0], -qgq[1], -qgq[2]];
+        if v.antialiased && it.comp > 0.0 {
+            // comp = √(det₀/det₁): d comp = comp/2·tr((Σ₀⁻¹ − Σ₁⁻¹)·dΣ), Σ₀ = Σ₁ − 0.3·I
+            // (comp > 0 implies det₀ > 0 and a finite Σ₀⁻¹).
+            let f = f64::from(d_comp * it.comp * 0.5);
+            let q0 = cov.conic0();
+            for kk in 0..3 {
+                gs[kk] += f * (q0[kk] - q[kk]);
+            }
+        }
+        let [t0, t1] = it.t_rows.map(Vec3::as_dvec3);
+        let gt0 = (2.0 * (gs[0] * t0 + gs[1] * t1)).as_vec3();
+        let gt1 = (2.0 * (gs[1] * t0 + gs[2] * t1)).as_vec3();
+        // T rows = M_cᵀ·j_r → G_j_r = M_c·G_t_r; G_M_c = Σ_r j_r·G_t_rᵀ.
+        let z = it.p_cam.z;
+        let j0 = Vec3::new(v.fx / z, 0.0, -v.fx * it.u.x / z);
+        let j1 = Vec3::new(0.0, v.fy / z, -v.fy * it.u.y / z);
+        let gj0 = it.mc * gt0;
+        let gj1 = it.mc * gt1;
+        // G_M_c (column c = Σ_r j_r·gt_r[c]).
+        let gmc = Mat3::from_cols(
+            j0 * gt0.x + j1 * gt1.x,
+            j0 * gt0.y + j1 * gt1.y,
+            j0 * gt0.z + j1 * gt1.z,
+        );
+
+        // J → camera-space point. J00 = fx/z, J02 = −fx·u/z with u = x/z unless clamped (then fixed).
+        let mut d_p = Vec3::ZERO;
+        d_p.z += -v.fx / (z * z) * gj0.x - v.fy / (z * z) * gj1.y;
+        let (fx, fy) = (v.fx, v.fy);
+        // J02 = −fx·u_x/z.
+        d_p.z += fx * it.u.x / (z * z) * gj0.z;
+        if !it.clamped[0] {
+            // u_x = x/z: ∂J02/∂x = −fx/z², ∂J02/∂z (via u) = fx·x/z³.
+            d_p.x += -fx / (z * z) * gj0.z;
+            d_p.z += fx * it.p_cam.x / (z * z * z) * gj0.z;
+        }
+        d_p.z += fy * it.u.y / (z * z) * gj1.z;
+        if !it.clamped[1] {
+            d_p.y += -fy / (z * z) * gj1.z;
+            d_p.z += fy * it.p_cam.y / (z * z * z) * gj1.z;
+        }
+        // Projected centre: x_pix = fx·x/z + cx (unclamped).
+        d_p.x += g.xy[0] * fx / z;
+        d_p.y += g.xy[1] * fy / z;
+        d_p.z += -g.xy[0] * fx * it.p_cam.x / (z * z) - g.xy[1] * fy * it.p_cam.y / (z * z);
+        d_p.z += g.depth;
+        d_mean += v.rot.transpose() * d_p;
+
+        // M_c = W·R·S.
+        let gm = v.rot.transpose() * gmc;
+        let r = it.rot;
+        let d_scale = Vec3::new(
+            gm.x_axis.dot(r.x_axis),
+            gm.y_axis.dot(r.y_axis),
+            gm.z_axis.dot(r.z_axis),
+        );
+        let d_log_scale = d_scale * it.scale;
+        let g_r = Mat3::from_cols(
+            gm.x_axis * it.scale.x,
+            gm.y_axis * it.scale.y,
+            gm.z_axis * it.scale.z,
+        );
+        let rotation = if it.quat_zero {
+            [0.0; 4]
+        } else {
+            quat_backward(it.quat, it.quat_norm, &g_r)
+        };
+
+        let (w, h) = image_size;
+        let ndc = Vec2::new(g.xy[0] * 0.5 * w as f32, g.xy[1] * 0.5 * h as f32);
+        ParamGrad {
+            mean: d_mean,
+            log_scale: d_log_scale,
+            rotation,
+            opacity_logit: d_logit,
+            screen_norm: ndc.length(),
+        }
+    }
+
+    /// Gradient of R(q/|q|) with respect to the stored quaternion (w, x, y, z), given G_R.
+    fn quat_backward(q: Quat, norm: f32, g: &Mat3) -> [f32; 4] {
+        let cols = [g.x_axis, g.y_axis, g.z_axis].map(|c| c.to_array());
+        quat_backward_terms([q.w, q.x, q.y, q.z], norm, &cols)
+    }
 }
 
 #[cfg(test)]
@@ -1048,7 +1237,7 @@ mod tests {
                             out: d.out,
                             rect: d.rect,
                             radius: d.radius,
-                            chain: chain.lane(l),
+                            chain: chain.lane(&v, l),
                         })
                     });
                     for l in 0..WIDTH {
@@ -1072,6 +1261,136 @@ mod tests {
         assert!(
             outcomes[0] > 10_000 && outcomes[1] > 10_000 && outcomes[2] > 200,
             "every outcome must occur often: {outcomes:?}"
+        );
+    }
+
+    /// The backward in lanes gives every splat the bits of the one-splat reference backward:
+    /// parameter gradients and SH gradients, from the chains of the projection test's kind of
+    /// splats and random gradients of the projected quantities (some zero, some large).
+    #[test]
+    fn eight_lanes_chain_the_bits_of_one_splat_at_a_time() {
+        use camera_model::{Camera, Intrinsics, Pose};
+        use glam::DVec3;
+
+        use super::{ProjectedGrad, ProjectedGradLanes, project_backward8};
+        use crate::lanes::F8;
+        use crate::{RenderCamera, RenderOptions, Splats};
+
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(12);
+        let cam = RenderCamera::try_from(&Camera::new(
+            Intrinsics::from_fov_y(200, 150, 50.0),
+            Pose::look_at(DVec3::new(0.3, 0.2, 4.0), DVec3::ZERO, DVec3::Y),
+        ))
+        .unwrap();
+        let mut compared = 0;
+        for degree in 0..=3 {
+            let mut splats = Splats::new(3);
+            for i in 0..1_600 {
+                let mut r = |lo: f32, hi: f32| rng.random_range(lo..hi);
+                let mean = Vec3::new(r(-2.0, 2.0), r(-2.0, 2.0), r(-2.0, 2.0));
+                let mut ls = Vec3::new(r(-6.0, 0.0), r(-6.0, 0.0), r(-6.0, 0.0));
+                let mut q = [r(-1.0, 1.0), r(-1.0, 1.0), r(-1.0, 1.0), r(-1.0, 1.0)];
+                match i % 11 {
+                    0 => q = [0.0; 4],
+                    1 => ls = Vec3::new(r(1.0, 3.0), -9.0, r(-3.0, 0.0)),
+                    _ => {}
+                }
+                let sh: Vec<[f32; 3]> = (0..16)
+                    .map(|_| [r(-1.5, 1.5), r(-1.5, 1.5), r(-1.5, 1.5)])
+                    .collect();
+                splats.push(mean, ls, q, r(-4.0, 6.0), &sh);
+            }
+            for (antialiased, linear_colour) in [(false, false), (true, false), (true, true)] {
+                let opts = RenderOptions {
+                    active_sh_degree: degree,
+                    antialiased,
+                    linear_colour,
+                    ..RenderOptions::default()
+                };
+                let v = ViewConsts::new(&cam, &opts, &splats);
+                let k = splats.coeffs_per_splat();
+                for start in (0..splats.len()).step_by(WIDTH) {
+                    let idx = std::array::from_fn(|l| start + l);
+                    let mut chain = ChainLanes::default();
+                    let mut drawn = [false; WIDTH];
+                    project8(&splats, idx, WIDTH, &v, &mut chain, |l, r| {
+                        drawn[l] = r.is_ok()
+                    });
+                    let mut r = |scale: f32| {
+                        if rng.random_range(0..5) == 0 {
+                            0.0
+                        } else {
+                            scale * rng.random_range(-1.0..1.0_f32)
+                        }
+                    };
+                    let grads: [ProjectedGrad; WIDTH] = std::array::from_fn(|_| ProjectedGrad {
+                        xy: [r(1.0), r(1.0)],
+                        conic: [r(50.0), r(50.0), r(50.0)],
+                        opacity: r(1.0),
+                        color: [r(1.0), r(1.0), r(1.0)],
+                        depth: r(1.0),
+                    });
+                    let mut d_sh_lanes = [[[0.0_f32; 3]; 16]; WIDTH];
+                    let p = project_backward8(
+                        &v,
+                        &chain,
+                        &ProjectedGradLanes::gather(&grads),
+                        (200, 150),
+                        |dir, d_colour| {
+                            let mut d_dir = [F8::default(); 3];
+                            for l in 0..WIDTH {
+                                let lane = |a: &[F8; 3]| Vec3::new(a[0].0[l], a[1].0[l], a[2].0[l]);
+                                let d = crate::sh::eval_backward(
+                                    v.degree,
+                                    lane(dir),
+                                    &splats.sh[idx[l] * k..(idx[l] + 1) * k],
+                                    lane(&d_colour),
+                                    &mut d_sh_lanes[l],
+                                );
+                                for c in 0..3 {
+                                    d_dir[c].0[l] = d[c];
+                                }
+                            }
+                            d_dir
+                        },
+                    );
+                    for l in (0..WIDTH).filter(|&l| drawn[l]) {
+                        let mut d_sh = [[0.0_f32; 3]; 16];
+                        let one = reference::project_backward(
+                            &splats.sh[idx[l] * k..(idx[l] + 1) * k],
+                            &v,
+                            &chain.lane(&v, l),
+                            &grads[l],
+                            (200, 150),
+                            &mut d_sh,
+                        );
+                        let mut want: Vec<f32> = one.mean.to_array().to_vec();
+                        want.extend(one.log_scale.to_array());
+                        want.extend(one.rotation);
+                        want.extend([one.opacity_logit, one.screen_norm]);
+                        want.extend(d_sh.as_flattened());
+                        let lane = |a: &[F8]| a.iter().map(|x| x.0[l]).collect::<Vec<_>>();
+                        let mut got = lane(&p.mean);
+                        got.extend(lane(&p.log_scale));
+                        got.extend(lane(&p.rotation));
+                        got.extend(lane(&[p.opacity_logit, p.screen_norm]));
+                        got.extend(d_sh_lanes[l].as_flattened());
+                        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                        assert_eq!(
+                            bits(&got),
+                            bits(&want),
+                            "degree {degree}, antialiased {antialiased}, linear \
+                             {linear_colour}: splat {}",
+                            idx[l]
+                        );
+                        compared += 1;
+                    }
+                }
+            }
+        }
+        assert!(
+            compared > 8_000,
+            "too few drawn splats compared: {compared}"
         );
     }
 

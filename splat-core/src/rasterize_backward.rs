@@ -11,17 +11,19 @@
 
 use std::time::{Duration, Instant};
 
+use glam::Vec3;
 use rayon::prelude::*;
 
 use crate::constants::{MAX_ALPHA, MIN_ALPHA};
 use crate::disjoint::DisjointWrites;
+use crate::lanes::F8;
 use crate::lanes::WIDTH;
-use crate::project::{ChainView, ProjectedGrad, ViewConsts, project_backward};
+use crate::project::{ChainView, ProjectedGrad, ProjectedGradLanes, ViewConsts, project_backward8};
 use crate::rasterize::{
     DEPTH_MIN_ALPHA, PREFETCH_AHEAD, lanes_mut, prefetch, tile_extent, tile_major_index,
 };
 use crate::tiles::{Falloff, HALF_ROWS, LANES, RowSpans, TILE_PIXELS, TILE_SIZE};
-use crate::{Rasterizer, RenderCamera, RenderOptions, SplatGrads, SplatGradsMut, Splats};
+use crate::{Rasterizer, RenderCamera, RenderOptions, SplatGrads, SplatGradsMut, Splats, sh};
 
 /// Splats per task of the chain phase.
 const CHAIN_CHUNK: usize = 256;
@@ -38,7 +40,7 @@ struct PixelGrads<'a> {
     d_rgb: &'a [f32],
     d_alpha: Option<&'a [f32]>,
     d_depth: Option<&'a [f32]>,
-    bg: glam::Vec3,
+    bg: Vec3,
     width: usize,
     tiles_x: u32,
 }
@@ -202,28 +204,90 @@ impl Rasterizer {
              {first} of {} with {k} SH coefficients each",
             cv.splats
         );
-        for j in 0..n {
-            let i = first + j;
-            // A splat with no gradient record (hidden behind others in every tile it is
-            // listed in) would add exact zeros: skip its chain.
-            if !self.visible[i] || self.splat_grads[i].is_zero() {
+        #[cfg(target_arch = "x86_64")]
+        if self.use_avx2() {
+            // SAFETY: `use_avx2` is only true when the CPU reports AVX2 (`has_avx2`).
+            #[allow(unsafe_code)]
+            unsafe {
+                self.chain_range_avx2(cv, first, coeffs, g);
+            }
+            return;
+        }
+        self.chain_range(cv, first, coeffs, g);
+    }
+
+    /// [`Rasterizer::chain_range`] compiled with AVX2 (eight f32 lanes an instruction).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn chain_range_avx2(
+        &self,
+        cv: &ChainView,
+        first: usize,
+        coeffs: &[[f32; 3]],
+        g: SplatGradsMut<'_>,
+    ) {
+        self.chain_range(cv, first, coeffs, g);
+    }
+
+    /// The body of [`Rasterizer::chain_into`], its arguments checked.
+    #[inline(always)]
+    fn chain_range(&self, cv: &ChainView, first: usize, coeffs: &[[f32; 3]], g: SplatGradsMut<'_>) {
+        let (n, k) = (g.means.len(), cv.coeffs_per_splat);
+        // Group by group of the projection's lanes; a range need not start at a group, and its
+        // splats outside the range (or with no gradient record: hidden behind others in every
+        // tile it is listed in, so its chain would add exact zeros) are idle lanes.
+        let end = first + n;
+        for group in first / WIDTH..end.div_ceil(WIDTH) {
+            let i0 = group * WIDTH;
+            let active: [bool; WIDTH] = std::array::from_fn(|l| {
+                let i = i0 + l;
+                (first..end).contains(&i) && self.visible[i] && !self.splat_grads[i].is_zero()
+            });
+            if !active.contains(&true) {
                 continue;
             }
-            let p = project_backward(
-                &coeffs[j * k..(j + 1) * k],
+            let grads = std::array::from_fn(|l| {
+                if active[l] {
+                    self.splat_grads[i0 + l]
+                } else {
+                    ProjectedGrad::default()
+                }
+            });
+            let p = project_backward8(
                 &cv.v,
-                &self.chain[i / WIDTH].lane(i % WIDTH),
-                &self.splat_grads[i],
+                &self.chain[group],
+                &ProjectedGradLanes::gather(&grads),
                 cv.size,
-                &mut g.sh[j * k..(j + 1) * k],
+                |dir, d_colour| {
+                    let mut d_dir = [F8::default(); 3];
+                    for l in (0..WIDTH).filter(|&l| active[l]) {
+                        let j = i0 + l - first;
+                        let lane3 = |a: &[F8; 3]| Vec3::new(a[0].0[l], a[1].0[l], a[2].0[l]);
+                        let d = sh::eval_backward(
+                            cv.v.degree,
+                            lane3(dir),
+                            &coeffs[j * k..(j + 1) * k],
+                            lane3(&d_colour),
+                            &mut g.sh[j * k..(j + 1) * k],
+                        );
+                        for c in 0..3 {
+                            d_dir[c].0[l] = d[c];
+                        }
+                    }
+                    d_dir
+                },
             );
-            g.means[j] += p.mean;
-            g.log_scales[j] += p.log_scale;
-            for (r, d) in g.rotations[j].iter_mut().zip(p.rotation) {
-                *r += d;
+            for l in (0..WIDTH).filter(|&l| active[l]) {
+                let j = i0 + l - first;
+                let lane3 = |a: [F8; 3]| Vec3::new(a[0].0[l], a[1].0[l], a[2].0[l]);
+                g.means[j] += lane3(p.mean);
+                g.log_scales[j] += lane3(p.log_scale);
+                for (r, d) in g.rotations[j].iter_mut().zip(p.rotation) {
+                    *r += d.0[l];
+                }
+                g.opacity_logits[j] += p.opacity_logit.0[l];
+                g.screen_grad_norm[j] += p.screen_norm.0[l];
             }
-            g.opacity_logits[j] += p.opacity_logit;
-            g.screen_grad_norm[j] += p.screen_norm;
         }
     }
 

@@ -71,34 +71,74 @@ pub(crate) fn basis_terms<T: Real<Scalar = f32>>(degree: u32, [x, y, z]: [T; 3],
 
 /// Writes the basis values into `out` and their gradients with respect to (x, y, z) into `grad`.
 pub fn basis_grad(degree: u32, dir: Vec3, out: &mut [f32], grad: &mut [Vec3]) {
-    basis(degree, dir, out);
-    let Vec3 { x, y, z } = dir;
-    grad[0] = Vec3::ZERO;
+    let mut g = [[0.0_f32; 3]; 16];
+    basis_grad_terms(degree, dir.into(), out, &mut g);
+    let n = num_sh_coeffs(degree).min(grad.len());
+    for (d, s) in grad[..n].iter_mut().zip(&g) {
+        *d = Vec3::from(*s);
+    }
+}
+
+/// [`basis_grad`] on any [`Real`] whose lanes hold f32.
+#[inline(always)]
+pub(crate) fn basis_grad_terms<T: Real<Scalar = f32>>(
+    degree: u32,
+    [x, y, z]: [T; 3],
+    out: &mut [T],
+    grad: &mut [[T; 3]],
+) {
+    basis_terms(degree, [x, y, z], out);
+    let c = T::splat;
+    let zero = c(0.0);
+    // `k·(a, b, c)`, as `f32 * Vec3` computes it.
+    let scaled = |k: f32, v: [T; 3]| [c(k) * v[0], c(k) * v[1], c(k) * v[2]];
+    grad[0] = [zero; 3];
     if degree < 1 {
         return;
     }
-    grad[1] = Vec3::new(0.0, -C1, 0.0);
-    grad[2] = Vec3::new(0.0, 0.0, C1);
-    grad[3] = Vec3::new(-C1, 0.0, 0.0);
+    grad[1] = [zero, c(-C1), zero];
+    grad[2] = [zero, zero, c(C1)];
+    grad[3] = [c(-C1), zero, zero];
     if degree < 2 {
         return;
     }
     let (xx, yy, zz) = (x * x, y * y, z * z);
-    grad[4] = C2[0] * Vec3::new(y, x, 0.0);
-    grad[5] = C2[1] * Vec3::new(0.0, z, y);
-    grad[6] = C2[2] * Vec3::new(-2.0 * x, -2.0 * y, 4.0 * z);
-    grad[7] = C2[3] * Vec3::new(z, 0.0, x);
-    grad[8] = C2[4] * Vec3::new(2.0 * x, -2.0 * y, 0.0);
+    grad[4] = scaled(C2[0], [y, x, zero]);
+    grad[5] = scaled(C2[1], [zero, z, y]);
+    grad[6] = scaled(C2[2], [c(-2.0) * x, c(-2.0) * y, c(4.0) * z]);
+    grad[7] = scaled(C2[3], [z, zero, x]);
+    grad[8] = scaled(C2[4], [c(2.0) * x, c(-2.0) * y, zero]);
     if degree < 3 {
         return;
     }
-    grad[9] = C3[0] * Vec3::new(6.0 * x * y, 3.0 * xx - 3.0 * yy, 0.0);
-    grad[10] = C3[1] * Vec3::new(y * z, x * z, x * y);
-    grad[11] = C3[2] * Vec3::new(-2.0 * x * y, 4.0 * zz - xx - 3.0 * yy, 8.0 * y * z);
-    grad[12] = C3[3] * Vec3::new(-6.0 * x * z, -6.0 * y * z, 6.0 * zz - 3.0 * xx - 3.0 * yy);
-    grad[13] = C3[4] * Vec3::new(4.0 * zz - 3.0 * xx - yy, -2.0 * x * y, 8.0 * x * z);
-    grad[14] = C3[5] * Vec3::new(2.0 * x * z, -2.0 * y * z, xx - yy);
-    grad[15] = C3[6] * Vec3::new(3.0 * xx - 3.0 * yy, -6.0 * x * y, 0.0);
+    grad[9] = scaled(C3[0], [c(6.0) * x * y, c(3.0) * xx - c(3.0) * yy, zero]);
+    grad[10] = scaled(C3[1], [y * z, x * z, x * y]);
+    grad[11] = scaled(
+        C3[2],
+        [
+            c(-2.0) * x * y,
+            c(4.0) * zz - xx - c(3.0) * yy,
+            c(8.0) * y * z,
+        ],
+    );
+    grad[12] = scaled(
+        C3[3],
+        [
+            c(-6.0) * x * z,
+            c(-6.0) * y * z,
+            c(6.0) * zz - c(3.0) * xx - c(3.0) * yy,
+        ],
+    );
+    grad[13] = scaled(
+        C3[4],
+        [
+            c(4.0) * zz - c(3.0) * xx - yy,
+            c(-2.0) * x * y,
+            c(8.0) * x * z,
+        ],
+    );
+    grad[14] = scaled(C3[5], [c(2.0) * x * z, c(-2.0) * y * z, xx - yy]);
+    grad[15] = scaled(C3[6], [c(3.0) * xx - c(3.0) * yy, c(-6.0) * x * y, zero]);
 }
 
 /// Returns `Σ_k basis_k(dir)·coeffs[k]` per channel (no +0.5 offset, no clamp), using the first
@@ -139,6 +179,7 @@ pub fn color(degree: u32, dir: Vec3, coeffs: &[[f32; 3]]) -> Vec3 {
 
 /// Backward of [`eval`]: adds `basis_k·d_out` into `d_coeffs[k]` and returns dL/d(dir) (the
 /// gradient with respect to the unit-vector components, before normalisation).
+#[inline]
 pub fn eval_backward(
     degree: u32,
     dir: Vec3,
@@ -146,17 +187,45 @@ pub fn eval_backward(
     d_out: Vec3,
     d_coeffs: &mut [[f32; 3]],
 ) -> Vec3 {
-    let mut b = [0.0_f32; 16];
-    let mut g = [Vec3::ZERO; 16];
-    basis_grad(degree, dir, &mut b, &mut g);
     let n = num_sh_coeffs(degree);
-    let mut d_dir = Vec3::ZERO;
+    let d_dir = eval_backward_terms(
+        degree,
+        n,
+        dir.into(),
+        |k| coeffs[k],
+        d_out.into(),
+        |k, dc| {
+            for (d, v) in d_coeffs[k].iter_mut().zip(dc) {
+                *d += v;
+            }
+        },
+    );
+    d_dir.into()
+}
+
+/// [`eval_backward`] on any [`Real`] whose lanes hold f32, over the first `n` coefficients
+/// (the k-th given by `coeff(k)`): hands `d_coeff` each coefficient's gradient
+/// `basis_k·d_out` and returns dL/d(dir).
+#[inline(always)]
+pub(crate) fn eval_backward_terms<T: Real<Scalar = f32>>(
+    degree: u32,
+    n: usize,
+    dir: [T; 3],
+    coeff: impl Fn(usize) -> [T; 3],
+    d_out: [T; 3],
+    mut d_coeff: impl FnMut(usize, [T; 3]),
+) -> [T; 3] {
+    let mut b = [T::splat(0.0); 16];
+    let mut g = [[T::splat(0.0); 3]; 16];
+    basis_grad_terms(degree, dir, &mut b, &mut g);
+    let mut d_dir = [T::splat(0.0); 3];
     for k in 0..n {
-        let dc = b[k] * d_out;
-        d_coeffs[k][0] += dc.x;
-        d_coeffs[k][1] += dc.y;
-        d_coeffs[k][2] += dc.z;
-        d_dir += g[k] * Vec3::from(coeffs[k]).dot(d_out);
+        d_coeff(k, [b[k] * d_out[0], b[k] * d_out[1], b[k] * d_out[2]]);
+        let c = coeff(k);
+        let along = c[0] * d_out[0] + c[1] * d_out[1] + c[2] * d_out[2];
+        for a in 0..3 {
+            d_dir[a] = d_dir[a] + g[k][a] * along;
+        }
     }
     d_dir
 }
