@@ -140,6 +140,14 @@ pub(crate) struct ChainLanes {
     color_raw: [F8; 3],
 }
 
+impl ChainLanes {
+    /// The unit directions from the camera to the splats.
+    #[inline(always)]
+    pub(crate) fn dir(&self) -> &[F8; 3] {
+        &self.dir
+    }
+}
+
 #[cfg(test)]
 impl ChainLanes {
     /// The chain of lane `l` in view `v`.
@@ -679,13 +687,27 @@ fn lanes_mat_vec(m: &[[F8; 3]; 3], p: [F8; 3]) -> [F8; 3] {
     array(|c| m[0][c] * p[0] + m[1][c] * p[1] + m[2][c] * p[2])
 }
 
+/// The gradient reaching eight splats' SH colours from that of their shown colours: clamped
+/// channels pass none (Inria's `clamped` flags).
+#[inline(always)]
+pub(crate) fn colour_grad8(v: &ViewConsts, it: &ChainLanes, g: &ProjectedGradLanes) -> [F8; 3] {
+    let zero = F8::splat(0.0);
+    array(|ch| {
+        if v.linear_colour {
+            g.color[ch]
+        } else {
+            F8::select(it.color_raw[ch].test(zero, |a, b| a < b), zero, g.color[ch])
+        }
+    })
+}
+
 /// Backward of [`project8`] for the splats of one group: chains `g` (summed over pixels) to
 /// their parameters, lane by lane the IEEE operations of the backward one splat at a time
 /// (`reference::project_backward` in the tests, which checks the bits). The SH part is the
-/// caller's: `sh_backward(dir, d_colour)` adds each splat's coefficient gradients where they
-/// belong and returns dL/d(dir) (`sh::eval_backward` one lane at a time: in lanes, moving 48
-/// coefficients and their gradients a splat between lanes and the model's layout cost more
-/// than the arithmetic saved).
+/// caller's, one lane at a time (`sh::eval_backward` of [`colour_grad8`] along
+/// [`ChainLanes::dir`]; in lanes, moving 48 coefficients and their gradients a splat between
+/// lanes and the model's layout cost more than the arithmetic saved), which hands over
+/// dL/d(dir) as `d_dir`.
 #[inline(always)]
 #[allow(clippy::too_many_lines)]
 pub(crate) fn project_backward8(
@@ -693,18 +715,9 @@ pub(crate) fn project_backward8(
     it: &ChainLanes,
     g: &ProjectedGradLanes,
     image_size: (u32, u32),
-    sh_backward: impl FnOnce(&[F8; 3], [F8; 3]) -> [F8; 3],
+    d_dir: [F8; 3],
 ) -> ParamGradLanes {
     let (zero, half) = (F8::splat(0.0), F8::splat(0.5));
-    // Colour: clamped channels pass no gradient (Inria's `clamped` flags).
-    let d_raw: [F8; 3] = array(|ch| {
-        if v.linear_colour {
-            g.color[ch]
-        } else {
-            F8::select(it.color_raw[ch].test(zero, |a, b| a < b), zero, g.color[ch])
-        }
-    });
-    let d_dir = sh_backward(&it.dir, d_raw);
     // dir = d/|d| with d = mean − centre.
     let along = it.dir[0] * d_dir[0] + it.dir[1] * d_dir[1] + it.dir[2] * d_dir[2];
     let d_mean: [F8; 3] = array(|c| zero + (d_dir[c] - it.dir[c] * along) / it.dir_len);
@@ -1272,7 +1285,7 @@ mod tests {
         use camera_model::{Camera, Intrinsics, Pose};
         use glam::DVec3;
 
-        use super::{ProjectedGrad, ProjectedGradLanes, project_backward8};
+        use super::{ProjectedGrad, ProjectedGradLanes, colour_grad8, project_backward8};
         use crate::lanes::F8;
         use crate::{RenderCamera, RenderOptions, Splats};
 
@@ -1331,29 +1344,23 @@ mod tests {
                         depth: r(1.0),
                     });
                     let mut d_sh_lanes = [[[0.0_f32; 3]; 16]; WIDTH];
-                    let p = project_backward8(
-                        &v,
-                        &chain,
-                        &ProjectedGradLanes::gather(&grads),
-                        (200, 150),
-                        |dir, d_colour| {
-                            let mut d_dir = [F8::default(); 3];
-                            for l in 0..WIDTH {
-                                let lane = |a: &[F8; 3]| Vec3::new(a[0].0[l], a[1].0[l], a[2].0[l]);
-                                let d = crate::sh::eval_backward(
-                                    v.degree,
-                                    lane(dir),
-                                    &splats.sh[idx[l] * k..(idx[l] + 1) * k],
-                                    lane(&d_colour),
-                                    &mut d_sh_lanes[l],
-                                );
-                                for c in 0..3 {
-                                    d_dir[c].0[l] = d[c];
-                                }
-                            }
-                            d_dir
-                        },
-                    );
+                    let grads_lanes = ProjectedGradLanes::gather(&grads);
+                    let d_colour = colour_grad8(&v, &chain, &grads_lanes);
+                    let mut d_dir = [F8::default(); 3];
+                    for l in 0..WIDTH {
+                        let lane = |a: &[F8; 3]| Vec3::new(a[0].0[l], a[1].0[l], a[2].0[l]);
+                        let d = crate::sh::eval_backward(
+                            v.degree,
+                            lane(chain.dir()),
+                            &splats.sh[idx[l] * k..(idx[l] + 1) * k],
+                            lane(&d_colour),
+                            &mut d_sh_lanes[l],
+                        );
+                        for c in 0..3 {
+                            d_dir[c].0[l] = d[c];
+                        }
+                    }
+                    let p = project_backward8(&v, &chain, &grads_lanes, (200, 150), d_dir);
                     for l in (0..WIDTH).filter(|&l| drawn[l]) {
                         let mut d_sh = [[0.0_f32; 3]; 16];
                         let one = reference::project_backward(

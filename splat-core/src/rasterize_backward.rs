@@ -18,7 +18,9 @@ use crate::constants::{MAX_ALPHA, MIN_ALPHA};
 use crate::disjoint::DisjointWrites;
 use crate::lanes::F8;
 use crate::lanes::WIDTH;
-use crate::project::{ChainView, ProjectedGrad, ProjectedGradLanes, ViewConsts, project_backward8};
+use crate::project::{
+    ChainView, ProjectedGrad, ProjectedGradLanes, ViewConsts, colour_grad8, project_backward8,
+};
 use crate::rasterize::{
     DEPTH_MIN_ALPHA, PREFETCH_AHEAD, lanes_mut, prefetch, tile_extent, tile_major_index,
 };
@@ -253,30 +255,25 @@ impl Rasterizer {
                     ProjectedGrad::default()
                 }
             });
-            let p = project_backward8(
-                &cv.v,
-                &self.chain[group],
-                &ProjectedGradLanes::gather(&grads),
-                cv.size,
-                |dir, d_colour| {
-                    let mut d_dir = [F8::default(); 3];
-                    for l in (0..WIDTH).filter(|&l| active[l]) {
-                        let j = i0 + l - first;
-                        let lane3 = |a: &[F8; 3]| Vec3::new(a[0].0[l], a[1].0[l], a[2].0[l]);
-                        let d = sh::eval_backward(
-                            cv.v.degree,
-                            lane3(dir),
-                            &coeffs[j * k..(j + 1) * k],
-                            lane3(&d_colour),
-                            &mut g.sh[j * k..(j + 1) * k],
-                        );
-                        for c in 0..3 {
-                            d_dir[c].0[l] = d[c];
-                        }
-                    }
-                    d_dir
-                },
-            );
+            let it = &self.chain[group];
+            let grads = ProjectedGradLanes::gather(&grads);
+            let d_colour = colour_grad8(&cv.v, it, &grads);
+            let mut d_dir = [F8::default(); 3];
+            for l in (0..WIDTH).filter(|&l| active[l]) {
+                let j = i0 + l - first;
+                let lane3 = |a: &[F8; 3]| Vec3::new(a[0].0[l], a[1].0[l], a[2].0[l]);
+                let d = sh::eval_backward(
+                    cv.v.degree,
+                    lane3(it.dir()),
+                    &coeffs[j * k..(j + 1) * k],
+                    lane3(&d_colour),
+                    &mut g.sh[j * k..(j + 1) * k],
+                );
+                for c in 0..3 {
+                    d_dir[c].0[l] = d[c];
+                }
+            }
+            let p = project_backward8(&cv.v, it, &grads, cv.size, d_dir);
             for l in (0..WIDTH).filter(|&l| active[l]) {
                 let j = i0 + l - first;
                 let lane3 = |a: [F8; 3]| Vec3::new(a[0].0[l], a[1].0[l], a[2].0[l]);

@@ -179,7 +179,7 @@ pub fn color(degree: u32, dir: Vec3, coeffs: &[[f32; 3]]) -> Vec3 {
 
 /// Backward of [`eval`]: adds `basis_k·d_out` into `d_coeffs[k]` and returns dL/d(dir) (the
 /// gradient with respect to the unit-vector components, before normalisation).
-#[inline]
+#[inline(always)]
 pub fn eval_backward(
     degree: u32,
     dir: Vec3,
