@@ -1170,6 +1170,30 @@ mod tests {
         b
     }
 
+    /// The view of the lane tests: 200×150, 50° vertical field of view, 4 units out.
+    fn lanes_camera() -> crate::RenderCamera {
+        use camera_model::{Camera, Intrinsics, Pose};
+        use glam::DVec3;
+        crate::RenderCamera::try_from(&Camera::new(
+            Intrinsics::from_fov_y(200, 150, 50.0),
+            Pose::look_at(DVec3::new(0.3, 0.2, 4.0), DVec3::ZERO, DVec3::Y),
+        ))
+        .unwrap()
+    }
+
+    /// The options the lane tests cover at SH degree `degree`: plain, antialiased, and
+    /// antialiased with linear colour.
+    fn lanes_options(degree: u32) -> [crate::RenderOptions; 3] {
+        [(false, false), (true, false), (true, true)].map(|(antialiased, linear_colour)| {
+            crate::RenderOptions {
+                active_sh_degree: degree,
+                antialiased,
+                linear_colour,
+                ..crate::RenderOptions::default()
+            }
+        })
+    }
+
     /// The projection in lanes gives every splat the bits of the one-splat reference,
     /// culls included: random splats with edge cases mixed in (behind the camera, off screen,
     /// near-invisible, zero and huge quaternions, needles, NaN and infinite inputs, colours
@@ -1177,17 +1201,10 @@ mod tests {
     /// group starts that are not multiples of eight (repeated lanes).
     #[test]
     fn eight_lanes_give_the_bits_of_one_splat_at_a_time() {
-        use camera_model::{Camera, Intrinsics, Pose};
-        use glam::DVec3;
-
-        use crate::{RenderCamera, RenderOptions, Splats};
+        use crate::Splats;
 
         let mut rng = rand_pcg::Pcg64::seed_from_u64(11);
-        let cam = RenderCamera::try_from(&Camera::new(
-            Intrinsics::from_fov_y(200, 150, 50.0),
-            Pose::look_at(DVec3::new(0.3, 0.2, 4.0), DVec3::ZERO, DVec3::Y),
-        ))
-        .unwrap();
+        let cam = lanes_camera();
         let specials = [
             f32::NAN,
             f32::INFINITY,
@@ -1231,14 +1248,9 @@ mod tests {
                 }
                 splats.push(mean, ls, q, logit, &sh);
             }
-            for (antialiased, linear_colour) in [(false, false), (true, false), (true, true)] {
-                let opts = RenderOptions {
-                    active_sh_degree: degree,
-                    antialiased,
-                    linear_colour,
-                    ..RenderOptions::default()
-                };
+            for opts in lanes_options(degree) {
                 let v = ViewConsts::new(&cam, &opts, &splats);
+                let (antialiased, linear_colour) = (opts.antialiased, opts.linear_colour);
                 let n = splats.len();
                 for start in (0..n).step_by(5) {
                     let idx = std::array::from_fn(|l| (start + l).min(n - 1));
@@ -1282,19 +1294,12 @@ mod tests {
     /// splats and random gradients of the projected quantities (some zero, some large).
     #[test]
     fn eight_lanes_chain_the_bits_of_one_splat_at_a_time() {
-        use camera_model::{Camera, Intrinsics, Pose};
-        use glam::DVec3;
-
         use super::{ProjectedGrad, ProjectedGradLanes, colour_grad8, project_backward8};
+        use crate::Splats;
         use crate::lanes::F8;
-        use crate::{RenderCamera, RenderOptions, Splats};
 
         let mut rng = rand_pcg::Pcg64::seed_from_u64(12);
-        let cam = RenderCamera::try_from(&Camera::new(
-            Intrinsics::from_fov_y(200, 150, 50.0),
-            Pose::look_at(DVec3::new(0.3, 0.2, 4.0), DVec3::ZERO, DVec3::Y),
-        ))
-        .unwrap();
+        let cam = lanes_camera();
         let mut compared = 0;
         for degree in 0..=3 {
             let mut splats = Splats::new(3);
@@ -1313,14 +1318,9 @@ mod tests {
                     .collect();
                 splats.push(mean, ls, q, r(-4.0, 6.0), &sh);
             }
-            for (antialiased, linear_colour) in [(false, false), (true, false), (true, true)] {
-                let opts = RenderOptions {
-                    active_sh_degree: degree,
-                    antialiased,
-                    linear_colour,
-                    ..RenderOptions::default()
-                };
+            for opts in lanes_options(degree) {
                 let v = ViewConsts::new(&cam, &opts, &splats);
+                let (antialiased, linear_colour) = (opts.antialiased, opts.linear_colour);
                 let k = splats.coeffs_per_splat();
                 for start in (0..splats.len()).step_by(WIDTH) {
                     let idx = std::array::from_fn(|l| start + l);
