@@ -120,9 +120,11 @@ pub(crate) struct Chain {
     color_raw: Vec3,
 }
 
-/// What the backward needs of eight consecutive splats' projections, field by field in lanes (splat 8·g + l in lane l
-/// of group g): the projection stores whole vectors, the backward reads one lane at a time.
-/// Storing one splat's chain from lanes cost the projection about as much as its arithmetic.
+/// What the backward needs of eight consecutive splats' projections, field by field in lanes
+/// (splat 8·g + l in lane l of group g): the projection stores whole vectors and the backward
+/// reads them back as vectors (storing each splat's record from lanes cost the projection about
+/// as much as its arithmetic). The rotation, M_c and T are not kept: the backward recomputes
+/// them in lanes for less than reading them back cost.
 #[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct ChainLanes {
     /// (x, y, z, w).
@@ -726,7 +728,9 @@ pub(crate) fn project_backward8(
     let d_logit = g.opacity * it.comp * it.sigmoid_o * (F8::splat(1.0) - it.sigmoid_o);
     let d_comp = g.opacity * it.sigmoid_o;
 
-    // Conic = Σ₂⁻¹ and Σ₂ = T·Tᵀ, in f64 (see `project_backward`'s reference form).
+    // Conic = Σ₂⁻¹ → dL/dΣ₂ = −Q·G_Q·Q (b appears twice in G_Q), then Σ₂ = T·Tᵀ → G_T = 2·G_Σ·T,
+    // in f64 with the forward's `Cov2` (for a thin splat long on screen f32 lost Q·T's long
+    // column; the tests' `reference::project_backward` says more).
     let (rot, mc) = cov_factor(v, it.quat, it.scale);
     let z = it.p_cam[2];
     let [j0, j1] = jacobian(v, z, it.u);
