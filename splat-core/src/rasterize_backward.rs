@@ -16,8 +16,7 @@ use rayon::prelude::*;
 
 use crate::constants::{MAX_ALPHA, MIN_ALPHA};
 use crate::disjoint::DisjointWrites;
-use crate::lanes::F8;
-use crate::lanes::WIDTH;
+use crate::lanes::{F8, WIDTH};
 use crate::project::{
     ChainView, ProjectedGrad, ProjectedGradLanes, ViewConsts, colour_grad8, project_backward8,
 };
@@ -248,7 +247,7 @@ impl Rasterizer {
             if !active.contains(&true) {
                 continue;
             }
-            let grads = std::array::from_fn(|l| {
+            let records = std::array::from_fn(|l| {
                 if active[l] {
                     self.splat_grads[i0 + l]
                 } else {
@@ -256,7 +255,7 @@ impl Rasterizer {
                 }
             });
             let it = &self.chain[group];
-            let grads = ProjectedGradLanes::gather(&grads);
+            let grads = ProjectedGradLanes::gather(&records);
             let d_colour = colour_grad8(&cv.v, it, &grads);
             let mut d_dir = [F8::default(); 3];
             for l in (0..WIDTH).filter(|&l| active[l]) {
