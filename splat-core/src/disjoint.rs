@@ -46,6 +46,18 @@ impl<'a, T> DisjointWrites<'a, T> {
         unsafe { self.ptr.add(index).write(value) }
     }
 
+    /// Hints the CPU to fetch positions `start..start + len` (clipped to the buffer) into the
+    /// cache; reads nothing, so it needs no promise.
+    pub(crate) fn prefetch(&self, start: usize, len: usize) {
+        let end = (start + len).min(self.len);
+        if start < end {
+            crate::rasterize::prefetch_bytes(
+                self.ptr.wrapping_add(start).cast_const().cast(),
+                (end - start) * size_of::<T>(),
+            );
+        }
+    }
+
     /// The run `start..end`, for this task alone.
     ///
     /// # Panics

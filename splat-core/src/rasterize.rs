@@ -332,6 +332,9 @@ impl Rasterizer {
                         live,
                     };
                     let list = &bins.list[start..end];
+                    // The tile's rows of the output images are written once it is composited,
+                    // each a cache miss unless fetched while it is.
+                    images.prefetch_tile(ext);
                     let counts = composite_tile(list, proj, ext, o, &mut NoWeights, avx2);
                     images.write_tile(ext, t, d, rgb, avx2);
                     counts
@@ -366,6 +369,17 @@ impl<'a> OutputImages<'a> {
             depth: DisjointWrites::new(&mut out.depth),
             width: width as usize,
             bg,
+        }
+    }
+
+    /// Hints the CPU to fetch the rows of the tile at `ext` in the three images.
+    fn prefetch_tile(&self, (x0, y0, tw, th): (i32, i32, i32, i32)) {
+        let (x0, tw) = (x0 as usize, tw as usize);
+        for y in y0 as usize..(y0 + th) as usize {
+            let first = y * self.width + x0;
+            self.rgb.prefetch(3 * first, 3 * tw);
+            self.alpha.prefetch(first, tw);
+            self.depth.prefetch(first, tw);
         }
     }
 
@@ -751,19 +765,48 @@ pub(crate) const PREFETCH_AHEAD: usize = 8;
 /// `i` is out of range).
 #[inline(always)]
 pub(crate) fn prefetch(proj: &[Projected], i: usize) {
-    #[cfg(target_arch = "x86_64")]
     if let Some(rec) = proj.get(i) {
-        // SAFETY: a prefetch never faults and the pointer is to a live element; SSE is part of
-        // the x86-64 baseline.
-        #[allow(unsafe_code)]
-        unsafe {
-            std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(
-                std::ptr::from_ref(rec).cast::<i8>(),
-            );
+        // The line the record starts in: the fields the walks read first.
+        prefetch_bytes(std::ptr::from_ref(rec).cast(), 1);
+    }
+}
+
+/// Hints the CPU to bring the cache lines of `data[start..start + len]` into the cache (the
+/// range clipped to `data`).
+#[inline(always)]
+pub(crate) fn prefetch_span(data: &[f32], start: usize, len: usize) {
+    let end = (start + len).min(data.len());
+    if start < end {
+        prefetch_bytes(
+            data[start..end].as_ptr().cast(),
+            (end - start) * size_of::<f32>(),
+        );
+    }
+}
+
+/// Hints the CPU to bring the cache lines of the `bytes` bytes from `first` into the cache (a
+/// no-op where there is no prefetch hint). A prefetch never faults, so any address will do.
+#[inline(always)]
+pub(crate) fn prefetch_bytes(first: *const u8, bytes: usize) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        const LINE: usize = 64;
+        let lead = first as usize % LINE;
+        let mut offset = 0;
+        while offset < lead + bytes {
+            // SAFETY: prefetching is a hint that never faults or reads the memory for the
+            // program, and SSE is part of the x86-64 baseline.
+            #[allow(unsafe_code)]
+            unsafe {
+                std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(
+                    first.wrapping_sub(lead).wrapping_add(offset).cast::<i8>(),
+                );
+            }
+            offset += LINE;
         }
     }
     #[cfg(not(target_arch = "x86_64"))]
-    let _ = (proj, i);
+    let _ = (first, bytes);
 }
 
 /// The `LANES` elements of `buf` from `base` as a fixed-size array.
