@@ -51,7 +51,7 @@ impl<'a, T> DisjointWrites<'a, T> {
     pub(crate) fn prefetch(&self, start: usize, len: usize) {
         let end = (start + len).min(self.len);
         if start < end {
-            crate::rasterize::prefetch_bytes(
+            crate::prefetch::bytes(
                 self.ptr.wrapping_add(start).cast_const().cast(),
                 (end - start) * size_of::<T>(),
             );

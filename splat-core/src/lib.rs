@@ -49,6 +49,7 @@ pub mod frame;
 pub mod glb;
 mod lanes;
 pub mod ply;
+mod prefetch;
 mod project;
 mod projected;
 mod rasterize;

@@ -8,6 +8,7 @@ use rayon::prelude::*;
 use crate::constants::{MAX_ALPHA, MIN_ALPHA, MIN_TRANSMITTANCE};
 use crate::disjoint::DisjointWrites;
 use crate::lanes::WIDTH;
+use crate::prefetch;
 use crate::project::{ChainLanes, Cull, ProjectedGrad, ViewConsts, project8};
 use crate::projected::Projected;
 use crate::tiles::{Bins, Falloff, HALF_ROWS, LANES, RowSpans, TILE_PIXELS, TILE_SIZE};
@@ -688,7 +689,7 @@ fn composite_tile_impl<S: WeightSink>(
     o.live.fill(false);
     for (k, &sid) in list.iter().enumerate() {
         if let Some(&ahead) = list.get(k + PREFETCH_AHEAD) {
-            prefetch(proj, ahead as usize);
+            prefetch::record(proj, ahead as usize);
         }
         let p = &proj[sid as usize];
         let spans = RowSpans::new(p, x0, y0, tw, th);
@@ -760,54 +761,6 @@ fn composite_tile_impl<S: WeightSink>(
 /// in depth order, so its records are scattered over the whole projection buffer (10 MB at 250 k
 /// splats, beyond the L2 cache) and each would otherwise be a cache miss.
 pub(crate) const PREFETCH_AHEAD: usize = 8;
-
-/// Hints the CPU to bring `proj[i]` into the cache (a no-op where there is no prefetch hint or
-/// `i` is out of range).
-#[inline(always)]
-pub(crate) fn prefetch(proj: &[Projected], i: usize) {
-    if let Some(rec) = proj.get(i) {
-        // The line the record starts in: the fields the walks read first.
-        prefetch_bytes(std::ptr::from_ref(rec).cast(), 1);
-    }
-}
-
-/// Hints the CPU to bring the cache lines of `data[start..start + len]` into the cache (the
-/// range clipped to `data`).
-#[inline(always)]
-pub(crate) fn prefetch_span(data: &[f32], start: usize, len: usize) {
-    let end = (start + len).min(data.len());
-    if start < end {
-        prefetch_bytes(
-            data[start..end].as_ptr().cast(),
-            (end - start) * size_of::<f32>(),
-        );
-    }
-}
-
-/// Hints the CPU to bring the cache lines of the `bytes` bytes from `first` into the cache (a
-/// no-op where there is no prefetch hint). A prefetch never faults, so any address will do.
-#[inline(always)]
-pub(crate) fn prefetch_bytes(first: *const u8, bytes: usize) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        const LINE: usize = 64;
-        let lead = first as usize % LINE;
-        let mut offset = 0;
-        while offset < lead + bytes {
-            // SAFETY: prefetching is a hint that never faults or reads the memory for the
-            // program, and SSE is part of the x86-64 baseline.
-            #[allow(unsafe_code)]
-            unsafe {
-                std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(
-                    first.wrapping_sub(lead).wrapping_add(offset).cast::<i8>(),
-                );
-            }
-            offset += LINE;
-        }
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = (first, bytes);
-}
 
 /// The `LANES` elements of `buf` from `base` as a fixed-size array.
 #[inline(always)]

@@ -17,13 +17,11 @@ use rayon::prelude::*;
 use crate::constants::{MAX_ALPHA, MIN_ALPHA};
 use crate::disjoint::DisjointWrites;
 use crate::lanes::{F8, WIDTH};
+use crate::prefetch;
 use crate::project::{
     ChainView, ProjectedGrad, ProjectedGradLanes, ViewConsts, colour_grad8, project_backward8,
 };
-use crate::rasterize::{
-    DEPTH_MIN_ALPHA, PREFETCH_AHEAD, lanes_mut, prefetch, prefetch_span, tile_extent,
-    tile_major_index,
-};
+use crate::rasterize::{DEPTH_MIN_ALPHA, PREFETCH_AHEAD, lanes_mut, tile_extent, tile_major_index};
 use crate::tiles::{Falloff, HALF_ROWS, LANES, RowSpans, TILE_PIXELS, TILE_SIZE};
 use crate::{Rasterizer, RenderCamera, RenderOptions, SplatGrads, SplatGradsMut, Splats, sh};
 
@@ -62,12 +60,12 @@ impl PixelGrads<'_> {
         let (x0, tw) = (x0 as usize, tw as usize);
         for y in y0 as usize..(y0 + th) as usize {
             let p = y * self.width + x0;
-            prefetch_span(self.d_rgb, 3 * p, 3 * tw);
+            prefetch::span(self.d_rgb, 3 * p, 3 * tw);
             if let Some(d) = self.d_alpha {
-                prefetch_span(d, p, tw);
+                prefetch::span(d, p, tw);
             }
             if let Some(d) = self.d_depth {
-                prefetch_span(d, p, tw);
+                prefetch::span(d, p, tw);
             }
         }
     }
@@ -425,7 +423,7 @@ impl Rasterizer {
         let [g_r, g_g, g_b] = &mut g_rgb;
         for kk in (0..max_last as usize).rev() {
             if let Some(ahead) = kk.checked_sub(PREFETCH_AHEAD) {
-                prefetch(&self.proj, list[ahead] as usize);
+                prefetch::record(&self.proj, list[ahead] as usize);
             }
             let p = &self.proj[list[kk] as usize];
             let [a, b, c] = p.conic;
