@@ -257,7 +257,8 @@ pub struct BudgetRound {
 /// The wall time of one round, by what it was spent on (seconds).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct RoundSeconds {
-    /// Scoring every splat's contribution, planning the merges and applying them.
+    /// Scoring every splat's contribution, planning the merges and applying them (with the
+    /// snapshots the branches start from and, when the merge is refused, going back).
     pub planning: f64,
     /// The control branch's training steps (the trainer's clock).
     pub control: f64,
@@ -272,6 +273,14 @@ impl RoundSeconds {
     #[must_use]
     pub fn total(&self) -> f64 {
         self.planning + self.control + self.merged + self.scoring
+    }
+
+    /// The round's time outside the branches' steps (planning and scoring), which the round
+    /// counts on the trainer's clock once it is decided
+    /// ([`crate::Trainer::count_time_between_steps`]).
+    #[must_use]
+    pub fn between_steps(&self) -> f64 {
+        self.planning + self.scoring
     }
 }
 
@@ -416,11 +425,12 @@ impl BudgetSearch {
         if merges.removed() == 0 {
             // Nothing left to merge (at `min_splats`, or no cell holds two splats): done.
             self.exhausted = true;
+            trainer.count_time_between_steps(planning.elapsed().as_secs_f64());
             return Ok(None);
         }
-        seconds.planning = planning.elapsed().as_secs_f64();
         let target = iteration + plan.trial;
         let start = trainer.snapshot();
+        seconds.planning = planning.elapsed().as_secs_f64();
         let started_s = trainer.report(false).elapsed_s;
         // The control, scored at the scoring points of the trial.
         let mut kept = Scores::default();
@@ -453,6 +463,7 @@ impl BudgetSearch {
             seconds,
         };
         if round.out_of_time {
+            trainer.count_time_between_steps(round.seconds.between_steps());
             self.rounds.push(round);
             return Ok(Some(round));
         }
@@ -501,8 +512,13 @@ impl BudgetSearch {
             && self.spent_db() + round.drop_db().unwrap_or(f64::INFINITY).max(0.0)
                 <= cfg.tolerance_db;
         if !round.accepted {
+            let restoring = Instant::now();
             trainer.restore_snapshot(kept).map_err(fail)?;
+            round.seconds.planning += restoring.elapsed().as_secs_f64();
         }
+        // Both branches' steps are on the trainer's clock already; the planning and the scoring
+        // are wall time the run's budget pays for as well.
+        trainer.count_time_between_steps(round.seconds.between_steps());
         self.rounds.push(round);
         let spent = self.spent_db();
         self.tolerance_spent = spent > 0.0 && cfg.tolerance_db - spent < cfg.least_left_db;

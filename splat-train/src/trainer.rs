@@ -56,7 +56,8 @@ pub struct StepStats {
 pub struct HistoryEntry {
     /// 1-based iteration.
     pub iteration: u32,
-    /// Training time in seconds: the sum of step times, excluding progress callbacks and pauses.
+    /// Training time in seconds: the sum of step times and of the work counted between them
+    /// ([`Trainer::count_time_between_steps`]), excluding progress callbacks and pauses.
     pub elapsed_s: f64,
     /// Loss of this step's view.
     pub loss: f64,
@@ -191,7 +192,8 @@ pub struct Progress {
 pub struct TrainReport {
     /// Iterations completed.
     pub iterations: u32,
-    /// Training time in seconds.
+    /// Training time in seconds: the steps' and the work counted between them
+    /// ([`Trainer::count_time_between_steps`]); what a time budget measures.
     pub elapsed_s: f64,
     /// Whether the time budget stopped the run early.
     pub stopped_by_budget: bool,
@@ -514,6 +516,17 @@ impl Trainer {
     /// instead of from its own first steps; the run's steps then take over as they come.
     pub fn start_pace(&mut self, pace: Pace) {
         self.run.pace = pace;
+    }
+
+    /// Counts `seconds` of wall time spent for the run between its steps (scoring held-out
+    /// views, planning a budget round's merges, saving a checkpoint) on the run's clock, which
+    /// is what a time budget measures: that work shortens the schedule's horizon as steps do, so
+    /// the run ends inside its budget and not the budget plus everything done between steps.
+    /// Negative or non-finite times are ignored.
+    pub fn count_time_between_steps(&mut self, seconds: f64) {
+        if seconds.is_finite() && seconds > 0.0 {
+            self.run.elapsed_s += seconds;
+        }
     }
 
     /// Ends the coarse warm-up now: the next steps train on the full views (a probe that has

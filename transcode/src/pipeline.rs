@@ -1584,8 +1584,15 @@ fn train_to_end(
         total: u64::from(total),
         done: u64::from(trainer.iteration()),
     });
+    // The held-out scores and the checkpoints are wall time between the steps, which a time
+    // budget counts as it counts the steps (`Trainer::count_time_between_steps`).
+    let between = |trainer: &mut Trainer, since: Instant| {
+        trainer.count_time_between_steps(since.elapsed().as_secs_f64());
+    };
     if trainer.iteration() == 0 {
+        let t = Instant::now();
         probe.take(trainer, 0.0, false)?;
+        between(trainer, t);
     }
     let mut shown_total = total;
     let mut advance = |p: &splat_train::Progress| {
@@ -1613,7 +1620,11 @@ fn train_to_end(
         // it grows when the steps get faster (a budget round's merge), so the length estimated
         // before the first step would end the schedule early, with budget left.
         let last = r.iterations >= trainer.horizon() || r.stopped_by_budget;
+        let t = Instant::now();
         probe.take(trainer, r.elapsed_s, last)?;
+        if !last {
+            between(trainer, t);
+        }
         if last {
             // A time budget that laid the schedule over fewer steps than configured stopped it.
             let cut = trainer.config().time_budget.is_some()
@@ -1621,7 +1632,9 @@ fn train_to_end(
             break trainer.report(r.stopped_by_budget || cut);
         }
         if saved_at.elapsed() >= saving.every {
+            let t = Instant::now();
             saving.save(trainer, &probe.curve, budget.search)?;
+            between(trainer, t);
             saved_at = Instant::now();
         }
     };
