@@ -276,8 +276,7 @@ impl RoundSeconds {
     }
 
     /// The round's time outside the branches' steps (planning and scoring), which the round
-    /// counts on the trainer's clock once it is decided
-    /// ([`crate::Trainer::count_time_between_steps`]).
+    /// counts on the trainer's clock as it goes ([`crate::Trainer::count_time_between_steps`]).
     #[must_use]
     pub fn between_steps(&self) -> f64 {
         self.planning + self.scoring
@@ -410,6 +409,15 @@ impl BudgetSearch {
             return Err(fail("no budget search is planned".into()));
         };
         let n = trainer.splats().len();
+        // The round's planning and scoring are counted on the trainer's clock as they happen
+        // (a time budget is wall time, and a round near its end must not run past it); each
+        // branch's time is its steps alone, which is what the branches are matched on.
+        let clock = |trainer: &Trainer| trainer.report(false).elapsed_s;
+        let count_since = |trainer: &mut Trainer, since: Instant| {
+            let took = since.elapsed().as_secs_f64();
+            trainer.count_time_between_steps(took);
+            took
+        };
         let planning = Instant::now();
         let mut seconds = RoundSeconds::default();
         let contributions = trainer.contributions();
@@ -425,13 +433,13 @@ impl BudgetSearch {
         if merges.removed() == 0 {
             // Nothing left to merge (at `min_splats`, or no cell holds two splats): done.
             self.exhausted = true;
-            trainer.count_time_between_steps(planning.elapsed().as_secs_f64());
+            count_since(trainer, planning);
             return Ok(None);
         }
         let target = iteration + plan.trial;
         let start = trainer.snapshot();
-        seconds.planning = planning.elapsed().as_secs_f64();
-        let started_s = trainer.report(false).elapsed_s;
+        seconds.planning = count_since(trainer, planning);
+        let started_s = clock(trainer);
         // The control, scored at the scoring points of the trial.
         let mut kept = Scores::default();
         let mut times = Vec::new();
@@ -442,12 +450,12 @@ impl BudgetSearch {
             if control.iterations < at {
                 break;
             }
-            times.push(control.elapsed_s - started_s);
+            times.push(control.elapsed_s - started_s - seconds.scoring);
             let scoring = Instant::now();
             kept.add(heldout_psnr(trainer.splats())?);
-            seconds.scoring += scoring.elapsed().as_secs_f64();
+            seconds.scoring += count_since(trainer, scoring);
         }
-        seconds.control = control.elapsed_s - started_s;
+        seconds.control = clock(trainer) - started_s - seconds.scoring;
         let kept_mean = kept.mean();
         let mut round = BudgetRound {
             iteration,
@@ -463,7 +471,6 @@ impl BudgetSearch {
             seconds,
         };
         if round.out_of_time {
-            trainer.count_time_between_steps(round.seconds.between_steps());
             self.rounds.push(round);
             return Ok(Some(round));
         }
@@ -473,18 +480,21 @@ impl BudgetSearch {
         trainer
             .prune(&keep)
             .map_err(|e| fail(format!("pruning: {e}")))?;
-        round.seconds.planning += merging.elapsed().as_secs_f64();
+        round.seconds.planning += count_since(trainer, merging);
         let equal_time = trainer.config().time_budget.is_some();
         // The pruned branch, scored at the same steps, or under a time budget at the same
         // training times: there the branches get equal time, and the smaller model's faster
         // steps are part of what the prune buys.
         let mut pruned_scores = Scores::default();
-        let before = trainer.report(false).elapsed_s;
+        let mut pruned_scoring = 0.0;
+        let before = clock(trainer);
         let mut pruned = trainer.report(false);
         for (k, &t) in (1..=SCORE_POINTS).zip(&times) {
             let at = scoring_step(iteration, plan.trial, k);
             if equal_time {
-                while pruned.elapsed_s - before < t && pruned.iterations < trainer.horizon() {
+                while pruned.elapsed_s - before - pruned_scoring < t
+                    && pruned.iterations < trainer.horizon()
+                {
                     pruned = trainer.run_until(pruned.iterations + 1, &mut *on_step);
                     if pruned.stopped_by_budget {
                         break;
@@ -498,9 +508,12 @@ impl BudgetSearch {
             }
             let scoring = Instant::now();
             pruned_scores.add(heldout_psnr(trainer.splats())?);
-            round.seconds.scoring += scoring.elapsed().as_secs_f64();
+            pruned_scoring += count_since(trainer, scoring);
+            // The clock as it stands after the score, which the next point's steps start from.
+            pruned = trainer.report(false);
         }
-        round.seconds.merged = pruned.elapsed_s - before;
+        round.seconds.scoring += pruned_scoring;
+        round.seconds.merged = clock(trainer) - before - pruned_scoring;
         round.steps_pruned = pruned.iterations - iteration;
         round.out_of_time = pruned_scores.count < SCORE_POINTS;
         if pruned_scores.count > 0 {
@@ -514,11 +527,8 @@ impl BudgetSearch {
         if !round.accepted {
             let restoring = Instant::now();
             trainer.restore_snapshot(kept).map_err(fail)?;
-            round.seconds.planning += restoring.elapsed().as_secs_f64();
+            round.seconds.planning += count_since(trainer, restoring);
         }
-        // Both branches' steps are on the trainer's clock already; the planning and the scoring
-        // are wall time the run's budget pays for as well.
-        trainer.count_time_between_steps(round.seconds.between_steps());
         self.rounds.push(round);
         let spent = self.spent_db();
         self.tolerance_spent = spent > 0.0 && cfg.tolerance_db - spent < cfg.least_left_db;

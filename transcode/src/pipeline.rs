@@ -1584,15 +1584,12 @@ fn train_to_end(
         total: u64::from(total),
         done: u64::from(trainer.iteration()),
     });
-    // The held-out scores and the checkpoints are wall time between the steps, which a time
-    // budget counts as it counts the steps (`Trainer::count_time_between_steps`).
-    let between = |trainer: &mut Trainer, since: Instant| {
-        trainer.count_time_between_steps(since.elapsed().as_secs_f64());
-    };
+    // The held-out curve's scores (`--eval-every`, off by default) are a measurement of the
+    // run and stay off its clock, so the curve's time axis is training time, as in `transcode
+    // train`; the checkpoints are part of the run, and a time budget pays for them
+    // (`Trainer::count_time_between_steps`).
     if trainer.iteration() == 0 {
-        let t = Instant::now();
         probe.take(trainer, 0.0, false)?;
-        between(trainer, t);
     }
     let mut shown_total = total;
     let mut advance = |p: &splat_train::Progress| {
@@ -1620,11 +1617,7 @@ fn train_to_end(
         // it grows when the steps get faster (a budget round's merge), so the length estimated
         // before the first step would end the schedule early, with budget left.
         let last = r.iterations >= trainer.horizon() || r.stopped_by_budget;
-        let t = Instant::now();
         probe.take(trainer, r.elapsed_s, last)?;
-        if !last {
-            between(trainer, t);
-        }
         if last {
             // A time budget that laid the schedule over fewer steps than configured stopped it.
             let cut = trainer.config().time_budget.is_some()
@@ -1634,7 +1627,7 @@ fn train_to_end(
         if saved_at.elapsed() >= saving.every {
             let t = Instant::now();
             saving.save(trainer, &probe.curve, budget.search)?;
-            between(trainer, t);
+            trainer.count_time_between_steps(t.elapsed().as_secs_f64());
             saved_at = Instant::now();
         }
     };
