@@ -324,6 +324,10 @@ pub struct BudgetSearch {
     /// tolerance (the search is then over).
     #[serde(default)]
     pub tolerance_spent: bool,
+    /// Whether a time budget had too little left for the next round's two branches when it was
+    /// due (the search is then over, and training goes on without it).
+    #[serde(default)]
+    pub no_time_left: bool,
 }
 
 impl BudgetSearch {
@@ -339,13 +343,14 @@ impl BudgetSearch {
     }
 
     /// Whether no more rounds will run: no plan, all planned rounds done, nothing left to
-    /// merge, too little of the tolerance left, a round ran out of time, or
-    /// [`MAX_REFUSED_ROUNDS`] rounds were refused.
+    /// merge, too little of the tolerance left, a round ran out of time or had no time left to
+    /// start, or [`MAX_REFUSED_ROUNDS`] rounds were refused.
     #[must_use]
     pub fn finished(&self) -> bool {
         let Some(plan) = self.plan else { return true };
         self.exhausted
             || self.tolerance_spent
+            || self.no_time_left
             || self.rounds.len() as u32 >= plan.rounds
             || self.rounds.last().is_some_and(|r| r.out_of_time)
             || self.refused() >= MAX_REFUSED_ROUNDS
@@ -381,17 +386,22 @@ impl BudgetSearch {
     /// before them: they are run again, identically).
     pub fn rewind(&mut self, iteration: u32) {
         self.rounds.retain(|r| r.iteration < iteration);
-        // Where the search found nothing to merge, or spent its tolerance, is found again.
+        // Where the search found nothing to merge, spent its tolerance or ran short of time is
+        // found again.
         self.exhausted = false;
         self.tolerance_spent = false;
+        self.no_time_left = false;
     }
 
     /// Runs the due round on `trainer`: scores its splats, trains both branches
     /// `plan.trial` steps, scores them with `heldout_psnr` (black and white) and keeps the
     /// pruned branch when the search's total ([`BudgetRound::drop_db`]: the worse background)
     /// stays within `cfg.tolerance_db`. `on_step` sees every step of both
-    /// branches. Returns the round (also recorded), or `None` when nothing is left to merge (the
-    /// search is then over and no step was trained).
+    /// branches. Returns the round (also recorded), or `None` when nothing is left to merge or,
+    /// under a time budget, the trainer's horizon has no room for both branches' steps
+    /// ([`BudgetSearch::no_time_left`]; a round started then could only run out of time, its
+    /// planning, scoring and merged steps spent for nothing): the search is then over and no
+    /// step was trained.
     ///
     /// # Errors
     /// What `heldout_psnr` returns; a [`RoundError`] when no round is planned or the trainer
@@ -408,6 +418,11 @@ impl BudgetSearch {
         let Some(plan) = self.plan else {
             return Err(fail("no budget search is planned".into()));
         };
+        if trainer.config().time_budget.is_some() && iteration + 2 * plan.trial > trainer.horizon()
+        {
+            self.no_time_left = true;
+            return Ok(None);
+        }
         let n = trainer.splats().len();
         // The round's planning and scoring are counted on the trainer's clock as they happen
         // (a time budget is wall time, and a round near its end must not run past it); each

@@ -684,9 +684,7 @@ fn a_refused_budget_round_changes_nothing() {
             trial: 15,
             rounds: 2,
         }),
-        rounds: Vec::new(),
-        exhausted: false,
-        tolerance_spent: false,
+        ..BudgetSearch::default()
     };
     // A negative tolerance refuses every prune.
     let cfg = BudgetConfig {
@@ -859,6 +857,55 @@ fn a_time_budget_pays_for_the_budget_rounds_scoring() {
         "the schedule ends where the run stopped"
     );
     assert_eq!(t.active_sh_degree(), 1, "every SH band was reached");
+}
+
+/// Under a time budget a round is not started when the trainer's horizon has no room for both
+/// of its branches: it could only run out of time. The search ends there and training goes on,
+/// the run's schedule complete.
+#[test]
+fn a_round_with_no_time_for_its_branches_is_not_started() {
+    let (init, train, held) = budget_scene();
+    let mut cfg = base_config(10_000_000);
+    cfg.sh_degree_interval = 5_000_000;
+    cfg.time_budget = Some(std::time::Duration::from_secs_f64(BUDGET_S));
+    let mut t = Trainer::new(init, train, cfg).unwrap();
+    // Branches of far more steps than 1.5 s can hold.
+    let mut search = BudgetSearch {
+        plan: Some(BudgetPlan {
+            first: 10,
+            trial: 5_000_000,
+            rounds: 1,
+        }),
+        ..BudgetSearch::default()
+    };
+    let bcfg = BudgetConfig {
+        min_splats: 10,
+        ..BudgetConfig::default()
+    };
+    t.run_until(10, |_| {});
+    assert!(search.due(t.iteration()));
+    let mut scored = 0;
+    let round = search
+        .run_round(
+            &mut t,
+            &bcfg,
+            &mut |s: &Splats| {
+                scored += 1;
+                heldout_psnr(s, &held)
+            },
+            &mut |_| {},
+        )
+        .unwrap();
+    assert!(round.is_none() && search.rounds.is_empty() && scored == 0);
+    assert!(search.no_time_left && search.finished() && !search.due(t.iteration()));
+    assert_eq!(t.iteration(), 10, "no branch step was trained");
+    let report = t.run(|_| {});
+    assert!(report.stopped_by_budget);
+    assert_eq!(t.horizon(), report.iterations);
+    assert_eq!(t.active_sh_degree(), 1, "every SH band was reached");
+    // Resuming before the point forgets the decision, which is taken again.
+    search.rewind(10);
+    assert!(!search.no_time_left);
 }
 
 /// Accepted rounds merge the model down by `keep` each time, count the removed splats as

@@ -1653,8 +1653,13 @@ fn budget_round(
         .search
         .run_round(trainer, budget.config, &mut heldout_psnr, advance)?;
     let Some(round) = round else {
+        let why = if budget.search.no_time_left {
+            "too little of the time budget is left for a round's two branches; the search ends"
+        } else {
+            "nothing left to merge"
+        };
         observer(Event::Note(format!(
-            "splat budget, step {}: nothing left to merge at {} splats",
+            "splat budget, step {}: {why} at {} splats",
             trainer.iteration(),
             trainer.splats().len()
         )));
