@@ -75,7 +75,8 @@ pub struct Overrides {
     /// Training iterations.
     #[arg(long)]
     pub iterations: Option<u32>,
-    /// Training time budget in seconds.
+    /// Training time budget in seconds: the wall time from the speed probe to the last step,
+    /// the splat budget's rounds and the checkpoints included (the schedule is fitted to it).
     #[arg(long, value_name = "SECONDS")]
     pub time_budget: Option<f64>,
     /// Score the held-out views every K training steps for the report's held-out curve.
