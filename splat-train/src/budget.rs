@@ -76,6 +76,10 @@ pub struct BudgetConfig {
     /// scored at, so such a round would be decided by that noise, and it costs a trial of
     /// training thrown away either way.
     pub least_left_db: f64,
+    /// Whether a round that cannot cost less than what is left of `tolerance_db` is skipped
+    /// without training its branches ([`BudgetSearch::cost_floor`]): it counts as refused, and
+    /// the next, gentler merge is tried in its place.
+    pub skip_hopeless: bool,
     /// After training: the held-out PSNR (dB) dropping SH bands may cost, within what the rounds
     /// left of `tolerance_db` ([`crate::sh_bands::choose_bands`]).
     pub bands_tolerance_db: f64,
@@ -104,6 +108,7 @@ impl Default for BudgetConfig {
             merge_levels: 3,
             splats_per_pixel: 2.0,
             least_left_db: 0.05,
+            skip_hopeless: true,
             bands_tolerance_db: 0.05,
             static_sh_rms: 0.002,
         }
@@ -328,7 +333,32 @@ pub struct BudgetSearch {
     /// due (the search is then over, and training goes on without it).
     #[serde(default)]
     pub no_time_left: bool,
+    /// Merges not tried because they could not have cost less than what was left of the
+    /// tolerance ([`BudgetConfig::skip_hopeless`]); each counts as a refused round.
+    #[serde(default)]
+    pub skipped: Vec<SkippedRound>,
 }
+
+/// A merge the search did not try: the least it could have cost, from the rounds before it,
+/// was more than what was left of the tolerance.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct SkippedRound {
+    /// The step at which it was due.
+    pub iteration: u32,
+    /// The share of the splats it would have kept.
+    pub keep: f64,
+    /// The least it could have cost (dB): [`BudgetSearch::cost_floor`].
+    pub floor_db: f64,
+    /// What was left of the tolerance (dB).
+    pub left_db: f64,
+}
+
+/// The least share of a refused (or skipped) merge's cost that the next, gentler one (half as
+/// many splats removed) has cost: measured 0.30–0.68 (the spider frame's 124,627 → 62,313 at
+/// 0.299 dB, then → 93,469 at 0.204; 62,313 → 31,157 at 0.836, then → 46,733 at 0.260; the
+/// demo's 15,703 → 7,851 at 1.2–1.5, then → 11,776 at 0.36–0.51, then → 13,740 at 0.07–0.16;
+/// docs/benchmarks/budget.md §Session 36).
+pub const GENTLER_COST_SHARE: f64 = 0.25;
 
 impl BudgetSearch {
     /// The total cost of the accepted rounds (dB), each counted as at least 0.
@@ -357,11 +387,43 @@ impl BudgetSearch {
     }
 
     /// Rounds whose pruned branch was measured and refused.
+    /// (and merges skipped as hopeless).
     fn refused(&self) -> u32 {
-        self.rounds
+        let measured = self
+            .rounds
             .iter()
             .filter(|r| !r.accepted && !r.out_of_time)
-            .count() as u32
+            .count();
+        (measured + self.skipped.len()) as u32
+    }
+
+    /// The least the next round can cost (dB), from the last try: a merge as large as an
+    /// accepted one costs at least what that one did, since it takes as many splats from a
+    /// model that has fewer (every such pair measured: −0.223 → +0.190 → +0.836, −0.055 →
+    /// +0.299, −0.178 → +0.213 dB); a gentler merge after a refused or skipped one at least
+    /// [`GENTLER_COST_SHARE`] of that one's cost (or floor). Zero with no try before it.
+    #[must_use]
+    pub fn cost_floor(&self) -> f64 {
+        let last_round = self.rounds.last();
+        // A skip at a round's step comes before that round (the round is tried in its place).
+        if let Some(skip) = self
+            .skipped
+            .last()
+            .filter(|s| last_round.is_none_or(|r| s.iteration > r.iteration))
+        {
+            return GENTLER_COST_SHARE * skip.floor_db;
+        }
+        match last_round {
+            Some(r) if !r.out_of_time => {
+                let cost = r.drop_db().unwrap_or(0.0).max(0.0);
+                if r.accepted {
+                    cost
+                } else {
+                    GENTLER_COST_SHARE * cost
+                }
+            }
+            _ => 0.0,
+        }
     }
 
     /// The share of its splats the next round keeps: `keep`, and after each refused round
@@ -386,6 +448,7 @@ impl BudgetSearch {
     /// before them: they are run again, identically).
     pub fn rewind(&mut self, iteration: u32) {
         self.rounds.retain(|r| r.iteration < iteration);
+        self.skipped.retain(|s| s.iteration < iteration);
         // Where the search found nothing to merge, spent its tolerance or ran short of time is
         // found again.
         self.exhausted = false;
@@ -397,11 +460,14 @@ impl BudgetSearch {
     /// `plan.trial` steps, scores them with `heldout_psnr` (black and white) and keeps the
     /// pruned branch when the search's total ([`BudgetRound::drop_db`]: the worse background)
     /// stays within `cfg.tolerance_db`. `on_step` sees every step of both
-    /// branches. Returns the round (also recorded), or `None` when nothing is left to merge or,
-    /// under a time budget, the trainer's horizon has no room for both branches' steps
-    /// ([`BudgetSearch::no_time_left`]; a round started then could only run out of time, its
-    /// planning, scoring and merged steps spent for nothing): the search is then over and no
-    /// step was trained.
+    /// branches. Merges that cannot cost less than what is left of the tolerance are skipped
+    /// first ([`BudgetConfig::skip_hopeless`], recorded in [`BudgetSearch::skipped`]), each
+    /// counting as refused, so the round tries the next, gentler one. Returns the round (also
+    /// recorded), or `None` when nothing is left to merge, when every merge the search could
+    /// still try was skipped, or, under a time budget, when the trainer's horizon has no room
+    /// for both branches' steps ([`BudgetSearch::no_time_left`]; a round started then could
+    /// only run out of time, its planning, scoring and merged steps spent for nothing): the
+    /// search is then over and no step was trained.
     ///
     /// # Errors
     /// What `heldout_psnr` returns; a [`RoundError`] when no round is planned or the trainer
@@ -422,6 +488,24 @@ impl BudgetSearch {
         {
             self.no_time_left = true;
             return Ok(None);
+        }
+        // Merges that cannot cost less than what is left are not tried: each counts as refused,
+        // and the next, gentler one is considered in its place.
+        while cfg.skip_hopeless
+            && let floor = self.cost_floor()
+            && let left = cfg.tolerance_db - self.spent_db()
+            && floor > 0.0
+            && floor > left
+        {
+            self.skipped.push(SkippedRound {
+                iteration,
+                keep: self.next_keep(cfg.keep),
+                floor_db: floor,
+                left_db: left,
+            });
+            if self.finished() {
+                return Ok(None);
+            }
         }
         let n = trainer.splats().len();
         // The round's planning and scoring are counted on the trainer's clock as they happen
@@ -1172,6 +1256,49 @@ mod tests {
                 .collect::<Vec<_>>(),
             [630, 640, 650, 660]
         );
+    }
+
+    /// The least the next round can cost: an accepted merge's cost for one as large, a quarter
+    /// of a refused (or skipped) merge's for the gentler one after it, nothing with no try
+    /// before it or after a round that ran out of time.
+    #[test]
+    fn the_cost_floor_follows_the_last_try() {
+        let round = |iteration, accepted, out_of_time, pruned: f64| BudgetRound {
+            iteration,
+            splats: 100,
+            candidate: 50,
+            kept_psnr: 30.0,
+            pruned_psnr: Some(30.0 - pruned),
+            kept_psnr_white: Some(30.0),
+            pruned_psnr_white: Some(30.0 - 0.5 * pruned),
+            accepted,
+            out_of_time,
+            steps_pruned: 10,
+            seconds: RoundSeconds::default(),
+        };
+        let mut search = BudgetSearch::default();
+        assert_eq!(search.cost_floor(), 0.0);
+        search.rounds.push(round(10, true, false, -0.2));
+        assert_eq!(search.cost_floor(), 0.0, "a gain is no floor");
+        search.rounds.push(round(20, true, false, 0.19));
+        assert!((search.cost_floor() - 0.19).abs() < 1e-12);
+        search.rounds.push(round(30, false, false, 0.8));
+        assert!((search.cost_floor() - GENTLER_COST_SHARE * 0.8).abs() < 1e-12);
+        search.skipped.push(SkippedRound {
+            iteration: 40,
+            keep: 0.75,
+            floor_db: 0.2,
+            left_db: 0.06,
+        });
+        assert!((search.cost_floor() - GENTLER_COST_SHARE * 0.2).abs() < 1e-12);
+        // The round tried in the skipped one's place, at the same step, is the last try.
+        search.rounds.push(round(40, false, false, 0.26));
+        assert!((search.cost_floor() - GENTLER_COST_SHARE * 0.26).abs() < 1e-12);
+        search.rounds.push(round(50, false, true, 0.0));
+        assert_eq!(search.cost_floor(), 0.0);
+        // Skipped merges count as refused: the next keeps half as many removed again.
+        assert_eq!(search.refused(), 3);
+        assert!((search.next_keep(0.5) - 0.9375).abs() < 1e-12);
     }
 
     /// After each refused round the next removes half as many splats as the last try, and the

@@ -54,8 +54,8 @@ mod update;
 mod view;
 
 pub use budget::{
-    BudgetConfig, BudgetPlan, BudgetRound, BudgetSearch, HeldoutPsnr, RoundError, RoundSeconds,
-    SCORE_POINTS,
+    BudgetConfig, BudgetPlan, BudgetRound, BudgetSearch, GENTLER_COST_SHARE, HeldoutPsnr,
+    RoundError, RoundSeconds, SCORE_POINTS, SkippedRound,
 };
 pub use config::{Background, DensifyConfig, Frozen, LearningRates, TrainConfig, Warmup};
 pub use dataset::{Dataset, DatasetError, read_dataset};

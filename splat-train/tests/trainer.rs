@@ -686,9 +686,11 @@ fn a_refused_budget_round_changes_nothing() {
         }),
         ..BudgetSearch::default()
     };
-    // A negative tolerance refuses every prune.
+    // A negative tolerance refuses every prune (and every merge would be skipped as hopeless
+    // after the first: here each is tried).
     let cfg = BudgetConfig {
         tolerance_db: -1.0,
+        skip_hopeless: false,
         min_splats: 10,
         ..BudgetConfig::default()
     };
@@ -906,6 +908,85 @@ fn a_round_with_no_time_for_its_branches_is_not_started() {
     // Resuming before the point forgets the decision, which is taken again.
     search.rewind(10);
     assert!(!search.no_time_left);
+}
+
+/// A merge that cannot cost less than what is left of the tolerance is skipped without training
+/// its branches and counts as refused, so the round tries the next, gentler merge in its place;
+/// when every merge the search could still try is hopeless, the search ends with no step
+/// trained.
+#[test]
+fn hopeless_merges_are_skipped() {
+    let (init, train, held) = budget_scene();
+    // A first round, accepted at a cost of 0.2 dB: the next halving cannot cost less.
+    let accepted = splat_train::BudgetRound {
+        iteration: 10,
+        splats: 400,
+        candidate: 200,
+        kept_psnr: 30.0,
+        pruned_psnr: Some(29.8),
+        kept_psnr_white: None,
+        pruned_psnr_white: None,
+        accepted: true,
+        out_of_time: false,
+        steps_pruned: 10,
+        seconds: splat_train::RoundSeconds::default(),
+    };
+    let plan = BudgetPlan {
+        first: 10,
+        trial: 10,
+        rounds: 3,
+    };
+    for (tolerance_db, tried) in [(0.25, true), (0.21, false)] {
+        let mut t = Trainer::new(init.clone(), train.clone(), base_config(80)).unwrap();
+        t.run_until(20, |_| {});
+        let mut search = BudgetSearch {
+            plan: Some(plan),
+            rounds: vec![accepted],
+            ..BudgetSearch::default()
+        };
+        let cfg = BudgetConfig {
+            tolerance_db,
+            min_splats: 10,
+            ..BudgetConfig::default()
+        };
+        assert!(search.due(20));
+        let round = search
+            .run_round(
+                &mut t,
+                &cfg,
+                &mut |s: &Splats| heldout_psnr(s, &held),
+                &mut |_| {},
+            )
+            .unwrap();
+        let left = tolerance_db - 0.2;
+        let first = search.skipped[0];
+        assert_eq!((first.iteration, first.keep), (20, 0.5));
+        assert!((first.floor_db - 0.2).abs() < 1e-9 && (first.left_db - left).abs() < 1e-9);
+        if tried {
+            // 0.05 dB left: the halving (at least 0.2) is skipped, the three-quarter merge (at
+            // least a quarter of that, 0.05) is tried.
+            assert_eq!(search.skipped.len(), 1, "{:?}", search.skipped);
+            let round = round.expect("the gentler merge is tried");
+            assert_eq!(round.iteration, 20);
+            assert!(
+                (round.candidate as f64 - 300.0).abs() <= 30.0,
+                "kept {} of 400",
+                round.candidate
+            );
+            assert!(t.iteration() > 20);
+        } else {
+            // 0.01 dB left: the halving, then ¾ (0.05) and ⅞ (0.0125) are all hopeless.
+            assert!(round.is_none());
+            let keeps: Vec<f64> = search.skipped.iter().map(|s| s.keep).collect();
+            assert_eq!(keeps, [0.5, 0.75, 0.875]);
+            assert!(search.finished() && !search.due(t.iteration()));
+            assert_eq!(t.iteration(), 20, "no branch step was trained");
+            assert_eq!(search.rounds.len(), 1);
+        }
+        // Resuming before the round forgets the skips, which are decided again.
+        search.rewind(20);
+        assert!(search.skipped.is_empty());
+    }
 }
 
 /// Accepted rounds merge the model down by `keep` each time, count the removed splats as

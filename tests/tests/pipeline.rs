@@ -339,6 +339,22 @@ fn a_time_budget_with_a_warmup_ends_on_budget() {
     );
     assert!(run.step_estimate_s.is_some_and(|s| s > 0.0 && s < 4.0));
     assert!(run.metrics.psnr_black > 24.0, "{}", run.metrics.psnr_black);
+    // The budget is the training stage's wall time: what runs between the steps (the splat
+    // budget's rounds, checkpoints) is on the trainer's clock too.
+    let stage = run
+        .timings
+        .iter()
+        .find(|t| t.stage == "train")
+        .map(|t| t.seconds)
+        .unwrap();
+    eprintln!(
+        "training stage {stage:.2} s, {} budget rounds",
+        run.budget.rounds.len()
+    );
+    assert!(
+        stage < 5.0,
+        "the training stage took {stage:.2} s of a 4 s budget"
+    );
 }
 
 #[test]

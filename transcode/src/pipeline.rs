@@ -1649,12 +1649,34 @@ fn budget_round(
         let (black, white) = splat_train::psnr_black_and_white(s, probe.views, &probe.options)?;
         Ok(splat_train::HeldoutPsnr { black, white })
     };
+    let (due_at, n) = (trainer.iteration(), trainer.splats().len());
     let round = budget
         .search
         .run_round(trainer, budget.config, &mut heldout_psnr, advance)?;
+    for skip in budget
+        .search
+        .skipped
+        .iter()
+        .filter(|s| s.iteration == due_at)
+    {
+        observer(Event::Note(format!(
+            "splat budget, step {due_at}: a merge keeping {:.1} % of {n} splats skipped: it \
+             could not cost less than {:.3} dB, and {:.3} dB of the tolerance is left",
+            100.0 * skip.keep,
+            skip.floor_db,
+            skip.left_db
+        )));
+    }
     let Some(round) = round else {
         let why = if budget.search.no_time_left {
             "too little of the time budget is left for a round's two branches; the search ends"
+        } else if budget
+            .search
+            .skipped
+            .last()
+            .is_some_and(|s| s.iteration == due_at)
+        {
+            "no merge left that could cost less than what is left of the tolerance; the search ends"
         } else {
             "nothing left to merge"
         };

@@ -45,7 +45,10 @@ pub(super) fn section(h: &mut String, runs: &[RunReport], names: &[String]) {
          the rounds' costs add up to no more than the tolerance \
          (<code>budget.tolerance_db</code>, <code>--budget-tolerance</code>); after a refused \
          round the next one merges half as many splats, and the third refusal ends the search, \
-         as does a tolerance spent to within <code>budget.least_left_db</code>. \
+         as does a tolerance spent to within <code>budget.least_left_db</code>. A merge that \
+         cannot cost less than what is left is not tried and counts as refused: one as large as \
+         an accepted merge costs at least what that one did, and a gentler one after a refusal \
+         at least a quarter of the refused one's cost. \
          Lines join each round's two branches (solid: kept, \
          dashed: refused); the circle is the chosen model after all its training. Sizes of the \
          branches are the final model's files scaled by splat count.</p>\n",
@@ -177,6 +180,28 @@ fn table(h: &mut String, run: &RunReport, name: &str) {
     );
     if let Some(time) = rounds_time(&run.budget.rounds) {
         let _ = writeln!(h, "<p>{time}</p>");
+    }
+    if !run.budget.skipped.is_empty() {
+        let skipped: Vec<String> = run
+            .budget
+            .skipped
+            .iter()
+            .map(|s| {
+                format!(
+                    "step {}, keeping {:.1} % (at least {:.3} dB, {:.3} dB left)",
+                    s.iteration,
+                    100.0 * s.keep,
+                    s.floor_db,
+                    s.left_db
+                )
+            })
+            .collect();
+        let _ = writeln!(
+            h,
+            "<p>Merges not tried, as they could not cost less than what was left of the \
+             tolerance (<code>budget.skip_hopeless</code>), each counted as refused: {}.</p>",
+            skipped.join("; ")
+        );
     }
 }
 
