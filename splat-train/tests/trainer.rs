@@ -141,10 +141,16 @@ fn budgeted_run(budget_s: f64) -> (Splats, Vec<View>, TrainConfig) {
     let truth = random_model(60, 3);
     let train = render_views(&truth, &cameras(12, 48, 36, 0.0), "v");
     let init = initial_model(&truth, 0.02, 4);
+    (init, train, budgeted_config(budget_s))
+}
+
+/// A configuration for far more steps (10 million) than fit in `budget_s`, its one SH band
+/// coming at half the schedule.
+fn budgeted_config(budget_s: f64) -> TrainConfig {
     let mut cfg = base_config(10_000_000);
     cfg.sh_degree_interval = 5_000_000;
     cfg.time_budget = Some(std::time::Duration::from_secs_f64(budget_s));
-    (init, train, cfg)
+    cfg
 }
 
 #[test]
@@ -678,14 +684,7 @@ fn a_refused_budget_round_changes_nothing() {
     let mut straight = Trainer::new(init.clone(), train.clone(), base_config(60)).unwrap();
     straight.run(|_| {});
     let mut branched = Trainer::new(init, train, base_config(60)).unwrap();
-    let mut search = BudgetSearch {
-        plan: Some(BudgetPlan {
-            first: 20,
-            trial: 15,
-            rounds: 2,
-        }),
-        ..BudgetSearch::default()
-    };
+    let mut search = search_of(20, 15, 2);
     // A negative tolerance refuses every prune (and every merge would be skipped as hopeless
     // after the first: here each is tried).
     let cfg = BudgetConfig {
@@ -700,15 +699,7 @@ fn a_refused_budget_round_changes_nothing() {
     // step 35) tries to remove a quarter.
     for (k, keep) in [(0, 0.5), (1, 0.75)] {
         assert!(search.due(branched.iteration()));
-        let round = search
-            .run_round(
-                &mut branched,
-                &cfg,
-                &mut |s: &Splats| heldout_psnr(s, &held),
-                &mut |_| {},
-            )
-            .unwrap()
-            .unwrap();
+        let round = run_round_scored(&mut search, &mut branched, &cfg, &held).unwrap();
         assert!(!round.accepted && !round.out_of_time);
         // Refused: the merged branch's steps were thrown away.
         assert!(round.seconds.merged > 0.0);
@@ -728,6 +719,30 @@ fn a_refused_budget_round_changes_nothing() {
     assert_eq!(branched.splats(), straight.splats());
 }
 
+/// Runs `search`'s due round on `t`, scoring the branches on `held`.
+fn run_round_scored(
+    search: &mut BudgetSearch,
+    t: &mut Trainer,
+    cfg: &BudgetConfig,
+    held: &[View],
+) -> Option<splat_train::BudgetRound> {
+    search
+        .run_round(t, cfg, &mut |s: &Splats| heldout_psnr(s, held), &mut |_| {})
+        .unwrap()
+}
+
+/// A search with no round done yet, its `rounds` rounds of `trial` steps from step `first`.
+fn search_of(first: u32, trial: u32, rounds: u32) -> BudgetSearch {
+    BudgetSearch {
+        plan: Some(BudgetPlan {
+            first,
+            trial,
+            rounds,
+        }),
+        ..BudgetSearch::default()
+    }
+}
+
 /// The budget tests' scene: a 400-splat truth seen by 12 training and 3 held-out views, and a
 /// jittered copy to train from.
 fn budget_scene() -> (Splats, Vec<View>, Vec<View>) {
@@ -739,14 +754,7 @@ fn budget_scene() -> (Splats, Vec<View>, Vec<View>) {
 
 /// A search of three rounds of 10 steps from step 10, whose tolerance (1e9 dB) takes any cost.
 fn three_rounds(least_left_db: f64) -> (BudgetSearch, BudgetConfig) {
-    let search = BudgetSearch {
-        plan: Some(BudgetPlan {
-            first: 10,
-            trial: 10,
-            rounds: 3,
-        }),
-        ..BudgetSearch::default()
-    };
+    let search = search_of(10, 10, 3);
     let cfg = BudgetConfig {
         tolerance_db: 1e9,
         least_left_db,
@@ -768,14 +776,7 @@ fn a_search_ends_when_too_little_tolerance_is_left() {
         let (mut search, cfg) = three_rounds(least_left_db);
         while t.iteration() < 80 {
             while search.due(t.iteration()) {
-                search
-                    .run_round(
-                        &mut t,
-                        &cfg,
-                        &mut |s: &Splats| heldout_psnr(s, &held),
-                        &mut |_| {},
-                    )
-                    .unwrap();
+                run_round_scored(&mut search, &mut t, &cfg, &held);
             }
             t.run_until(t.iteration() + 1, |_| {});
         }
@@ -802,10 +803,7 @@ fn a_search_ends_when_too_little_tolerance_is_left() {
 #[test]
 fn a_time_budget_pays_for_the_budget_rounds_scoring() {
     let (init, train, held) = budget_scene();
-    let mut cfg = base_config(10_000_000);
-    cfg.sh_degree_interval = 5_000_000;
-    cfg.time_budget = Some(std::time::Duration::from_secs_f64(BUDGET_S));
-    let mut t = Trainer::new(init, train, cfg).unwrap();
+    let mut t = Trainer::new(init, train, budgeted_config(BUDGET_S)).unwrap();
     let (mut search, bcfg) = three_rounds(0.0);
     // Three rounds score both branches at every scoring point: 0.96 s of a 1.5 s budget (on a
     // machine slow enough for the budget to run out first, fewer).
@@ -867,19 +865,9 @@ fn a_time_budget_pays_for_the_budget_rounds_scoring() {
 #[test]
 fn a_round_with_no_time_for_its_branches_is_not_started() {
     let (init, train, held) = budget_scene();
-    let mut cfg = base_config(10_000_000);
-    cfg.sh_degree_interval = 5_000_000;
-    cfg.time_budget = Some(std::time::Duration::from_secs_f64(BUDGET_S));
-    let mut t = Trainer::new(init, train, cfg).unwrap();
+    let mut t = Trainer::new(init, train, budgeted_config(BUDGET_S)).unwrap();
     // Branches of far more steps than 1.5 s can hold.
-    let mut search = BudgetSearch {
-        plan: Some(BudgetPlan {
-            first: 10,
-            trial: 5_000_000,
-            rounds: 1,
-        }),
-        ..BudgetSearch::default()
-    };
+    let mut search = search_of(10, 5_000_000, 1);
     let bcfg = BudgetConfig {
         min_splats: 10,
         ..BudgetConfig::default()
@@ -931,33 +919,18 @@ fn hopeless_merges_are_skipped() {
         steps_pruned: 10,
         seconds: splat_train::RoundSeconds::default(),
     };
-    let plan = BudgetPlan {
-        first: 10,
-        trial: 10,
-        rounds: 3,
-    };
     for (tolerance_db, tried) in [(0.25, true), (0.21, false)] {
         let mut t = Trainer::new(init.clone(), train.clone(), base_config(80)).unwrap();
         t.run_until(20, |_| {});
-        let mut search = BudgetSearch {
-            plan: Some(plan),
-            rounds: vec![accepted],
-            ..BudgetSearch::default()
-        };
+        let mut search = search_of(10, 10, 3);
+        search.rounds.push(accepted);
         let cfg = BudgetConfig {
             tolerance_db,
             min_splats: 10,
             ..BudgetConfig::default()
         };
         assert!(search.due(20));
-        let round = search
-            .run_round(
-                &mut t,
-                &cfg,
-                &mut |s: &Splats| heldout_psnr(s, &held),
-                &mut |_| {},
-            )
-            .unwrap();
+        let round = run_round_scored(&mut search, &mut t, &cfg, &held);
         let left = tolerance_db - 0.2;
         let first = search.skipped[0];
         assert_eq!((first.iteration, first.keep), (20, 0.5));
