@@ -386,8 +386,7 @@ impl BudgetSearch {
             || self.refused() >= MAX_REFUSED_ROUNDS
     }
 
-    /// Rounds whose pruned branch was measured and refused.
-    /// (and merges skipped as hopeless).
+    /// Rounds whose pruned branch was measured and refused, and merges skipped as hopeless.
     fn refused(&self) -> u32 {
         let measured = self
             .rounds
