@@ -691,12 +691,13 @@ impl Merges {
     }
 
     /// Replaces each group's first member by the group's merged splat ([`merge_group`]) with
-    /// fresh optimiser moments; returns the keep flags that then remove the other members.
+    /// the members' optimiser moments blended the same way ([`ParamState::blend_moments`]);
+    /// returns the keep flags that then remove the other members.
     pub fn apply(&self, state: &mut ParamState, weights: &[f64]) -> Vec<bool> {
         let mut keep = vec![true; state.len()];
         for g in &self.groups {
             merge_group(&mut state.splats, g, weights);
-            state.reset_moments(g[0]);
+            state.blend_moments(g, &member_shares(g, weights));
             for &j in &g[1..] {
                 keep[j] = false;
             }
@@ -885,18 +886,24 @@ fn flattening_cost(members: &[usize], sig: &[[f32; 4]], weights: &[f64]) -> f64 
         .sum()
 }
 
+/// Each member's share of a merged group: its weight over the group's (negative weights
+/// count as 0), or equal shares when no member has weight.
+fn member_shares(group: &[usize], weights: &[f64]) -> Vec<f32> {
+    let raw: Vec<f64> = group.iter().map(|&j| weights[j].max(0.0)).collect();
+    let sum: f64 = raw.iter().sum();
+    if sum > 0.0 {
+        raw.iter().map(|&v| (v / sum) as f32).collect()
+    } else {
+        vec![1.0 / group.len() as f32; group.len()]
+    }
+}
+
 /// Replaces splat `group[0]` by one Gaussian with the group's moments: the `weights`-weighted
 /// mean of the members' positions, and their mean covariance plus the spread of their
 /// positions (moment matching of a Gaussian mixture); SH the weighted mean of theirs; opacity
 /// the largest of theirs (the group covered at least as much as its most opaque member).
 pub fn merge_group(splats: &mut Splats, group: &[usize], weights: &[f64]) {
-    let raw: Vec<f64> = group.iter().map(|&j| weights[j].max(0.0)).collect();
-    let sum: f64 = raw.iter().sum();
-    let w: Vec<f32> = if sum > 0.0 {
-        raw.iter().map(|&v| (v / sum) as f32).collect()
-    } else {
-        vec![1.0 / group.len() as f32; group.len()]
-    };
+    let w = member_shares(group, weights);
     let mean: Vec3 = group
         .iter()
         .zip(&w)

@@ -109,6 +109,24 @@ impl ParamState {
         m.opacity_logits.reset(i..i + 1);
         m.sh.reset(i * 3 * k..(i + 1) * 3 * k);
     }
+
+    /// Gives splat `group[0]` the mean of the moments of the splats in `group`, weighted by
+    /// `shares` (one a member, summing to 1): the splat a merge leaves in the group's place.
+    ///
+    /// Zeroed moments would not be a fresh start late in a run: Adam's bias correction follows
+    /// the run's step count, so a splat whose moments restart mid-run steps by about
+    /// m / √v = (1 − β₁) / √(1 − β₂) ≈ 3 times its rate at first and stays above its rate for
+    /// hundreds of steps, until v has caught up. The members' moments carry the scale of their
+    /// gradients, so the merged splat goes on at its rate.
+    pub fn blend_moments(&mut self, group: &[usize], shares: &[f32]) {
+        let k = self.splats.coeffs_per_splat();
+        let m = &mut self.moments;
+        m.means.blend(WIDTHS[0], group, shares);
+        m.log_scales.blend(WIDTHS[1], group, shares);
+        m.rotations.blend(WIDTHS[2], group, shares);
+        m.opacity_logits.blend(WIDTHS[3], group, shares);
+        m.sh.blend(3 * k, group, shares);
+    }
 }
 
 /// Keeps the `stride`-long records of `v` whose flag is set.
@@ -136,6 +154,20 @@ impl Moments {
     pub fn retain(&mut self, stride: usize, keep: &[bool]) {
         retain_by(&mut self.m, stride, keep);
         retain_by(&mut self.v, stride, keep);
+    }
+
+    /// Sets the `stride`-long record `group[0]` to the `shares`-weighted mean of the records
+    /// `group`, both moments.
+    pub fn blend(&mut self, stride: usize, group: &[usize], shares: &[f32]) {
+        for moment in [&mut self.m, &mut self.v] {
+            let mut mean = vec![0.0_f32; stride];
+            for (&j, &w) in group.iter().zip(shares) {
+                for (a, &x) in mean.iter_mut().zip(&moment[j * stride..(j + 1) * stride]) {
+                    *a += w * x;
+                }
+            }
+            moment[group[0] * stride..(group[0] + 1) * stride].copy_from_slice(&mean);
+        }
     }
 }
 
@@ -176,5 +208,37 @@ mod tests {
         assert_eq!(st.moments.sh.len(), 3 * 12);
         assert_eq!(st.moments.sh.m[12], 7.0);
         assert_eq!(st.moments.rotations.len(), 12);
+    }
+
+    #[test]
+    fn blended_moments_are_the_members_weighted_means() {
+        let mut st = ParamState::new(model());
+        let fill = |m: &mut Moments, stride: usize| {
+            for (i, (a, b)) in m.m.iter_mut().zip(m.v.iter_mut()).enumerate() {
+                *a = (i / stride) as f32 + 0.5;
+                *b = 10.0 * ((i / stride) as f32 + 1.0);
+            }
+        };
+        fill(&mut st.moments.means, 3);
+        fill(&mut st.moments.log_scales, 3);
+        fill(&mut st.moments.rotations, 4);
+        fill(&mut st.moments.opacity_logits, 1);
+        fill(&mut st.moments.sh, 12);
+        let before = st.moments.clone();
+        st.blend_moments(&[3, 1], &[0.25, 0.75]);
+        // Splat 3 now holds 0.25·(splat 3) + 0.75·(splat 1) in every record: m = 0.25·3.5 +
+        // 0.75·1.5 = 2, v = 0.25·40 + 0.75·20 = 25; the other splats are untouched.
+        for (after, old, stride) in [
+            (&st.moments.means, &before.means, 3),
+            (&st.moments.log_scales, &before.log_scales, 3),
+            (&st.moments.rotations, &before.rotations, 4),
+            (&st.moments.opacity_logits, &before.opacity_logits, 1),
+            (&st.moments.sh, &before.sh, 12),
+        ] {
+            assert_eq!(after.m[3 * stride..4 * stride], vec![2.0; stride][..]);
+            assert_eq!(after.v[3 * stride..4 * stride], vec![25.0; stride][..]);
+            assert_eq!(after.m[..3 * stride], old.m[..3 * stride]);
+            assert_eq!(after.v[..3 * stride], old.v[..3 * stride]);
+        }
     }
 }
