@@ -24,7 +24,7 @@ use std::collections::HashMap;
 use std::time::Instant;
 
 use glam::{Mat3, Quat, Vec3};
-use splat_core::{Splats, sigmoid};
+use splat_core::Splats;
 
 use crate::init::point_spacing;
 use crate::state::ParamState;
@@ -712,8 +712,7 @@ impl Merges {
 /// 1.5, 3, 6, … times the median nearest-neighbour spacing, each cell the union of eight cells
 /// of the level below (on a surface the finest holds about two splats). Merging a cell costs
 /// what flattening its colours would: the members' `weights` (contributions) times the squared
-/// distance of their colour (SH DC and the higher bands' norm, opacity-weighted) from the
-/// cell's weighted mean. Cells of every level are taken in order of cost per splat saved (cells
+/// distance of their colour (SH DC and the higher bands' norm) from the cell's weighted mean. Cells of every level are taken in order of cost per splat saved (cells
 /// larger than a pair that are not flat, taking in an edge or a corner, after all flat ones); a
 /// cell taken replaces the smaller cells already taken inside it, a cell inside one already
 /// taken is skipped, and a cell that would overshoot the target by more than half of what it
@@ -848,15 +847,21 @@ fn thickness(splats: &Splats, members: &[usize], weights: &[f64]) -> f32 {
 /// nearest-neighbour spacings (on a surface a level-`l` cell holds about 2·4^`l` splats).
 pub const MAX_MERGE_LEVELS: u32 = 8;
 
-/// Each splat's colour signature: opacity times (SH DC, norm of the higher bands).
+/// Each splat's colour signature: its SH DC and the norm of its higher bands.
+///
+/// Not scaled by opacity: the weight a signature is charged with, the splat's contribution, is
+/// already its blending weight summed over the views' pixels, so a faint splat costs little.
+/// Scaled once more, the splats of a uniform surface, whose opacities training spreads (where
+/// they overlap, a half-transparent splat draws the same colour as an opaque one), looked as
+/// different as texture and cost as much to merge as a small detailed object's
+/// (docs/benchmarks/budget.md, session 38).
 fn signatures(splats: &Splats) -> Vec<[f32; 4]> {
     let k = splats.coeffs_per_splat();
     (0..splats.len())
         .map(|i| {
             let sh = &splats.sh[i * k..(i + 1) * k];
-            let o = sigmoid(splats.opacity_logits[i]);
             let rest: f32 = sh[1..].iter().flatten().map(|v| v * v).sum::<f32>().sqrt();
-            [o * sh[0][0], o * sh[0][1], o * sh[0][2], o * rest]
+            [sh[0][0], sh[0][1], sh[0][2], rest]
         })
         .collect()
 }
@@ -1241,6 +1246,55 @@ mod tests {
         assert!(
             finest_only < n * 5 / 8,
             "removed {finest_only} of {n} with one level"
+        );
+    }
+
+    /// A uniform sheet whose splats' opacities are spread, as training leaves an overlapping
+    /// surface, beside a small patch of random colours that carries little of the images: the
+    /// sheet merges first, as its colour is one, and the patch keeps its splats. Opacity
+    /// weighted signatures would charge the sheet's spread opacities as texture (with these
+    /// figures they merged every splat of the patch).
+    #[test]
+    fn spread_opacities_of_a_uniform_surface_do_not_count_as_texture() {
+        let mut means = Vec::new();
+        let mut colours = Vec::new();
+        let mut rand = xorshift(3);
+        let h = 0.05;
+        for i in 0..48 {
+            for j in 0..48 {
+                means.push(Vec3::new(i as f32 * h, 0.0, j as f32 * h));
+                colours.push([0.8; 3]);
+            }
+        }
+        let sheet = means.len();
+        for i in 0..16 {
+            for j in 0..16 {
+                means.push(Vec3::new(3.0 + i as f32 * h, 0.0, j as f32 * h));
+                colours.push([rand(), rand(), rand()]);
+            }
+        }
+        let n = means.len();
+        let mut splats =
+            Splats::from_points(&means, &colours, &vec![Vec3::splat(0.03); n], None, 0.8, 0)
+                .unwrap();
+        for logit in &mut splats.opacity_logits {
+            let o = 0.3 + 0.69 * rand();
+            *logit = (o / (1.0 - o)).ln();
+        }
+        // The patch is a small object: each of its splats carries a twentieth of a sheet
+        // splat's share of the images.
+        let weights: Vec<f64> = (0..n).map(|i| if i < sheet { 1.0 } else { 0.05 }).collect();
+        let plan = plan_merges(&splats, &weights, n / 2, 3);
+        assert!(plan.removed() >= n - n / 2, "removed {}", plan.removed());
+        let patch_merged = plan
+            .groups
+            .iter()
+            .flatten()
+            .filter(|&&j| j >= sheet)
+            .count();
+        assert_eq!(
+            patch_merged, 0,
+            "{patch_merged} of the patch's splats merged"
         );
     }
 
