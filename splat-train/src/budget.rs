@@ -708,17 +708,17 @@ impl Merges {
 
 /// Plans merges that bring `splats` down to about `target` splats, cheapest first.
 ///
-/// The splats are binned in cubic cells on nested grids: `levels` levels whose cells are
-/// 1.5, 3, 6, … times the median nearest-neighbour spacing, each cell the union of eight cells
-/// of the level below (on a surface the finest holds about two splats). Merging a cell costs
-/// what flattening its colours would: the members' `weights` (contributions) times the squared
-/// distance of their colour (SH DC and the higher bands' norm) from the cell's weighted mean. Cells of every level are taken in order of cost per splat saved (cells
-/// larger than a pair that are not flat, taking in an edge or a corner, after all flat ones); a
-/// cell taken replaces the smaller cells already taken inside it, a cell inside one already
-/// taken is skipped, and a cell that would overshoot the target by more than half of what it
-/// saves is left for smaller ones. So a uniform region merges into few large splats, a detailed or glossy one
-/// keeps its splats, and one round can shrink a flat floor many times over while it leaves the
-/// object on it alone.
+/// The splats are binned in cubic cells on nested grids: `levels` levels whose cells are 1.5, 3, 6,
+/// … times the median nearest-neighbour spacing, each cell the union of eight cells of the level
+/// below (on a surface the finest holds about two splats). Merging a cell costs what flattening its
+/// colours would: the members' `weights` (contributions) times the squared distance of their colour
+/// (SH DC and the higher bands' norm) from the cell's weighted mean. Cells of every level are taken
+/// in order of cost per splat saved (cells larger than a pair that are not flat, taking in an edge
+/// or a corner, after all flat ones); a cell taken replaces the smaller cells already taken inside
+/// it, a cell inside one already taken is skipped, and a cell that would overshoot the target by
+/// more than half of what it saves is left for smaller ones. So a uniform region merges into few
+/// large splats, a detailed or glossy one keeps its splats, and one round can shrink a flat floor
+/// many times over while it leaves the object on it alone.
 #[must_use]
 pub fn plan_merges(splats: &Splats, weights: &[f64], target: usize, levels: u32) -> Merges {
     let n = splats.len();
