@@ -20,7 +20,6 @@
 //! and detailed or glossy ones keep many.
 
 use serde::{Deserialize, Serialize};
-use std::collections::HashMap;
 use std::time::Instant;
 
 use glam::{Mat3, Quat, Vec3};
@@ -29,6 +28,8 @@ use splat_core::Splats;
 use crate::init::point_spacing;
 use crate::state::ParamState;
 use crate::trainer::Trainer;
+
+mod clusters;
 
 /// A round that could not go on: the trainer refused to prune or to return to a branch.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -67,10 +68,10 @@ pub struct BudgetConfig {
     pub max_rounds: u32,
     /// No round prunes below this many splats.
     pub min_splats: usize,
-    /// Levels of nested merge cells a round considers ([`plan_merges`]): cells of 1.5, 3, 6, …
-    /// median spacings. More levels let one round merge a flat region into fewer, larger splats,
-    /// at some cost in held-out PSNR on textured surfaces (docs/pipeline.md).
-    pub merge_levels: u32,
+    /// The longest a merged group may be ([`plan_merges`]): the standard deviation of its
+    /// member positions along its longest axis, in median nearest-neighbour spacings. Longer
+    /// lets one round merge a flat region into fewer, larger splats.
+    pub merge_reach: f32,
     /// Once accepted rounds have spent some of `tolerance_db`, the search ends when less than
     /// this is left (dB): a round's measured cost moves by about as much with the steps it is
     /// scored at, so such a round would be decided by that noise, and it costs a trial of
@@ -105,7 +106,7 @@ impl Default for BudgetConfig {
             keep: 0.5,
             max_rounds: 4,
             min_splats: 256,
-            merge_levels: 3,
+            merge_reach: 7.0,
             splats_per_pixel: 2.0,
             least_left_db: 0.05,
             skip_hopeless: true,
@@ -155,11 +156,8 @@ impl BudgetConfig {
         if !(self.splats_per_pixel.is_finite() && self.splats_per_pixel > 0.0) {
             return bad("splats_per_pixel", "must be a finite number > 0");
         }
-        if !(1..=MAX_MERGE_LEVELS).contains(&self.merge_levels) {
-            return bad(
-                "merge_levels",
-                &format!("must be between 1 and {MAX_MERGE_LEVELS}"),
-            );
+        if !(self.merge_reach.is_finite() && self.merge_reach > 0.0) {
+            return bad("merge_reach", "must be a finite number > 0");
         }
         Ok(())
     }
@@ -525,7 +523,7 @@ impl BudgetSearch {
             trainer.splats(),
             &contributions,
             target_count,
-            cfg.merge_levels,
+            cfg.merge_reach,
         );
         let candidate = n - merges.removed();
         if merges.removed() == 0 {
@@ -706,146 +704,42 @@ impl Merges {
     }
 }
 
-/// Plans merges that bring `splats` down to about `target` splats, cheapest first.
+/// Plans merges that bring `splats` down to `target` splats, cheapest first.
 ///
-/// The splats are binned in cubic cells on nested grids: `levels` levels whose cells are 1.5, 3, 6,
-/// … times the median nearest-neighbour spacing, each cell the union of eight cells of the level
-/// below (on a surface the finest holds about two splats). Merging a cell costs what flattening its
-/// colours would: the members' `weights` (contributions) times the squared distance of their colour
-/// (SH DC and the higher bands' norm) from the cell's weighted mean. Cells of every level are taken
-/// in order of cost per splat saved (cells larger than a pair that are not flat, taking in an edge
-/// or a corner, after all flat ones); a cell taken replaces the smaller cells already taken inside
-/// it, a cell inside one already taken is skipped, and a cell that would overshoot the target by
-/// more than half of what it saves is left for smaller ones. So a uniform region merges into few
-/// large splats, a detailed or glossy one keeps its splats, and one round can shrink a flat floor
-/// many times over while it leaves the object on it alone.
+/// Groups grow from single splats by uniting neighbours (each splat joined to its nearest
+/// few), the cheapest union first. A union costs what flattening its colours would add: the
+/// members' `weights` (contributions) times the squared distance of their colour (SH DC and the
+/// higher bands' norm) from the union's weighted mean, less what its two parts already cost
+/// (Ward's criterion). No group grows longer than `reach` median nearest-neighbour spacings
+/// (the standard deviation of its member positions along its longest axis), and unions that
+/// would take in an edge or a corner of the surface (members more than 0.375 spacings off
+/// their best-fitting plane) come after every flat one. So a uniform region merges into few
+/// large splats, a checker's squares into groups inside each square and along its edges, and a
+/// detailed or glossy region keeps its splats. Nested cubic cells did the same job before
+/// session 39 and lost more of the images at a quarter of the splats: a cell's fixed place
+/// cuts across a texture's edges (docs/benchmarks/budget.md).
 #[must_use]
-pub fn plan_merges(splats: &Splats, weights: &[f64], target: usize, levels: u32) -> Merges {
+pub fn plan_merges(splats: &Splats, weights: &[f64], target: usize, reach: f32) -> Merges {
     let n = splats.len();
     if n <= target || n < 2 {
         return Merges::default();
     }
-    let cell = 1.5 * point_spacing(&splats.means);
-    if !(cell.is_finite() && cell > 0.0) {
+    let spacing = point_spacing(&splats.means);
+    if !(spacing.is_finite() && spacing > 0.0) {
         return Merges::default();
     }
-    let sig = signatures(splats);
-    let finest: Vec<[i64; 3]> = splats
-        .means
-        .iter()
-        .map(|p| (*p / cell).floor().as_i64vec3().to_array())
-        .collect();
-    let mut candidates = Vec::new();
-    for level in 0..levels.min(MAX_MERGE_LEVELS) {
-        // A level's cell is 2^level finest cells wide, aligned so that it nests exactly.
-        let mut cells: HashMap<[i64; 3], Vec<usize>> = HashMap::new();
-        for (i, k) in finest.iter().enumerate() {
-            cells
-                .entry(k.map(|c| c.div_euclid(1 << level)))
-                .or_default()
-                .push(i);
-        }
-        // A cell larger than a pair that takes in an edge or a corner would merge into one
-        // splat sticking out of the surface: such cells come after every flat one.
-        let bent = |m: &[usize]| level > 0 && thickness(splats, m, weights) > 0.25 * cell;
-        candidates.extend(
-            cells
-                .into_iter()
-                .filter(|(_, m)| m.len() > 1)
-                .map(|(key, members)| {
-                    let cost =
-                        flattening_cost(&members, &sig, weights) / (members.len() - 1) as f64;
-                    (bent(&members), cost, level, key, members)
-                }),
-        );
-    }
-    // Flat cells first; by cost; at equal cost the larger cell (fewer, larger splats for the
-    // same colour error); then by cell, so the plan does not depend on the hash maps' order.
-    candidates.sort_by(|a, b| {
-        a.0.cmp(&b.0)
-            .then(a.1.total_cmp(&b.1))
-            .then(b.2.cmp(&a.2))
-            .then(a.3.cmp(&b.3))
-    });
-    let need = n - target;
-    // The chosen cell each splat is in (an index into `chosen`), and the chosen cells.
-    let mut owner: Vec<Option<usize>> = vec![None; n];
-    let mut chosen: Vec<Option<(u32, Vec<usize>)>> = Vec::new();
-    let mut removed = 0;
-    for (_, _, level, _, members) in candidates {
-        if removed >= need {
-            break;
-        }
-        // Cells nest, so a member inside a chosen cell at least as large means the whole cell is.
-        if owner[members[0]].is_some_and(|g| chosen[g].as_ref().is_some_and(|c| c.0 >= level)) {
-            continue;
-        }
-        // The smaller chosen cells inside this one would give way to it.
-        let mut inner: Vec<usize> = members.iter().filter_map(|&m| owner[m]).collect();
-        inner.sort_unstable();
-        inner.dedup();
-        inner.retain(|&g| chosen[g].is_some());
-        let replaced: usize = inner
-            .iter()
-            .filter_map(|&g| chosen[g].as_ref())
-            .map(|(_, m)| m.len() - 1)
-            .sum();
-        let saves = members.len() - 1 - replaced;
-        // A cell that would overshoot the target by more than half of what it saves is left
-        // for smaller ones, so the round ends near its target.
-        if removed + saves > need && 2 * (removed + saves - need) > saves {
-            continue;
-        }
-        for g in inner {
-            chosen[g] = None;
-        }
-        removed += saves;
-        let g = chosen.len();
-        for &m in &members {
-            owner[m] = Some(g);
-        }
-        chosen.push(Some((level, members)));
-    }
-    let groups = chosen
-        .into_iter()
-        .flatten()
-        .map(|(_, mut members)| {
-            // The member carrying most of the images stands for the group.
-            members.sort_by(|&a, &b| weights[b].total_cmp(&weights[a]).then(a.cmp(&b)));
-            members
-        })
-        .collect();
+    let limits = clusters::Limits {
+        reach: reach * spacing,
+        flat: FLAT_SPACINGS * spacing,
+    };
+    let groups = clusters::grow_groups(splats, weights, &signatures(splats), target, limits);
     Merges { groups }
 }
 
-/// The standard deviation of `members`' positions (weighted by `weights`) across their
-/// best-fitting plane: about 0 on a flat patch, large where a cell takes in an edge or a corner.
-fn thickness(splats: &Splats, members: &[usize], weights: &[f64]) -> f32 {
-    let w: Vec<f32> = members
-        .iter()
-        .map(|&j| weights[j].max(0.0) as f32)
-        .collect();
-    let total: f32 = w.iter().sum();
-    if total <= 0.0 {
-        return 0.0;
-    }
-    let mean: Vec3 = members
-        .iter()
-        .zip(&w)
-        .map(|(&j, &wj)| wj * splats.means[j])
-        .sum::<Vec3>()
-        / total;
-    let mut cov = Mat3::ZERO;
-    for (&j, &wj) in members.iter().zip(&w) {
-        let d = splats.means[j] - mean;
-        cov += Mat3::from_cols(d * d.x, d * d.y, d * d.z) * (wj / total);
-    }
-    symmetric_eigen(cov).1.min_element().max(0.0).sqrt()
-}
-
-/// The most levels of nested cells [`plan_merges`] considers: cells up to 1.5·2⁷ = 192 median
-/// nearest-neighbour spacings (on a surface a level-`l` cell holds about 2·4^`l` splats).
-pub const MAX_MERGE_LEVELS: u32 = 8;
+/// How far (in median spacings, as a standard deviation) a group's members may lie off their
+/// best-fitting plane before a union counts as bent: a quarter of the old finest merge cell
+/// (1.5 spacings), where a cell across a surface's edge stood out.
+const FLAT_SPACINGS: f32 = 0.375;
 
 /// Each splat's colour signature: its SH DC and the norm of its higher bands.
 ///
@@ -864,31 +758,6 @@ fn signatures(splats: &Splats) -> Vec<[f32; 4]> {
             [sh[0][0], sh[0][1], sh[0][2], rest]
         })
         .collect()
-}
-
-/// Σ wⱼ‖sⱼ − s̄‖² over `members` with s̄ their weighted mean signature.
-fn flattening_cost(members: &[usize], sig: &[[f32; 4]], weights: &[f64]) -> f64 {
-    let w = |j: usize| weights[j].max(0.0);
-    let total: f64 = members.iter().map(|&j| w(j)).sum();
-    if total <= 0.0 {
-        return 0.0;
-    }
-    let mut mean = [0.0_f64; 4];
-    for &j in members {
-        for (m, v) in mean.iter_mut().zip(sig[j]) {
-            *m += w(j) * f64::from(v) / total;
-        }
-    }
-    members
-        .iter()
-        .map(|&j| {
-            w(j) * sig[j]
-                .iter()
-                .zip(mean)
-                .map(|(&v, m)| (f64::from(v) - m).powi(2))
-                .sum::<f64>()
-        })
-        .sum()
 }
 
 /// Each member's share of a merged group: its weight over the group's (negative weights
@@ -1163,7 +1032,7 @@ mod tests {
             Splats::from_points(&means, &colours, &vec![Vec3::splat(0.03); n], None, 0.8, 0)
                 .unwrap();
         let weights = vec![1.0; n];
-        let plan = plan_merges(&splats, &weights, n * 3 / 4, 4);
+        let plan = plan_merges(&splats, &weights, n * 3 / 4, 7.0);
         assert!(plan.removed() >= n / 4, "removed {}", plan.removed());
         assert!(plan.removed() < n / 4 + 8, "removed {}", plan.removed());
         let flat_removed: usize = plan
@@ -1174,7 +1043,7 @@ mod tests {
             .count();
         assert_eq!(flat_removed, plan.removed(), "only the flat half merges");
         // Deterministic.
-        assert_eq!(plan, plan_merges(&splats, &weights, n * 3 / 4, 4));
+        assert_eq!(plan, plan_merges(&splats, &weights, n * 3 / 4, 7.0));
         // Applying it keeps each group's first member and drops the rest.
         let mut state = ParamState::new(splats);
         let keep = plan.apply(&mut state, &weights);
@@ -1183,9 +1052,9 @@ mod tests {
     }
 
     /// A uniform sheet folded at a right angle, with a small patch of random colours on one
-    /// face: asked for an eighth, the plan merges the uniform faces into large cells (a round
+    /// face: asked for an eighth, the plan merges the uniform faces into large groups (a round
     /// can shrink a flat region far more than twofold), keeps every splat of the patch, and no
-    /// cell larger than a pair takes in both faces of the fold.
+    /// group larger than a pair takes in both faces of the fold.
     #[test]
     fn flat_regions_merge_into_large_cells_and_detail_stays() {
         let mut means = Vec::new();
@@ -1213,40 +1082,112 @@ mod tests {
                 .unwrap();
         let weights = vec![1.0; n];
         let target = n / 8;
-        let plan = plan_merges(&splats, &weights, target, 4);
+        let plan = plan_merges(&splats, &weights, target, 7.0);
         let removed = plan.removed();
         assert!(removed >= n - target, "removed {removed} of {n}");
         assert!(removed < n - target + n / 50, "removed {removed} of {n}");
         let mean_group =
             plan.groups.iter().map(Vec::len).sum::<usize>() as f64 / plan.groups.len() as f64;
-        assert!(mean_group > 8.0, "mean group {mean_group}");
-        // The detail patch sits at floor x < 0.45, z in [1.4, 1.8).
-        let is_detail = |p: Vec3| p.y == 0.0 && p.x < 8.5 * h && p.z >= 1.39 && p.z < 1.76;
+        assert!(mean_group >= 8.0, "mean group {mean_group}");
+        // The detail patch sits on the floor (x > 0) at x < 0.45, z in [1.4, 1.8).
+        let is_detail =
+            |p: Vec3| p.y == 0.0 && p.x > 0.0 && p.x < 8.5 * h && p.z >= 1.39 && p.z < 1.76;
+        assert_eq!(means.iter().filter(|&&p| is_detail(p)).count(), 64);
         let merged: Vec<usize> = plan.groups.iter().flatten().copied().collect();
         assert!(
             merged.iter().all(|&j| !is_detail(means[j])),
             "a splat of the detail patch was merged"
         );
+        // A group that takes in both faces lies flat (the fold's two rows, which share a
+        // plane), so its merged splat does not stick out of the surface.
+        let mut straddling = 0;
         for g in plan.groups.iter().filter(|g| g.len() > 2) {
             let on_wall = g.iter().filter(|&&j| means[j].x == 0.0).count();
+            if on_wall == 0 || on_wall == g.len() {
+                continue;
+            }
+            straddling += 1;
+            let mean = g.iter().map(|&j| means[j]).sum::<Vec3>() / g.len() as f32;
+            let cov = g
+                .iter()
+                .map(|&j| {
+                    let d = means[j] - mean;
+                    Mat3::from_cols(d * d.x, d * d.y, d * d.z)
+                })
+                .fold(Mat3::ZERO, |a, b| a + b)
+                / g.len() as f32;
+            let across = symmetric_eigen(cov).1.min_element().max(0.0).sqrt();
             assert!(
-                on_wall == 0 || on_wall == g.len(),
-                "a cell of {} straddles the fold",
+                across <= 0.375 * h * 1.001,
+                "a group of {} straddles the fold {across} off its plane",
                 g.len()
             );
         }
-        // Cells nest: no splat is in two groups.
+        assert!(
+            straddling < plan.groups.len() / 20,
+            "{straddling} groups at the fold"
+        );
+        // No splat is in two groups.
         let mut seen = merged.clone();
         seen.sort_unstable();
         seen.dedup();
         assert_eq!(seen.len(), merged.len());
-        // With the finest cells alone (about two splats each) one round cannot get near an
-        // eighth.
-        let finest_only = plan_merges(&splats, &weights, target, 1).removed();
+        // Groups no longer than about a spacing (pairs and triples) cannot get near an eighth.
+        let short = plan_merges(&splats, &weights, target, 0.4).removed();
         assert!(
-            finest_only < n * 5 / 8,
-            "removed {finest_only} of {n} with one level"
+            short < n * 5 / 8,
+            "removed {short} of {n} with a short reach"
         );
+    }
+
+    /// A checker of squares nine splats wide, placed off any grid: asked for a quarter, the
+    /// plan groups splats inside each square (no group takes in both colours) and no group is
+    /// longer than its reach.
+    #[test]
+    fn groups_keep_to_a_checker_s_squares_and_their_reach() {
+        let h = 0.05;
+        let square = |i: i32| (i + 4).div_euclid(9);
+        let mut means = Vec::new();
+        let mut colours = Vec::new();
+        let mut black = Vec::new();
+        for i in 0..60 {
+            for j in 0..60 {
+                means.push(Vec3::new(i as f32 * h, 0.0, j as f32 * h));
+                let dark = (square(i) + square(j)).rem_euclid(2) == 1;
+                black.push(dark);
+                colours.push(if dark {
+                    [0.1, 0.2, 0.5]
+                } else {
+                    [0.9, 0.85, 0.7]
+                });
+            }
+        }
+        let n = means.len();
+        let splats =
+            Splats::from_points(&means, &colours, &vec![Vec3::splat(0.03); n], None, 0.8, 0)
+                .unwrap();
+        let weights = vec![1.0; n];
+        let reach = 3.0;
+        let plan = plan_merges(&splats, &weights, n / 4, reach);
+        assert_eq!(plan.removed(), n - n / 4);
+        for g in &plan.groups {
+            assert!(
+                g.iter().all(|&j| black[j] == black[g[0]]),
+                "a group of {} takes in both colours",
+                g.len()
+            );
+            let mean = g.iter().map(|&j| means[j]).sum::<Vec3>() / g.len() as f32;
+            let var_x = g
+                .iter()
+                .map(|&j| (means[j].x - mean.x).powi(2))
+                .sum::<f32>();
+            let var_z = g
+                .iter()
+                .map(|&j| (means[j].z - mean.z).powi(2))
+                .sum::<f32>();
+            let longest = (var_x.max(var_z) / g.len() as f32).sqrt();
+            assert!(longest <= reach * h * 1.001, "a group {longest} long");
+        }
     }
 
     /// A uniform sheet whose splats' opacities are spread, as training leaves an overlapping
@@ -1284,7 +1225,7 @@ mod tests {
         // The patch is a small object: each of its splats carries a twentieth of a sheet
         // splat's share of the images.
         let weights: Vec<f64> = (0..n).map(|i| if i < sheet { 1.0 } else { 0.05 }).collect();
-        let plan = plan_merges(&splats, &weights, n / 2, 3);
+        let plan = plan_merges(&splats, &weights, n / 2, 7.0);
         assert!(plan.removed() >= n - n / 2, "removed {}", plan.removed());
         let patch_merged = plan
             .groups
@@ -1450,11 +1391,8 @@ mod tests {
                 "budget.least_left_db"
             );
         }
-        for merge_levels in [0, MAX_MERGE_LEVELS + 1] {
-            assert_eq!(
-                key(BudgetConfig { merge_levels, ..c }),
-                "budget.merge_levels"
-            );
+        for merge_reach in [0.0, -1.0, f32::NAN, f32::INFINITY] {
+            assert_eq!(key(BudgetConfig { merge_reach, ..c }), "budget.merge_reach");
         }
     }
 }

@@ -1,0 +1,253 @@
+//! Merge groups grown pair by pair: agglomerative clustering of the splats over their
+//! nearest-neighbour graph, cheapest union first by Ward's criterion on their colours.
+//!
+//! Written here because what a union costs (colour, weighted by contribution), what it may not
+//! become (longer than a reach, or bent across an edge) and how the groups become Gaussians are
+//! this crate's; the clustering itself is a priority queue over a graph, a few dozen lines.
+
+use std::cmp::Ordering;
+use std::collections::BinaryHeap;
+
+use glam::{DVec3, Mat3, Vec3};
+use splat_core::Splats;
+
+use super::symmetric_eigen;
+use crate::init::PointIndex;
+
+/// Nearest neighbours each splat is joined to before any union: enough that a surface's graph
+/// is connected across its sampling's gaps.
+const NEIGHBOURS: usize = 8;
+
+/// What a union may become, in world units.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Limits {
+    /// The largest standard deviation of a group's member positions along its longest axis.
+    pub reach: f32,
+    /// The largest across its plane before the union counts as bent (taking in an edge or a
+    /// corner of the surface): bent unions come after every flat one.
+    pub flat: f32,
+}
+
+/// A group's running sums.
+#[derive(Debug, Clone, Copy, Default)]
+struct Sums {
+    /// Σ w over the members' contributions (negatives as 0).
+    w: f64,
+    /// Σ w·s over their colour signatures.
+    ws: [f64; 4],
+    /// Members.
+    n: f64,
+    /// Σ p and Σ p·pᵀ (xx, xy, xz, yy, yz, zz) over their positions: the group's shape, which
+    /// every member counts in alike whatever it contributes.
+    p: DVec3,
+    pp: [f64; 6],
+}
+
+impl Sums {
+    fn of(p: Vec3, s: [f32; 4], w: f64) -> Self {
+        let p = p.as_dvec3();
+        Self {
+            w,
+            ws: s.map(|v| w * f64::from(v)),
+            n: 1.0,
+            p,
+            pp: [
+                p.x * p.x,
+                p.x * p.y,
+                p.x * p.z,
+                p.y * p.y,
+                p.y * p.z,
+                p.z * p.z,
+            ],
+        }
+    }
+
+    fn plus(&self, o: &Self) -> Self {
+        let mut ws = self.ws;
+        for (a, b) in ws.iter_mut().zip(o.ws) {
+            *a += b;
+        }
+        let mut pp = self.pp;
+        for (a, b) in pp.iter_mut().zip(o.pp) {
+            *a += b;
+        }
+        Self {
+            w: self.w + o.w,
+            ws,
+            n: self.n + o.n,
+            p: self.p + o.p,
+            pp,
+        }
+    }
+
+    /// The contribution-weighted mean signature (0 without weight).
+    fn mean_signature(&self) -> [f64; 4] {
+        if self.w > 0.0 {
+            self.ws.map(|v| v / self.w)
+        } else {
+            [0.0; 4]
+        }
+    }
+
+    /// The standard deviations of the member positions along the principal axes, least first.
+    fn extent(&self) -> Vec3 {
+        let m = self.p / self.n;
+        let c = |k: usize, a: f64, b: f64| (self.pp[k] / self.n - a * b) as f32;
+        let (xy, xz, yz) = (c(1, m.x, m.y), c(2, m.x, m.z), c(4, m.y, m.z));
+        let cov = Mat3::from_cols(
+            Vec3::new(c(0, m.x, m.x), xy, xz),
+            Vec3::new(xy, c(3, m.y, m.y), yz),
+            Vec3::new(xz, yz, c(5, m.z, m.z)),
+        );
+        let mut v = symmetric_eigen(cov).1.to_array();
+        v.sort_by(f32::total_cmp);
+        Vec3::from_array(v.map(|e| e.max(0.0).sqrt()))
+    }
+}
+
+/// What uniting two groups costs, or `None` where the union would be longer than the reach.
+///
+/// The cost is the rise in the contribution-weighted squared colour error of flattening the
+/// union to one colour over flattening each part: wₐw_b/(wₐ+w_b)·‖s̄ₐ − s̄_b‖² (Ward).
+fn union_cost(a: &Sums, b: &Sums, limits: Limits) -> Option<(bool, f64)> {
+    let u = a.plus(b);
+    let extent = u.extent();
+    if extent.z > limits.reach {
+        return None;
+    }
+    let (ma, mb) = (a.mean_signature(), b.mean_signature());
+    let d2: f64 = ma.iter().zip(mb).map(|(x, y)| (x - y).powi(2)).sum();
+    let cost = if u.w > 0.0 { a.w * b.w / u.w * d2 } else { 0.0 };
+    Some((extent.x > limits.flat, cost))
+}
+
+/// A union in the queue, valid while both groups are as they were when it was costed.
+#[derive(Debug, PartialEq)]
+struct Union {
+    bent: bool,
+    cost: f64,
+    /// Members of the union.
+    size: u32,
+    a: u32,
+    b: u32,
+    versions: (u32, u32),
+}
+
+impl Eq for Union {}
+
+impl Ord for Union {
+    /// The queue's greatest is the next union: flat before bent, cheapest first, at equal cost
+    /// the smaller (a uniform region grows into groups of even size instead of one group
+    /// swallowing its neighbours one by one until it reaches its limit), then by the pair, so
+    /// the plan does not depend on the queue's internal order.
+    fn cmp(&self, o: &Self) -> Ordering {
+        o.bent
+            .cmp(&self.bent)
+            .then(o.cost.total_cmp(&self.cost))
+            .then(o.size.cmp(&self.size))
+            .then(o.a.cmp(&self.a))
+            .then(o.b.cmp(&self.b))
+    }
+}
+
+impl PartialOrd for Union {
+    fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
+        Some(self.cmp(o))
+    }
+}
+
+/// Unites neighbouring splats, cheapest union first, until `target` groups are left or no
+/// union is allowed; returns the groups of at least two members, each heaviest member first.
+///
+/// `weights` are the splats' contributions and `signatures` their colours.
+pub(super) fn grow_groups(
+    splats: &Splats,
+    weights: &[f64],
+    signatures: &[[f32; 4]],
+    target: usize,
+    limits: Limits,
+) -> Vec<Vec<usize>> {
+    let n = splats.len();
+    let Some(index) = PointIndex::new(&splats.means) else {
+        return Vec::new();
+    };
+    let mut sums: Vec<Sums> = (0..n)
+        .map(|i| Sums::of(splats.means[i], signatures[i], weights[i].max(0.0)))
+        .collect();
+    let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); n];
+    for i in 0..n {
+        for j in index.nearest_n(splats.means[i], NEIGHBOURS + 1) {
+            if j != i {
+                neighbours[i].push(j as u32);
+                neighbours[j].push(i as u32);
+            }
+        }
+    }
+    for list in &mut neighbours {
+        list.sort_unstable();
+        list.dedup();
+    }
+    let mut queue = BinaryHeap::new();
+    let mut versions = vec![0_u32; n];
+    let push =
+        |queue: &mut BinaryHeap<Union>, sums: &[Sums], versions: &[u32], a: usize, b: usize| {
+            let (a, b) = (usize::min(a, b), usize::max(a, b));
+            if let Some((bent, cost)) = union_cost(&sums[a], &sums[b], limits) {
+                queue.push(Union {
+                    bent,
+                    cost,
+                    size: (sums[a].n + sums[b].n) as u32,
+                    a: a as u32,
+                    b: b as u32,
+                    versions: (versions[a], versions[b]),
+                });
+            }
+        };
+    for (a, list) in neighbours.iter().enumerate() {
+        for &b in list.iter().filter(|&&b| a < b as usize) {
+            push(&mut queue, &sums, &versions, a, b as usize);
+        }
+    }
+    let mut alive = vec![true; n];
+    let mut members: Vec<Vec<usize>> = (0..n).map(|i| vec![i]).collect();
+    let mut groups = n;
+    while groups > target {
+        let Some(u) = queue.pop() else { break };
+        let (a, b) = (u.a as usize, u.b as usize);
+        if !(alive[a] && alive[b]) || u.versions != (versions[a], versions[b]) {
+            continue;
+        }
+        // Group b joins group a.
+        alive[b] = false;
+        groups -= 1;
+        sums[a] = sums[a].plus(&sums[b]);
+        versions[a] += 1;
+        let joined = std::mem::take(&mut members[b]);
+        members[a].extend(joined);
+        let of_b = std::mem::take(&mut neighbours[b]);
+        for &k in of_b.iter().filter(|&&k| k as usize != a) {
+            let list = &mut neighbours[k as usize];
+            for x in list.iter_mut().filter(|x| **x as usize == b) {
+                *x = a as u32;
+            }
+            list.sort_unstable();
+            list.dedup();
+        }
+        let mut of_a: Vec<u32> = neighbours[a].iter().copied().chain(of_b).collect();
+        of_a.retain(|&k| k as usize != a && k as usize != b);
+        of_a.sort_unstable();
+        of_a.dedup();
+        for &k in &of_a {
+            push(&mut queue, &sums, &versions, a, k as usize);
+        }
+        neighbours[a] = of_a;
+    }
+    members
+        .into_iter()
+        .filter(|m| m.len() > 1)
+        .map(|mut m| {
+            m.sort_by(|&a, &b| weights[b].total_cmp(&weights[a]).then(a.cmp(&b)));
+            m
+        })
+        .collect()
+}
