@@ -708,16 +708,23 @@ impl Merges {
 ///
 /// Groups grow from single splats by uniting neighbours (each splat joined to its nearest
 /// few), the cheapest union first. A union costs what flattening its colours would add: the
-/// members' `weights` (contributions) times the squared distance of their colour (SH DC and the
-/// higher bands' norm) from the union's weighted mean, less what its two parts already cost
-/// (Ward's criterion). No group grows longer than `reach` median nearest-neighbour spacings
+/// members' `weights` (contributions) times the squared distance of their colours from the
+/// union's weighted mean, less what its two parts already cost (Ward's criterion). A colour is
+/// all of a splat's SH coefficients, so two colours' distance is their squared difference
+/// integrated over all directions (the real SH basis is orthonormal), and glossy splats whose
+/// highlights face different ways are told apart. Colours are not scaled by opacity: the
+/// contribution already is the splat's blending weight summed over the views' pixels, and
+/// scaled once more, the splats of a uniform surface, whose opacities training spreads (where
+/// they overlap, a half-transparent splat draws the same colour as an opaque one), looked as
+/// different as texture (docs/benchmarks/budget.md, session 38). No group grows longer than `reach` median nearest-neighbour spacings
 /// (the standard deviation of its member positions along its longest axis), and unions that
 /// would take in an edge or a corner of the surface (members more than 0.375 spacings off
 /// their best-fitting plane) come after every flat one. So a uniform region merges into few
 /// large splats, a checker's squares into groups inside each square and along its edges, and a
 /// detailed or glossy region keeps its splats. Nested cubic cells did the same job before
 /// session 39 and lost more of the images at a quarter of the splats: a cell's fixed place
-/// cuts across a texture's edges (docs/benchmarks/budget.md).
+/// cuts across a texture's edges; and the colour was the SH DC with the higher bands' norm
+/// only, which lost more at a quarter too (docs/benchmarks/budget.md).
 #[must_use]
 pub fn plan_merges(splats: &Splats, weights: &[f64], target: usize, reach: f32) -> Merges {
     let n = splats.len();
@@ -732,7 +739,7 @@ pub fn plan_merges(splats: &Splats, weights: &[f64], target: usize, reach: f32) 
         reach: reach * spacing,
         flat: FLAT_SPACINGS * spacing,
     };
-    let groups = clusters::grow_groups(splats, weights, &signatures(splats), target, limits);
+    let groups = clusters::grow_groups(splats, weights, target, limits);
     Merges { groups }
 }
 
@@ -740,25 +747,6 @@ pub fn plan_merges(splats: &Splats, weights: &[f64], target: usize, reach: f32) 
 /// best-fitting plane before a union counts as bent: a quarter of the old finest merge cell
 /// (1.5 spacings), where a cell across a surface's edge stood out.
 const FLAT_SPACINGS: f32 = 0.375;
-
-/// Each splat's colour signature: its SH DC and the norm of its higher bands.
-///
-/// Not scaled by opacity: the weight a signature is charged with, the splat's contribution, is
-/// already its blending weight summed over the views' pixels, so a faint splat costs little.
-/// Scaled once more, the splats of a uniform surface, whose opacities training spreads (where
-/// they overlap, a half-transparent splat draws the same colour as an opaque one), looked as
-/// different as texture and cost as much to merge as a small detailed object's
-/// (docs/benchmarks/budget.md, session 38).
-fn signatures(splats: &Splats) -> Vec<[f32; 4]> {
-    let k = splats.coeffs_per_splat();
-    (0..splats.len())
-        .map(|i| {
-            let sh = &splats.sh[i * k..(i + 1) * k];
-            let rest: f32 = sh[1..].iter().flatten().map(|v| v * v).sum::<f32>().sqrt();
-            [sh[0][0], sh[0][1], sh[0][2], rest]
-        })
-        .collect()
-}
 
 /// Each member's share of a merged group: its weight over the group's (negative weights
 /// count as 0), or equal shares when no member has weight.
@@ -1187,6 +1175,49 @@ mod tests {
                 .sum::<f32>();
             let longest = (var_x.max(var_z) / g.len() as f32).sqrt();
             assert!(longest <= reach * h * 1.001, "a group {longest} long");
+        }
+    }
+
+    /// Stripes of one colour whose view dependence faces alternately +x and −x (equal SH
+    /// coefficients but the sign of one band-1 term: the same DC and the same norm of the
+    /// higher bands, which is all the planner compared before session 39): brought to a quarter,
+    /// no group takes in both kinds, since what a colour looks like from every direction counts.
+    #[test]
+    fn glossy_splats_facing_different_ways_do_not_merge() {
+        let h = 0.05;
+        let mut means = Vec::new();
+        let mut east = Vec::new();
+        for i in 0..48 {
+            for j in 0..48 {
+                means.push(Vec3::new(i as f32 * h, 0.0, j as f32 * h));
+                east.push((j / 6) % 2 == 0);
+            }
+        }
+        let n = means.len();
+        let mut splats = Splats::from_points(
+            &means,
+            &vec![[0.5, 0.4, 0.3]; n],
+            &vec![Vec3::splat(0.03); n],
+            None,
+            0.8,
+            1,
+        )
+        .unwrap();
+        let k = splats.coeffs_per_splat();
+        assert_eq!(k, 4);
+        for (i, &e) in east.iter().enumerate() {
+            // Band 1's x term (the fourth coefficient).
+            splats.sh[i * k + 3] = [if e { 0.3 } else { -0.3 }; 3];
+        }
+        let weights = vec![1.0; n];
+        let plan = plan_merges(&splats, &weights, n / 4, 7.0);
+        assert_eq!(plan.removed(), n - n / 4);
+        for g in &plan.groups {
+            assert!(
+                g.iter().all(|&j| east[j] == east[g[0]]),
+                "a group of {} takes in both",
+                g.len()
+            );
         }
     }
 

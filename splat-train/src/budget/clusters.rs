@@ -33,8 +33,6 @@ pub(super) struct Limits {
 struct Sums {
     /// Σ w over the members' contributions (negatives as 0).
     w: f64,
-    /// Σ w·s over their colour signatures.
-    ws: [f64; 4],
     /// Members.
     n: f64,
     /// Σ p and Σ p·pᵀ (xx, xy, xz, yy, yz, zz) over their positions: the group's shape, which
@@ -44,11 +42,10 @@ struct Sums {
 }
 
 impl Sums {
-    fn of(p: Vec3, s: [f32; 4], w: f64) -> Self {
+    fn of(p: Vec3, w: f64) -> Self {
         let p = p.as_dvec3();
         Self {
             w,
-            ws: s.map(|v| w * f64::from(v)),
             n: 1.0,
             p,
             pp: [
@@ -63,29 +60,15 @@ impl Sums {
     }
 
     fn plus(&self, o: &Self) -> Self {
-        let mut ws = self.ws;
-        for (a, b) in ws.iter_mut().zip(o.ws) {
-            *a += b;
-        }
         let mut pp = self.pp;
         for (a, b) in pp.iter_mut().zip(o.pp) {
             *a += b;
         }
         Self {
             w: self.w + o.w,
-            ws,
             n: self.n + o.n,
             p: self.p + o.p,
             pp,
-        }
-    }
-
-    /// The contribution-weighted mean signature (0 without weight).
-    fn mean_signature(&self) -> [f64; 4] {
-        if self.w > 0.0 {
-            self.ws.map(|v| v / self.w)
-        } else {
-            [0.0; 4]
         }
     }
 
@@ -107,17 +90,31 @@ impl Sums {
 
 /// What uniting two groups costs, or `None` where the union would be longer than the reach.
 ///
-/// The cost is the rise in the contribution-weighted squared colour error of flattening the
-/// union to one colour over flattening each part: wₐw_b/(wₐ+w_b)·‖s̄ₐ − s̄_b‖² (Ward).
-fn union_cost(a: &Sums, b: &Sums, limits: Limits) -> Option<(bool, f64)> {
+/// `colour_a` and `colour_b` are the groups' contribution-weighted colour sums (Σ w·c). The
+/// cost is the rise in the contribution-weighted squared colour error of flattening the union
+/// to one colour over flattening each part: wₐw_b/(wₐ+w_b)·‖s̄ₐ − s̄_b‖² (Ward).
+fn union_cost(
+    a: &Sums,
+    b: &Sums,
+    colour_a: &[f32],
+    colour_b: &[f32],
+    limits: Limits,
+) -> Option<(bool, f64)> {
     let u = a.plus(b);
     let extent = u.extent();
     if extent.z > limits.reach {
         return None;
     }
-    let (ma, mb) = (a.mean_signature(), b.mean_signature());
-    let d2: f64 = ma.iter().zip(mb).map(|(x, y)| (x - y).powi(2)).sum();
-    let cost = if u.w > 0.0 { a.w * b.w / u.w * d2 } else { 0.0 };
+    let cost = if a.w > 0.0 && b.w > 0.0 {
+        let d2: f64 = colour_a
+            .iter()
+            .zip(colour_b)
+            .map(|(&x, &y)| (f64::from(x) / a.w - f64::from(y) / b.w).powi(2))
+            .sum();
+        a.w * b.w / u.w * d2
+    } else {
+        0.0
+    };
     Some((extent.x > limits.flat, cost))
 }
 
@@ -159,11 +156,10 @@ impl PartialOrd for Union {
 /// Unites neighbouring splats, cheapest union first, until `target` groups are left or no
 /// union is allowed; returns the groups of at least two members, each heaviest member first.
 ///
-/// `weights` are the splats' contributions and `signatures` their colours.
+/// `weights` are the splats' contributions; a splat's colour is all its SH coefficients.
 pub(super) fn grow_groups(
     splats: &Splats,
     weights: &[f64],
-    signatures: &[[f32; 4]],
     target: usize,
     limits: Limits,
 ) -> Vec<Vec<usize>> {
@@ -172,7 +168,18 @@ pub(super) fn grow_groups(
         return Vec::new();
     };
     let mut sums: Vec<Sums> = (0..n)
-        .map(|i| Sums::of(splats.means[i], signatures[i], weights[i].max(0.0)))
+        .map(|i| Sums::of(splats.means[i], weights[i].max(0.0)))
+        .collect();
+    // Each group's Σ w·c over its members' SH coefficients, in the place of the member that
+    // stands for it. In f32, half the memory of f64 (a paper-scale model's 250k splats of
+    // degree 3: 48 MB), and its rounding is far below the colour differences it compares.
+    let dims = 3 * splats.coeffs_per_splat();
+    let mut colour: Vec<f32> = splats
+        .sh
+        .as_flattened()
+        .chunks_exact(dims)
+        .zip(weights)
+        .flat_map(|(c, &w)| c.iter().map(move |&v| w.max(0.0) as f32 * v))
         .collect();
     let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); n];
     for i in 0..n {
@@ -189,23 +196,28 @@ pub(super) fn grow_groups(
     }
     let mut queue = BinaryHeap::new();
     let mut versions = vec![0_u32; n];
-    let push =
-        |queue: &mut BinaryHeap<Union>, sums: &[Sums], versions: &[u32], a: usize, b: usize| {
-            let (a, b) = (usize::min(a, b), usize::max(a, b));
-            if let Some((bent, cost)) = union_cost(&sums[a], &sums[b], limits) {
-                queue.push(Union {
-                    bent,
-                    cost,
-                    size: (sums[a].n + sums[b].n) as u32,
-                    a: a as u32,
-                    b: b as u32,
-                    versions: (versions[a], versions[b]),
-                });
-            }
-        };
+    let push = |queue: &mut BinaryHeap<Union>,
+                sums: &[Sums],
+                colour: &[f32],
+                versions: &[u32],
+                a: usize,
+                b: usize| {
+        let (a, b) = (usize::min(a, b), usize::max(a, b));
+        let of = |g: usize| &colour[g * dims..(g + 1) * dims];
+        if let Some((bent, cost)) = union_cost(&sums[a], &sums[b], of(a), of(b), limits) {
+            queue.push(Union {
+                bent,
+                cost,
+                size: (sums[a].n + sums[b].n) as u32,
+                a: a as u32,
+                b: b as u32,
+                versions: (versions[a], versions[b]),
+            });
+        }
+    };
     for (a, list) in neighbours.iter().enumerate() {
         for &b in list.iter().filter(|&&b| a < b as usize) {
-            push(&mut queue, &sums, &versions, a, b as usize);
+            push(&mut queue, &sums, &colour, &versions, a, b as usize);
         }
     }
     let mut alive = vec![true; n];
@@ -221,6 +233,9 @@ pub(super) fn grow_groups(
         alive[b] = false;
         groups -= 1;
         sums[a] = sums[a].plus(&sums[b]);
+        for d in 0..dims {
+            colour[a * dims + d] += colour[b * dims + d];
+        }
         versions[a] += 1;
         let joined = std::mem::take(&mut members[b]);
         members[a].extend(joined);
@@ -238,7 +253,7 @@ pub(super) fn grow_groups(
         of_a.sort_unstable();
         of_a.dedup();
         for &k in &of_a {
-            push(&mut queue, &sums, &versions, a, k as usize);
+            push(&mut queue, &sums, &colour, &versions, a, k as usize);
         }
         neighbours[a] = of_a;
     }
