@@ -1158,6 +1158,13 @@ mod tests {
         let reach = 3.0;
         let plan = plan_merges(&splats, &weights, n / 4, reach);
         assert_eq!(plan.removed(), n - n / 4);
+        // The same plan on one thread as on several.
+        let one_thread = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap()
+            .install(|| plan_merges(&splats, &weights, n / 4, reach));
+        assert_eq!(plan, one_thread);
         for g in &plan.groups {
             assert!(
                 g.iter().all(|&j| black[j] == black[g[0]]),

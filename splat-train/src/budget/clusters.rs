@@ -9,6 +9,7 @@ use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
 use glam::{DVec3, Mat3, Vec3};
+use rayon::prelude::*;
 use splat_core::Splats;
 
 use super::symmetric_eigen;
@@ -181,45 +182,50 @@ pub(super) fn grow_groups(
         .zip(weights)
         .flat_map(|(c, &w)| c.iter().map(move |&v| w.max(0.0) as f32 * v))
         .collect();
+    // The queries on rayon's threads (a paper-scale model's 250k take seconds on one), joined
+    // both ways in order after them, so the graph is the same on any number of threads.
+    let nearest: Vec<Vec<usize>> = splats
+        .means
+        .par_iter()
+        .map(|&p| index.nearest_n(p, NEIGHBOURS + 1))
+        .collect();
     let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); n];
-    for i in 0..n {
-        for j in index.nearest_n(splats.means[i], NEIGHBOURS + 1) {
-            if j != i {
-                neighbours[i].push(j as u32);
-                neighbours[j].push(i as u32);
-            }
+    for (i, near) in nearest.into_iter().enumerate() {
+        for j in near.into_iter().filter(|&j| j != i) {
+            neighbours[i].push(j as u32);
+            neighbours[j].push(i as u32);
         }
     }
     for list in &mut neighbours {
         list.sort_unstable();
         list.dedup();
     }
-    let mut queue = BinaryHeap::new();
     let mut versions = vec![0_u32; n];
-    let push = |queue: &mut BinaryHeap<Union>,
-                sums: &[Sums],
-                colour: &[f32],
-                versions: &[u32],
-                a: usize,
-                b: usize| {
+    let union = |sums: &[Sums], colour: &[f32], versions: &[u32], a: usize, b: usize| {
         let (a, b) = (usize::min(a, b), usize::max(a, b));
         let of = |g: usize| &colour[g * dims..(g + 1) * dims];
-        if let Some((bent, cost)) = union_cost(&sums[a], &sums[b], of(a), of(b), limits) {
-            queue.push(Union {
-                bent,
-                cost,
-                size: (sums[a].n + sums[b].n) as u32,
-                a: a as u32,
-                b: b as u32,
-                versions: (versions[a], versions[b]),
-            });
-        }
+        union_cost(&sums[a], &sums[b], of(a), of(b), limits).map(|(bent, cost)| Union {
+            bent,
+            cost,
+            size: (sums[a].n + sums[b].n) as u32,
+            a: a as u32,
+            b: b as u32,
+            versions: (versions[a], versions[b]),
+        })
     };
-    for (a, list) in neighbours.iter().enumerate() {
-        for &b in list.iter().filter(|&&b| a < b as usize) {
-            push(&mut queue, &sums, &colour, &versions, a, b as usize);
-        }
-    }
+    // The first unions costed on rayon's threads; the queue's order is total, so building it
+    // from them in any order gives the same plan.
+    let first: Vec<Union> = neighbours
+        .par_iter()
+        .enumerate()
+        .flat_map_iter(|(a, list)| {
+            let (sums, colour, versions) = (&sums, &colour, &versions);
+            list.iter()
+                .filter(move |&&b| a < b as usize)
+                .filter_map(move |&b| union(sums, colour, versions, a, b as usize))
+        })
+        .collect();
+    let mut queue = BinaryHeap::from(first);
     let mut alive = vec![true; n];
     let mut members: Vec<Vec<usize>> = (0..n).map(|i| vec![i]).collect();
     let mut groups = n;
@@ -253,7 +259,7 @@ pub(super) fn grow_groups(
         of_a.sort_unstable();
         of_a.dedup();
         for &k in &of_a {
-            push(&mut queue, &sums, &colour, &versions, a, k as usize);
+            queue.extend(union(&sums, &colour, &versions, a, k as usize));
         }
         neighbours[a] = of_a;
     }
