@@ -72,14 +72,26 @@ pub struct BudgetConfig {
     /// member positions along its longest axis, in median nearest-neighbour spacings. Longer
     /// lets one round merge a flat region into fewer, larger splats.
     pub merge_reach: f32,
+    /// A refused round whose cost is at most this many times what is left of `tolerance_db`
+    /// trains both branches on for `second_look_trials` trials and is judged again on that,
+    /// where the rounds' steps (up to `end_share`) leave room for it (0: never). A merged branch is still
+    /// recovering at the end of its first trial: the demo's quarter cost 0.438 dB there,
+    /// 0.284 one trial later, 0.160 two trials later and 0.11–0.18 at the end of the run
+    /// (docs/benchmarks/budget.md §Session 40).
+    pub second_look_within: f64,
+    /// How many trials (of `trial_share`) a second look trains both branches on for, scored
+    /// over the last quarter of them.
+    pub second_look_trials: u32,
     /// Once accepted rounds have spent some of `tolerance_db`, the search ends when less than
     /// this is left (dB): a round's measured cost moves by about as much with the steps it is
     /// scored at, so such a round would be decided by that noise, and it costs a trial of
     /// training thrown away either way.
     pub least_left_db: f64,
-    /// Whether a round that cannot cost less than what is left of `tolerance_db` is skipped
-    /// without training its branches ([`BudgetSearch::cost_floor`]): it counts as refused, and
-    /// the next, gentler merge is tried in its place.
+    /// Whether a round that cannot cost less than what is left of `tolerance_db`
+    /// ([`BudgetSearch::cost_floor`]), or whose first look cannot cost little enough to be
+    /// looked at again ([`BudgetSearch::first_look_floor`] over `second_look_within` times what
+    /// is left), is skipped without training its branches: it counts as refused, and the next,
+    /// gentler merge is tried in its place.
     pub skip_hopeless: bool,
     /// After training: the held-out PSNR (dB) dropping SH bands may cost, within what the rounds
     /// left of `tolerance_db` ([`crate::sh_bands::choose_bands`]).
@@ -109,6 +121,8 @@ impl Default for BudgetConfig {
             merge_reach: 7.0,
             splats_per_pixel: 2.0,
             least_left_db: 0.05,
+            second_look_within: 2.0,
+            second_look_trials: 2,
             skip_hopeless: true,
             bands_tolerance_db: 0.05,
             static_sh_rms: 0.002,
@@ -146,6 +160,12 @@ impl BudgetConfig {
         }
         if !(self.bands_tolerance_db.is_finite() && self.bands_tolerance_db >= 0.0) {
             return bad("bands_tolerance_db", "must be a finite number ≥ 0");
+        }
+        if !(self.second_look_within.is_finite() && self.second_look_within >= 0.0) {
+            return bad("second_look_within", "must be a finite number ≥ 0");
+        }
+        if self.second_look_trials == 0 {
+            return bad("second_look_trials", "must be at least 1");
         }
         if !(self.least_left_db.is_finite() && self.least_left_db >= 0.0) {
             return bad("least_left_db", "must be a finite number ≥ 0");
@@ -252,6 +272,11 @@ pub struct BudgetRound {
     /// both branches train for the same time.
     #[serde(default)]
     pub steps_pruned: u32,
+    /// The cost ([`BudgetRound::drop_db`]) at the end of the first trial, when the round was
+    /// looked at again ([`BudgetConfig::second_look_within`]): the PSNR fields and the decision
+    /// are then the second look's, after another trial of both branches. `None`: one look.
+    #[serde(default)]
+    pub first_look_db: Option<f64>,
     /// Where the round's wall time went (zero in rounds saved before it was measured).
     #[serde(default)]
     pub seconds: RoundSeconds,
@@ -347,6 +372,9 @@ pub struct SkippedRound {
     pub keep: f64,
     /// The least it could have cost (dB): [`BudgetSearch::cost_floor`].
     pub floor_db: f64,
+    /// The least its first look could have cost (dB): [`BudgetSearch::first_look_floor`].
+    #[serde(default)]
+    pub first_look_floor_db: f64,
     /// What was left of the tolerance (dB).
     pub left_db: f64,
 }
@@ -401,6 +429,27 @@ impl BudgetSearch {
     /// [`GENTLER_COST_SHARE`] of that one's cost (or floor). Zero with no try before it.
     #[must_use]
     pub fn cost_floor(&self) -> f64 {
+        self.floor_of(BudgetRound::drop_db, |s| s.floor_db)
+    }
+
+    /// The least the next round's first look can cost (dB): [`BudgetSearch::cost_floor`] from
+    /// the first looks of the tries before it that had two (it is first looked at as soon
+    /// after its merge as they were).
+    #[must_use]
+    pub fn first_look_floor(&self) -> f64 {
+        self.floor_of(
+            |r| r.first_look_db.or(r.drop_db()),
+            |s| s.first_look_floor_db.max(s.floor_db),
+        )
+    }
+
+    /// The cost floor from the last try, its cost taken by `cost` (a round) or `skip_floor` (a
+    /// skipped merge).
+    fn floor_of(
+        &self,
+        cost: impl Fn(&BudgetRound) -> Option<f64>,
+        skip_floor: impl Fn(&SkippedRound) -> f64,
+    ) -> f64 {
         let last_round = self.rounds.last();
         // A skip at a round's step comes before that round (the round is tried in its place).
         if let Some(skip) = self
@@ -408,11 +457,11 @@ impl BudgetSearch {
             .last()
             .filter(|s| last_round.is_none_or(|r| s.iteration > r.iteration))
         {
-            return GENTLER_COST_SHARE * skip.floor_db;
+            return GENTLER_COST_SHARE * skip_floor(skip);
         }
         match last_round {
             Some(r) if !r.out_of_time => {
-                let cost = r.drop_db().unwrap_or(0.0).max(0.0);
+                let cost = cost(r).unwrap_or(0.0).max(0.0);
                 if r.accepted {
                     cost
                 } else {
@@ -486,18 +535,21 @@ impl BudgetSearch {
             self.no_time_left = true;
             return Ok(None);
         }
-        // Merges that cannot cost less than what is left are not tried: each counts as refused,
-        // and the next, gentler one is considered in its place.
+        // Merges that cannot cost less than what is left are not tried, nor those whose first
+        // look cannot come near enough to it to be looked at again (`second_look_within`):
+        // each counts as refused, and the next, gentler one is considered in its place.
         while cfg.skip_hopeless
             && let floor = self.cost_floor()
+            && let first_look_floor = self.first_look_floor()
             && let left = cfg.tolerance_db - self.spent_db()
-            && floor > 0.0
-            && floor > left
+            && first_look_floor > 0.0
+            && (floor > left || first_look_floor > cfg.second_look_within.max(1.0) * left)
         {
             self.skipped.push(SkippedRound {
                 iteration,
                 keep: self.next_keep(cfg.keep),
                 floor_db: floor,
+                first_look_floor_db: first_look_floor,
                 left_db: left,
             });
             if self.finished() {
@@ -508,7 +560,6 @@ impl BudgetSearch {
         // The round's planning and scoring are counted on the trainer's clock as they happen
         // (a time budget is wall time, and a round near its end must not run past it); each
         // branch's time is its steps alone, which is what the branches are matched on.
-        let clock = |trainer: &Trainer| trainer.report(false).elapsed_s;
         let count_since = |trainer: &mut Trainer, since: Instant| {
             let took = since.elapsed().as_secs_f64();
             trainer.count_time_between_steps(took);
@@ -518,7 +569,8 @@ impl BudgetSearch {
         let mut seconds = RoundSeconds::default();
         let contributions = trainer.contributions();
         let keep = self.next_keep(cfg.keep);
-        let target_count = ((n as f64 * keep).round() as usize).max(cfg.min_splats.min(n));
+        // At most `keep` of the splats: a quarter of 31,406 is 7,851, not 7,852.
+        let target_count = ((n as f64 * keep).floor() as usize).max(cfg.min_splats.min(n));
         let merges = plan_merges(
             trainer.splats(),
             &contributions,
@@ -535,24 +587,11 @@ impl BudgetSearch {
         let target = iteration + plan.trial;
         let start = trainer.snapshot();
         seconds.planning = count_since(trainer, planning);
-        let started_s = clock(trainer);
         // The control, scored at the scoring points of the trial.
-        let mut kept = Scores::default();
-        let mut times = Vec::new();
-        let mut control = trainer.report(false);
-        for k in 1..=SCORE_POINTS {
-            let at = scoring_step(iteration, plan.trial, k);
-            control = trainer.run_until(at, &mut *on_step);
-            if control.iterations < at {
-                break;
-            }
-            times.push(control.elapsed_s - started_s - seconds.scoring);
-            let scoring = Instant::now();
-            kept.add(heldout_psnr(trainer.splats())?);
-            seconds.scoring += count_since(trainer, scoring);
-        }
-        seconds.control = clock(trainer) - started_s - seconds.scoring;
-        let kept_mean = kept.mean();
+        let control = run_branch(trainer, iteration, plan.trial, None, heldout_psnr, on_step)?;
+        seconds.control = control.training_s;
+        seconds.scoring = control.scoring_s;
+        let kept_mean = control.scores.mean();
         let mut round = BudgetRound {
             iteration,
             splats: n,
@@ -562,8 +601,9 @@ impl BudgetSearch {
             kept_psnr_white: Some(kept_mean.white),
             pruned_psnr_white: None,
             accepted: false,
-            out_of_time: control.iterations < target,
+            out_of_time: control.ended_at < target,
             steps_pruned: 0,
+            first_look_db: None,
             seconds,
         };
         if round.out_of_time {
@@ -577,49 +617,85 @@ impl BudgetSearch {
             .prune(&keep)
             .map_err(|e| fail(format!("pruning: {e}")))?;
         round.seconds.planning += count_since(trainer, merging);
-        let equal_time = trainer.config().time_budget.is_some();
         // The pruned branch, scored at the same steps, or under a time budget at the same
         // training times: there the branches get equal time, and the smaller model's faster
         // steps are part of what the prune buys.
-        let mut pruned_scores = Scores::default();
-        let mut pruned_scoring = 0.0;
-        let before = clock(trainer);
-        let mut pruned = trainer.report(false);
-        for (k, &t) in (1..=SCORE_POINTS).zip(&times) {
-            let at = scoring_step(iteration, plan.trial, k);
-            if equal_time {
-                while pruned.elapsed_s - before - pruned_scoring < t
-                    && pruned.iterations < trainer.horizon()
-                {
-                    pruned = trainer.run_until(pruned.iterations + 1, &mut *on_step);
-                    if pruned.stopped_by_budget {
-                        break;
-                    }
-                }
-            } else {
-                pruned = trainer.run_until(at, &mut *on_step);
-            }
-            if pruned.stopped_by_budget || (!equal_time && pruned.iterations < at) {
-                break;
-            }
-            let scoring = Instant::now();
-            pruned_scores.add(heldout_psnr(trainer.splats())?);
-            pruned_scoring += count_since(trainer, scoring);
-            // The clock as it stands after the score, which the next point's steps start from.
-            pruned = trainer.report(false);
+        let pruned = run_branch(
+            trainer,
+            iteration,
+            plan.trial,
+            Some(&control.times),
+            heldout_psnr,
+            on_step,
+        )?;
+        round.seconds.scoring += pruned.scoring_s;
+        round.seconds.merged = pruned.training_s;
+        round.steps_pruned = pruned.ended_at - iteration;
+        round.out_of_time = pruned.scores.count < SCORE_POINTS;
+        if pruned.scores.count > 0 {
+            let p = pruned.scores.mean();
+            round.pruned_psnr = Some(p.black);
+            round.pruned_psnr_white = Some(p.white);
         }
-        round.seconds.scoring += pruned_scoring;
-        round.seconds.merged = clock(trainer) - before - pruned_scoring;
-        round.steps_pruned = pruned.iterations - iteration;
-        round.out_of_time = pruned_scores.count < SCORE_POINTS;
-        if pruned_scores.count > 0 {
-            let pruned = pruned_scores.mean();
-            round.pruned_psnr = Some(pruned.black);
-            round.pruned_psnr_white = Some(pruned.white);
+        let within = |round: &BudgetRound| {
+            !round.out_of_time
+                && self.spent_db() + round.drop_db().unwrap_or(f64::INFINITY).max(0.0)
+                    <= cfg.tolerance_db
+        };
+        round.accepted = within(&round);
+        // A cost near what is left is looked at again after more training of both branches,
+        // where the room is: the merged branch is still recovering from its merges, and its
+        // cost at the end of the run has been half of this or less.
+        // The rounds end by `end_share` of the run's steps (under a time budget, of the steps it
+        // is now expected to reach).
+        let left = cfg.tolerance_db - self.spent_db();
+        let rounds_end = (cfg.end_share * f64::from(trainer.horizon())).round() as u32;
+        let second_look = !round.accepted
+            && !round.out_of_time
+            && round
+                .drop_db()
+                .is_some_and(|d| d <= cfg.second_look_within * left)
+            && iteration + (1 + cfg.second_look_trials) * plan.trial <= rounds_end;
+        let mut kept = kept;
+        if second_look {
+            round.first_look_db = round.drop_db();
+            let swapping = Instant::now();
+            let merged = trainer.swap_snapshot(kept).map_err(fail)?;
+            round.seconds.planning += count_since(trainer, swapping);
+            let control = run_branch(
+                trainer,
+                iteration + plan.trial,
+                cfg.second_look_trials * plan.trial,
+                None,
+                heldout_psnr,
+                on_step,
+            )?;
+            round.seconds.control += control.training_s;
+            round.seconds.scoring += control.scoring_s;
+            let swapping = Instant::now();
+            kept = trainer.swap_snapshot(merged).map_err(fail)?;
+            round.seconds.planning += count_since(trainer, swapping);
+            let from = trainer.iteration();
+            let pruned = run_branch(
+                trainer,
+                from,
+                cfg.second_look_trials * plan.trial,
+                Some(&control.times),
+                heldout_psnr,
+                on_step,
+            )?;
+            round.seconds.scoring += pruned.scoring_s;
+            round.seconds.merged += pruned.training_s;
+            round.steps_pruned = pruned.ended_at - iteration;
+            round.out_of_time =
+                control.scores.count < SCORE_POINTS || pruned.scores.count < SCORE_POINTS;
+            let (k, p) = (control.scores.mean(), pruned.scores.mean());
+            round.kept_psnr = k.black;
+            round.kept_psnr_white = Some(k.white);
+            round.pruned_psnr = Some(p.black);
+            round.pruned_psnr_white = Some(p.white);
+            round.accepted = within(&round);
         }
-        round.accepted = !round.out_of_time
-            && self.spent_db() + round.drop_db().unwrap_or(f64::INFINITY).max(0.0)
-                <= cfg.tolerance_db;
         if !round.accepted {
             let restoring = Instant::now();
             trainer.restore_snapshot(kept).map_err(fail)?;
@@ -630,6 +706,81 @@ impl BudgetSearch {
         self.tolerance_spent = spent > 0.0 && cfg.tolerance_db - spent < cfg.least_left_db;
         Ok(Some(round))
     }
+}
+
+/// One branch of a round: its held-out scores and what it took.
+struct Branch {
+    scores: Scores,
+    /// The training time (seconds, scoring excluded) at each scoring point.
+    times: Vec<f64>,
+    /// The step it ended at.
+    ended_at: u32,
+    /// Its training steps' time.
+    training_s: f64,
+    /// Its scoring's time.
+    scoring_s: f64,
+}
+
+/// Trains the trainer's branch over the trial of `trial` steps from step `start`, scoring it at
+/// the trial's scoring points. A control (`match_times` `None`) trains the trial's steps; a
+/// merged branch matches the control's scoring points: under a time budget it trains until each
+/// of the control's training times (equal time), otherwise to the same steps.
+fn run_branch<E>(
+    trainer: &mut Trainer,
+    start: u32,
+    trial: u32,
+    match_times: Option<&[f64]>,
+    heldout_psnr: &mut dyn FnMut(&Splats) -> Result<HeldoutPsnr, E>,
+    on_step: &mut dyn FnMut(&crate::Progress),
+) -> Result<Branch, E> {
+    let clock = |trainer: &Trainer| trainer.report(false).elapsed_s;
+    let before = clock(trainer);
+    let equal_time = match_times.is_some() && trainer.config().time_budget.is_some();
+    let mut branch = Branch {
+        scores: Scores::default(),
+        times: Vec::new(),
+        ended_at: trainer.iteration(),
+        training_s: 0.0,
+        scoring_s: 0.0,
+    };
+    let mut now = trainer.report(false);
+    for k in 1..=SCORE_POINTS {
+        let at = scoring_step(start, trial, k);
+        match match_times {
+            Some(times) if k as usize > times.len() => break,
+            Some(times) if equal_time => {
+                let t = times[k as usize - 1];
+                while now.elapsed_s - before - branch.scoring_s < t
+                    && now.iterations < trainer.horizon()
+                {
+                    now = trainer.run_until(now.iterations + 1, &mut *on_step);
+                    if now.stopped_by_budget {
+                        break;
+                    }
+                }
+                if now.stopped_by_budget {
+                    break;
+                }
+            }
+            _ => {
+                now = trainer.run_until(at, &mut *on_step);
+                if now.iterations < at {
+                    break;
+                }
+            }
+        }
+        branch.times.push(now.elapsed_s - before - branch.scoring_s);
+        let scoring = Instant::now();
+        branch.scores.add(heldout_psnr(trainer.splats())?);
+        let took = scoring.elapsed().as_secs_f64();
+        trainer.count_time_between_steps(took);
+        branch.scoring_s += took;
+        // The clock as it stands after the score, which the next point's steps start from.
+        now = trainer.report(false);
+    }
+    branch.ended_at = trainer.iteration();
+    branch.training_s = clock(trainer) - before - branch.scoring_s;
+    Ok(branch)
 }
 
 /// Refused rounds after which the search stops: with the default `keep` of ½ it tries to
@@ -873,6 +1024,7 @@ mod tests {
             accepted: false,
             out_of_time: false,
             steps_pruned: 5,
+            first_look_db: None,
             seconds: RoundSeconds::default(),
         };
         assert!((round.drop_db().unwrap() - 0.4).abs() < 1e-9);
@@ -1313,6 +1465,7 @@ mod tests {
             accepted,
             out_of_time,
             steps_pruned: 10,
+            first_look_db: None,
             seconds: RoundSeconds::default(),
         };
         let mut search = BudgetSearch::default();
@@ -1327,6 +1480,7 @@ mod tests {
             iteration: 40,
             keep: 0.75,
             floor_db: 0.2,
+            first_look_floor_db: 0.2,
             left_db: 0.06,
         });
         assert!((search.cost_floor() - GENTLER_COST_SHARE * 0.2).abs() < 1e-12);
@@ -1338,6 +1492,29 @@ mod tests {
         // Skipped merges count as refused: the next keeps half as many removed again.
         assert_eq!(search.refused(), 3);
         assert!((search.next_keep(0.5) - 0.9375).abs() < 1e-12);
+        // A round looked at twice bounds the next merge's first look by its first look.
+        let mut search = BudgetSearch::default();
+        search.rounds.push(BudgetRound {
+            first_look_db: Some(0.34),
+            ..round(10, true, false, 0.09)
+        });
+        assert!((search.cost_floor() - 0.09).abs() < 1e-12);
+        assert!((search.first_look_floor() - 0.34).abs() < 1e-12);
+        search.rounds.push(BudgetRound {
+            first_look_db: Some(0.5),
+            ..round(20, false, false, 0.3)
+        });
+        assert!((search.cost_floor() - GENTLER_COST_SHARE * 0.3).abs() < 1e-12);
+        assert!((search.first_look_floor() - GENTLER_COST_SHARE * 0.5).abs() < 1e-12);
+        search.skipped.push(SkippedRound {
+            iteration: 30,
+            keep: 0.875,
+            floor_db: 0.075,
+            first_look_floor_db: 0.125,
+            left_db: 0.06,
+        });
+        assert!((search.cost_floor() - GENTLER_COST_SHARE * 0.075).abs() < 1e-12);
+        assert!((search.first_look_floor() - GENTLER_COST_SHARE * 0.125).abs() < 1e-12);
     }
 
     /// After each refused round the next removes half as many splats as the last try, and the
@@ -1355,6 +1532,7 @@ mod tests {
             accepted,
             out_of_time,
             steps_pruned: 10,
+            first_look_db: None,
             seconds: RoundSeconds::default(),
         };
         let mut search = BudgetSearch {

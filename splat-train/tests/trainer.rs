@@ -917,6 +917,7 @@ fn hopeless_merges_are_skipped() {
         accepted: true,
         out_of_time: false,
         steps_pruned: 10,
+        first_look_db: None,
         seconds: splat_train::RoundSeconds::default(),
     };
     for (tolerance_db, tried) in [(0.25, true), (0.21, false)] {
@@ -1028,4 +1029,127 @@ fn accepted_budget_rounds_shrink_the_model() {
     let report = t.report(false);
     assert_eq!(report.refine.pruned, 400 - n);
     assert_eq!(report.iterations, 80);
+}
+
+/// A refused round whose cost is near what is left of the tolerance is looked at again after
+/// both branches train on for `second_look_trials` more trials: its first look measures what a
+/// single look does, the decision is the second look's, a second refusal goes on from the
+/// control (the run that never branched, bit for bit) and an acceptance from the merged
+/// branch; where the planned rounds leave no room for it, a round is looked at once.
+#[test]
+fn a_second_look_trains_both_branches_on_and_decides_on_that() {
+    let (init, train, held) = budget_scene();
+    // One round of 10 steps from step 20 of a 60-step run; it merges four in five splats,
+    // which costs. The rounds end by 0.9 of the run (step 54): room for a second look of two
+    // more trials (to step 50).
+    let round_at_20 = |cfg: &BudgetConfig| {
+        let mut t = Trainer::new(init.clone(), train.clone(), base_config(60)).unwrap();
+        t.run_until(20, |_| {});
+        let mut search = search_of(20, 10, 3);
+        let round = run_round_scored(&mut search, &mut t, cfg, &held).unwrap();
+        (round, t)
+    };
+    let cfg = |tolerance_db: f64, second_look_within: f64| BudgetConfig {
+        tolerance_db,
+        second_look_within,
+        end_share: 0.9,
+        keep: 0.2,
+        min_splats: 10,
+        skip_hopeless: false,
+        ..BudgetConfig::default()
+    };
+    let (once, _) = round_at_20(&cfg(1e-9, 0.0));
+    let first = once.drop_db().unwrap();
+    assert!(first > 1e-9 && !once.accepted && once.first_look_db.is_none());
+    assert_eq!(once.steps_pruned, 10);
+
+    // Looked at again (any cost up to 1,000 dB is near enough), and refused again.
+    let (twice, t) = round_at_20(&cfg(1e-9, 1e12));
+    assert_eq!(twice.first_look_db, Some(first));
+    let second = twice.drop_db().unwrap();
+    assert!(second > 1e-9 && !twice.accepted, "{twice:?}");
+    assert_eq!((twice.steps_pruned, t.iteration()), (30, 50));
+    assert!(twice.seconds.merged > once.seconds.merged);
+    assert_eq!(twice.discarded_seconds(), twice.seconds.merged);
+    let mut straight = Trainer::new(init.clone(), train.clone(), base_config(60)).unwrap();
+    straight.run_until(50, |_| {});
+    assert_eq!(t.splats(), straight.splats());
+
+    // The merged branch recovers between the looks: with a tolerance of its second cost, the
+    // first look refuses and the second accepts, and training goes on from the merged branch.
+    assert!(
+        second < first,
+        "{second} dB at the second look, {first} at the first"
+    );
+    let (kept, t) = round_at_20(&cfg(second, 1e12));
+    assert_eq!(kept.first_look_db, Some(first));
+    assert!(kept.accepted, "{kept:?}");
+    assert_eq!(kept.drop_db(), Some(second));
+    assert_eq!(t.splats().len(), kept.candidate);
+    assert_eq!(t.iteration(), 20 + kept.steps_pruned);
+    assert_eq!(kept.discarded_seconds(), kept.seconds.control);
+
+    // No room: with the rounds ending by 0.8 of the run (step 48), before a second look would.
+    let (cramped, t) = round_at_20(&BudgetConfig {
+        end_share: 0.8,
+        ..cfg(1e-9, 1e12)
+    });
+    assert!(cramped.first_look_db.is_none() && !cramped.accepted);
+    assert_eq!(t.iteration(), 30);
+}
+
+/// After a round accepted at its second look, the next merge is first looked at as soon after
+/// its merge as that round was: one whose first look cannot cost little enough to be looked at
+/// again is skipped, even where its final cost could be within what is left.
+#[test]
+fn a_merge_too_costly_to_be_looked_at_again_is_skipped() {
+    let (init, train, held) = budget_scene();
+    // Accepted at 0.1 dB on its second look, after 0.6 dB on its first.
+    let accepted = splat_train::BudgetRound {
+        iteration: 10,
+        splats: 400,
+        candidate: 200,
+        kept_psnr: 30.0,
+        pruned_psnr: Some(29.9),
+        kept_psnr_white: None,
+        pruned_psnr_white: None,
+        accepted: true,
+        out_of_time: false,
+        steps_pruned: 30,
+        first_look_db: Some(0.6),
+        seconds: splat_train::RoundSeconds::default(),
+    };
+    // 0.15 dB left: a halving's first look costs at least 0.6, over twice that (skipped) but
+    // not over five times (tried).
+    for (second_look_within, halving_tried) in [(2.0, false), (5.0, true)] {
+        let mut t = Trainer::new(init.clone(), train.clone(), base_config(80)).unwrap();
+        t.run_until(20, |_| {});
+        let mut search = search_of(10, 10, 3);
+        search.rounds.push(accepted);
+        assert!((search.cost_floor() - 0.1).abs() < 1e-9);
+        assert!((search.first_look_floor() - 0.6).abs() < 1e-9);
+        let cfg = BudgetConfig {
+            tolerance_db: 0.25,
+            second_look_within,
+            min_splats: 10,
+            ..BudgetConfig::default()
+        };
+        let round = run_round_scored(&mut search, &mut t, &cfg, &held).expect("a round runs");
+        let wanted = if halving_tried {
+            assert!(search.skipped.is_empty(), "{:?}", search.skipped);
+            200.0
+        } else {
+            let skip = search.skipped[0];
+            assert_eq!((search.skipped.len(), skip.keep), (1, 0.5));
+            assert!((skip.floor_db - 0.1).abs() < 1e-9);
+            assert!((skip.first_look_floor_db - 0.6).abs() < 1e-9);
+            // The gentler merge (its first look at least a quarter of 0.6) is tried.
+            300.0
+        };
+        assert!(
+            (round.candidate as f64 - wanted).abs() <= 0.1 * wanted,
+            "kept {} of 400, wanted about {wanted}",
+            round.candidate
+        );
+    }
 }

@@ -1659,11 +1659,18 @@ fn budget_round(
         .iter()
         .filter(|s| s.iteration == due_at)
     {
+        let why = if skip.floor_db > skip.left_db {
+            format!("it could not cost less than {:.3} dB", skip.floor_db)
+        } else {
+            format!(
+                "its first look could not cost less than {:.3} dB, too much to be looked at again",
+                skip.first_look_floor_db
+            )
+        };
         observer(Event::Note(format!(
-            "splat budget, step {due_at}: a merge keeping {:.1} % of {n} splats skipped: it \
-             could not cost less than {:.3} dB, and {:.3} dB of the tolerance is left",
+            "splat budget, step {due_at}: a merge keeping {:.1} % of {n} splats skipped: {why}, \
+             and {:.3} dB of the tolerance is left",
             100.0 * skip.keep,
-            skip.floor_db,
             skip.left_db
         )));
     }
@@ -1689,8 +1696,11 @@ fn budget_round(
     };
     let cost = match (round.pruned_psnr, round.drop_db()) {
         (Some(p), Some(d)) => format!(
-            "costs {d:+.3} dB held-out, the worse of black ({p:.2} against {:.2}) and white \
+            "costs {d:+.3} dB held-out{}, the worse of black ({p:.2} against {:.2}) and white \
              ({:.2} against {:.2})",
+            round.first_look_db.map_or(String::new(), |f| format!(
+                " after a second trial of both branches (the first {f:+.3})"
+            )),
             round.kept_psnr,
             round.pruned_psnr_white.unwrap_or(f64::NAN),
             round.kept_psnr_white.unwrap_or(f64::NAN),

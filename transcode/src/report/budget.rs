@@ -43,7 +43,11 @@ pub(super) fn section(h: &mut String, runs: &[RunReport], names: &[String]) {
          steps over the last quarter of the trial (the same times under a time budget), taking \
          the means; a round costs what the worse background lost. A pruned branch is kept while \
          the rounds' costs add up to no more than the tolerance \
-         (<code>budget.tolerance_db</code>, <code>--budget-tolerance</code>); after a refused \
+         (<code>budget.tolerance_db</code>, <code>--budget-tolerance</code>). A round refused at \
+         up to <code>budget.second_look_within</code> times what is left is looked at again \
+         after both branches train <code>budget.second_look_trials</code> trials more (the \
+         merged branch is still recovering from its merges), where the rounds' steps leave room, \
+         and decided on that (the table gives both looks' costs); after a refused \
          round the next one merges half as many splats, and the third refusal ends the search, \
          as does a tolerance spent to within <code>budget.least_left_db</code>. A merge that \
          cannot cost less than what is left is not tried and counts as refused: one as large as \
@@ -160,7 +164,11 @@ fn table(h: &mut String, run: &RunReport, name: &str) {
             r.pruned_psnr.map_or("–".into(), |p| format!("{p:.2}")),
             r.pruned_psnr_white
                 .map_or("–".into(), |p| format!("{p:.2}")),
-            r.drop_db().map_or("–".into(), |d| format!("{d:+.3}")),
+            match (r.drop_db(), r.first_look_db) {
+                (Some(d), Some(f)) => format!("{d:+.3} (first look {f:+.3})"),
+                (Some(d), None) => format!("{d:+.3}"),
+                (None, _) => "–".into(),
+            },
             r.steps_pruned,
             round_seconds(r),
         );
@@ -188,10 +196,12 @@ fn table(h: &mut String, run: &RunReport, name: &str) {
             .iter()
             .map(|s| {
                 format!(
-                    "step {}, keeping {:.1} % (at least {:.3} dB, {:.3} dB left)",
+                    "step {}, keeping {:.1} % (at least {:.3} dB, at its first look {:.3}; \
+                     {:.3} dB left)",
                     s.iteration,
                     100.0 * s.keep,
                     s.floor_db,
+                    s.first_look_floor_db.max(s.floor_db),
                     s.left_db
                 )
             })
@@ -199,7 +209,8 @@ fn table(h: &mut String, run: &RunReport, name: &str) {
         let _ = writeln!(
             h,
             "<p>Merges not tried, as they could not cost less than what was left of the \
-             tolerance (<code>budget.skip_hopeless</code>), each counted as refused: {}.</p>",
+             tolerance, or their first look could not cost little enough to be looked at again \
+             (<code>budget.skip_hopeless</code>), each counted as refused: {}.</p>",
             skipped.join("; ")
         );
     }
