@@ -898,6 +898,25 @@ fn a_round_with_no_time_for_its_branches_is_not_started() {
     assert!(!search.no_time_left);
 }
 
+/// A round at step 10 that halved 400 splats and was kept at a cost of `cost_db` (on black),
+/// looked at once or, with `first_look_db`, twice.
+fn halving_accepted_at_10(cost_db: f64, first_look_db: Option<f64>) -> splat_train::BudgetRound {
+    splat_train::BudgetRound {
+        iteration: 10,
+        splats: 400,
+        candidate: 200,
+        kept_psnr: 30.0,
+        pruned_psnr: Some(30.0 - cost_db),
+        kept_psnr_white: None,
+        pruned_psnr_white: None,
+        accepted: true,
+        out_of_time: false,
+        steps_pruned: if first_look_db.is_some() { 30 } else { 10 },
+        first_look_db,
+        seconds: splat_train::RoundSeconds::default(),
+    }
+}
+
 /// A merge that cannot cost less than what is left of the tolerance is skipped without training
 /// its branches and counts as refused, so the round tries the next, gentler merge in its place;
 /// when every merge the search could still try is hopeless, the search ends with no step
@@ -906,20 +925,7 @@ fn a_round_with_no_time_for_its_branches_is_not_started() {
 fn hopeless_merges_are_skipped() {
     let (init, train, held) = budget_scene();
     // A first round, accepted at a cost of 0.2 dB: the next halving cannot cost less.
-    let accepted = splat_train::BudgetRound {
-        iteration: 10,
-        splats: 400,
-        candidate: 200,
-        kept_psnr: 30.0,
-        pruned_psnr: Some(29.8),
-        kept_psnr_white: None,
-        pruned_psnr_white: None,
-        accepted: true,
-        out_of_time: false,
-        steps_pruned: 10,
-        first_look_db: None,
-        seconds: splat_train::RoundSeconds::default(),
-    };
+    let accepted = halving_accepted_at_10(0.2, None);
     for (tolerance_db, tried) in [(0.25, true), (0.21, false)] {
         let mut t = Trainer::new(init.clone(), train.clone(), base_config(80)).unwrap();
         t.run_until(20, |_| {});
@@ -1105,20 +1111,7 @@ fn a_second_look_trains_both_branches_on_and_decides_on_that() {
 fn a_merge_too_costly_to_be_looked_at_again_is_skipped() {
     let (init, train, held) = budget_scene();
     // Accepted at 0.1 dB on its second look, after 0.6 dB on its first.
-    let accepted = splat_train::BudgetRound {
-        iteration: 10,
-        splats: 400,
-        candidate: 200,
-        kept_psnr: 30.0,
-        pruned_psnr: Some(29.9),
-        kept_psnr_white: None,
-        pruned_psnr_white: None,
-        accepted: true,
-        out_of_time: false,
-        steps_pruned: 30,
-        first_look_db: Some(0.6),
-        seconds: splat_train::RoundSeconds::default(),
-    };
+    let accepted = halving_accepted_at_10(0.1, Some(0.6));
     // 0.15 dB left: a halving's first look costs at least 0.6, over twice that (skipped) but
     // not over five times (tried).
     for (second_look_within, halving_tried) in [(2.0, false), (5.0, true)] {
