@@ -74,10 +74,10 @@ pub struct BudgetConfig {
     pub merge_reach: f32,
     /// A refused round whose cost is at most this many times what is left of `tolerance_db`
     /// trains both branches on for `second_look_trials` trials and is judged again on that,
-    /// where the rounds' steps (up to `end_share`) leave room for it (0: never). A merged branch is still
-    /// recovering at the end of its first trial: the demo's quarter cost 0.438 dB there,
-    /// 0.284 one trial later, 0.160 two trials later and 0.11–0.18 at the end of the run
-    /// (docs/benchmarks/budget.md §Session 40).
+    /// where the rounds' steps (up to `end_share`) leave room for it (0: never). A merged
+    /// branch is still recovering at the end of its first trial: the demo's quarter cost
+    /// 0.44 dB there, 0.28 one trial later, 0.16 two trials later and 0.11–0.18 at the end of
+    /// the run (docs/benchmarks/budget.md §Session 40).
     pub second_look_within: f64,
     /// How many trials (of `trial_share`) a second look trains both branches on for, scored
     /// over the last quarter of them.
@@ -274,7 +274,8 @@ pub struct BudgetRound {
     pub steps_pruned: u32,
     /// The cost ([`BudgetRound::drop_db`]) at the end of the first trial, when the round was
     /// looked at again ([`BudgetConfig::second_look_within`]): the PSNR fields and the decision
-    /// are then the second look's, after another trial of both branches. `None`: one look.
+    /// are then the second look's, after `second_look_trials` more trials of both branches.
+    /// `None`: one look.
     #[serde(default)]
     pub first_look_db: Option<f64>,
     /// Where the round's wall time went (zero in rounds saved before it was measured).
@@ -312,6 +313,21 @@ impl RoundSeconds {
 }
 
 impl BudgetRound {
+    /// Takes the branches' mean held-out scores (the control's, where given); a branch scored
+    /// at no point leaves its fields as they were.
+    fn take_scores(&mut self, kept: Option<&Scores>, pruned: &Scores) {
+        if let Some(kept) = kept.filter(|k| k.count > 0) {
+            let k = kept.mean();
+            self.kept_psnr = k.black;
+            self.kept_psnr_white = Some(k.white);
+        }
+        if pruned.count > 0 {
+            let p = pruned.mean();
+            self.pruned_psnr = Some(p.black);
+            self.pruned_psnr_white = Some(p.white);
+        }
+    }
+
     /// The training time of the branch the round threw away: the control's when the merged
     /// branch was kept, the merged branch's when it was refused (none when the control ran out
     /// of time: training goes on from it).
@@ -632,22 +648,17 @@ impl BudgetSearch {
         round.seconds.merged = pruned.training_s;
         round.steps_pruned = pruned.ended_at - iteration;
         round.out_of_time = pruned.scores.count < SCORE_POINTS;
-        if pruned.scores.count > 0 {
-            let p = pruned.scores.mean();
-            round.pruned_psnr = Some(p.black);
-            round.pruned_psnr_white = Some(p.white);
-        }
+        round.take_scores(None, &pruned.scores);
         let within = |round: &BudgetRound| {
             !round.out_of_time
                 && self.spent_db() + round.drop_db().unwrap_or(f64::INFINITY).max(0.0)
                     <= cfg.tolerance_db
         };
         round.accepted = within(&round);
-        // A cost near what is left is looked at again after more training of both branches,
-        // where the room is: the merged branch is still recovering from its merges, and its
-        // cost at the end of the run has been half of this or less.
-        // The rounds end by `end_share` of the run's steps (under a time budget, of the steps it
-        // is now expected to reach).
+        // A cost near what is left is looked at again after more training of both branches
+        // (the merged branch is still recovering from its merges, and its cost at the end of
+        // the run has been half of this or less), where the rounds' steps leave room: they end
+        // by `end_share` of the run's steps (under a time budget, of those it now expects).
         let left = cfg.tolerance_db - self.spent_db();
         let rounds_end = (cfg.end_share * f64::from(trainer.horizon())).round() as u32;
         let second_look = !round.accepted
@@ -689,11 +700,7 @@ impl BudgetSearch {
             round.steps_pruned = pruned.ended_at - iteration;
             round.out_of_time =
                 control.scores.count < SCORE_POINTS || pruned.scores.count < SCORE_POINTS;
-            let (k, p) = (control.scores.mean(), pruned.scores.mean());
-            round.kept_psnr = k.black;
-            round.kept_psnr_white = Some(k.white);
-            round.pruned_psnr = Some(p.black);
-            round.pruned_psnr_white = Some(p.white);
+            round.take_scores(Some(&control.scores), &pruned.scores);
             round.accepted = within(&round);
         }
         if !round.accepted {
