@@ -96,8 +96,8 @@ def floor_regions(p: np.ndarray, ball: np.ndarray, grid: float) -> dict[str, int
 
 
 def long_edges(p: np.ndarray, sd: np.ndarray, rot: np.ndarray, grid: float) -> dict[str, float]:
-    """The splats on the box's eight long edges (within 1.5 voxels of two faces, more than 3
-    from the third): count, median standard deviations (least, middle, largest) and the share
+    """The floor's splats (rows of `p`, `sd`, `rot`) on the box's eight long edges (within 1.5
+    voxels of two faces, more than 3 from the third): count, median standard deviations (least, middle, largest) and the share
     whose longest axis is within 26 degrees of its edge."""
     lo, hi = FLOOR_LO * grid, FLOOR_HI * grid
     d = np.minimum(np.abs(p - lo), np.abs(p - hi))
@@ -128,8 +128,8 @@ def main() -> int:
     rows = []
     for out in args.outs:
         row = {"out": str(out)}
-        paths = (("input", args.input or out / "input/demo.ply"), ("model", out / "model/splats.ply"))
-        for name, path in paths:
+        model = out / "model/splats.ply"
+        for name, path in (("input", args.input or out / "input/demo.ply"), ("model", model)):
             if not path.is_file():
                 print(f"error: {path} does not exist", file=sys.stderr)
                 return 1
@@ -137,9 +137,10 @@ def main() -> int:
             ball = on_ball(p, args.grid)
             row[name] = {"total": int(ball.size), "ball": int(ball.sum())}
         if args.regions:
-            sd, rot = axes(paths[1][1])
+            # `p` and `ball` are the model's, the loop's last.
+            sd, rot = axes(model)
             row["floor"] = floor_regions(p, ball, args.grid)
-            row["long edges"] = long_edges(p, sd, rot, args.grid)
+            row["long edges"] = long_edges(p[~ball], sd[~ball], rot[~ball], args.grid)
         rows.append(row)
         i, m = row["input"], row["model"]
         print(
