@@ -202,9 +202,13 @@ impl BudgetConfig {
     }
 
     /// The initial splat count for `points` input points when the mean training view covers
-    /// `covered_pixels` pixels: the points, or fewer when they outnumber the pixels.
+    /// `covered_pixels` pixels and at most `asked` were asked for (`--splats K`): the points, or
+    /// fewer when they outnumber what was asked or, with the search on, the pixels. What was
+    /// asked caps the start and never raises it: splats beyond what the views can tell apart
+    /// are training time spent for nothing.
     #[must_use]
-    pub fn start_splats(&self, points: usize, covered_pixels: f64) -> usize {
+    pub fn start_splats(&self, points: usize, covered_pixels: f64, asked: Option<usize>) -> usize {
+        let points = asked.map_or(points, |k| k.min(points));
         if !self.auto {
             return points;
         }
@@ -1573,11 +1577,19 @@ mod tests {
         assert_eq!(p.rounds, 4);
         assert_eq!(c.plan(499), None, "too short a run");
         assert_eq!(BudgetConfig { auto: false, ..c }.plan(2000), None);
-        assert_eq!(c.start_splats(3_000_000, 300_000.0), 600_000);
-        assert_eq!(c.start_splats(30_000, 300_000.0), 30_000);
+        assert_eq!(c.start_splats(3_000_000, 300_000.0, None), 600_000);
+        assert_eq!(c.start_splats(30_000, 300_000.0, None), 30_000);
         assert_eq!(
-            BudgetConfig { auto: false, ..c }.start_splats(3_000_000, 1.0),
+            BudgetConfig { auto: false, ..c }.start_splats(3_000_000, 1.0, None),
             3_000_000
+        );
+        // What was asked caps the start (below the pixels' share) and never raises it.
+        assert_eq!(c.start_splats(3_000_000, 300_000.0, Some(250_000)), 250_000);
+        assert_eq!(c.start_splats(3_000_000, 100_000.0, Some(250_000)), 200_000);
+        assert_eq!(c.start_splats(30_000, 300_000.0, Some(250_000)), 30_000);
+        assert_eq!(
+            BudgetConfig { auto: false, ..c }.start_splats(3_000_000, 1.0, Some(250_000)),
+            250_000
         );
     }
 

@@ -947,15 +947,17 @@ fn initialise(
     let mut init_cfg = cfg.init.clone();
     init_cfg.mode = mode;
     let budget = budget_applies(cfg, mode).then_some(&cfg.budget);
-    if let Some(b) = budget
-        && init_cfg.splats.is_none()
-    {
+    // `--splats K` caps the search's start, never raises it (`BudgetConfig::start_splats`).
+    if let Some(b) = budget {
         let points = surfaces.init.len();
-        let start = b.start_splats(points, mean_covered_pixels(&refs.train));
-        if start < points {
+        let asked = init_cfg.splats;
+        let start = b.start_splats(points, mean_covered_pixels(&refs.train), asked);
+        if start < asked.unwrap_or(points).min(points) {
+            let asked = asked.map_or(String::new(), |k| format!(", under the {k} asked for"));
             observer(Event::Note(format!(
-                "splat budget: {points} points merged to about {start} (two per covered pixel \
-                 of the mean training view) before training"
+                "splat budget: {points} points merged to about {start} ({} per covered pixel \
+                 of the mean training view{asked}) before training",
+                b.splats_per_pixel
             )));
             init_cfg.splats = Some(start);
         }

@@ -50,11 +50,11 @@ pub struct Overrides {
     /// Initialisation: surface or sparse.
     #[arg(long, value_parser = parse_init)]
     pub init: Option<InitMode>,
-    /// Splats: `auto` (the default: start from the input's points, merged to about one per
-    /// covered pixel, and prune by contribution while held-out PSNR stays within
-    /// `--budget-tolerance` of the whole model), `all` (one per input point, no pruning), or a
-    /// number K: start from about K points and let the automatic budget prune below them (a
-    /// hard cap; add `--no-prune` for exactly K).
+    /// Splats: `auto` (the default: start from the input's points, merged to about two per
+    /// covered pixel of the mean training view, and prune by contribution while held-out PSNR
+    /// stays within `--budget-tolerance` of the whole model), `all` (one per input point, no
+    /// pruning), or a number K, a hard cap: start as `auto` does but from at most about K points,
+    /// and let the automatic budget prune below that (add `--no-prune` for about K exactly).
     #[arg(long, value_name = "auto|all|K")]
     pub splats: Option<SplatCount>,
     /// The held-out PSNR (dB) the automatic splat budget may give up against the whole model.
@@ -238,7 +238,8 @@ pub enum SplatCount {
     Auto,
     /// One splat per input point, no pruning.
     All,
-    /// About K initial splats, pruned below that by the automatic budget unless `--no-prune`.
+    /// At most about K initial splats (fewer where the automatic budget starts lower), pruned
+    /// below that by the automatic budget unless `--no-prune` (then about K).
     Count(usize),
 }
 
