@@ -67,7 +67,11 @@ fn splats_k_caps_the_automatic_start_and_never_raises_it() {
     let config = tmp.path().join("small.toml");
     std::fs::write(&config, CONFIG).unwrap();
 
-    let (auto, printed) = initial_splats(&input, &config, &tmp.path().join("auto"), &[]);
+    // Each run in its own folder, named by what it tries.
+    let run =
+        |name: &str, extra: &[&str]| initial_splats(&input, &config, &tmp.path().join(name), extra);
+
+    let (auto, printed) = run("auto", &[]);
     // 48² views: the demo's thousands of points outnumber twice the covered pixels.
     assert!(
         auto < points / 2,
@@ -80,12 +84,7 @@ fn splats_k_caps_the_automatic_start_and_never_raises_it() {
 
     // A cap above the automatic start: the same start, and the note names the cap.
     let above = (points as f64 * 0.9) as u64;
-    let (capped, printed) = initial_splats(
-        &input,
-        &config,
-        &tmp.path().join("above"),
-        &["--splats", &above.to_string()],
-    );
+    let (capped, printed) = run("above", &["--splats", &above.to_string()]);
     assert_eq!(
         capped, auto,
         "--splats {above} should start where auto does"
@@ -97,24 +96,14 @@ fn splats_k_caps_the_automatic_start_and_never_raises_it() {
 
     // A cap below it: about K (the voxel sampling's count is within a few percent of K).
     let below = auto / 2;
-    let (small, _) = initial_splats(
-        &input,
-        &config,
-        &tmp.path().join("below"),
-        &["--splats", &below.to_string()],
-    );
+    let (small, _) = run("below", &["--splats", &below.to_string()]);
     assert!(
         small <= auto * 2 / 3 && small.abs_diff(below) * 10 <= below,
         "--splats {below} started at {small} (auto {auto})"
     );
 
     // Without the budget, K is what is asked for, above the automatic start too.
-    let (kept, _) = initial_splats(
-        &input,
-        &config,
-        &tmp.path().join("kept"),
-        &["--splats", &above.to_string(), "--no-prune"],
-    );
+    let (kept, _) = run("kept", &["--splats", &above.to_string(), "--no-prune"]);
     assert!(
         kept > auto && kept.abs_diff(above) * 10 <= above,
         "--splats {above} --no-prune started at {kept} (auto {auto})"
