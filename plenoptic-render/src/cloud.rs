@@ -77,16 +77,20 @@ struct ViewBuffers {
 /// so memory stays what the views in flight need plus one set (keeping every set that was once
 /// in flight held 0.9 GB more at the peak of a paper-scale run on 16 threads).
 #[derive(Default)]
-struct ViewBuffersPool(Mutex<Option<ViewBuffers>>);
+// Boxed: a set is moved in and out whole, and a prepared cloud stays small.
+struct ViewBuffersPool(Mutex<Option<Box<ViewBuffers>>>);
 
 impl ViewBuffersPool {
-    /// A set for a view of `pixels` sub-pixels and `points` points: the z-buffer empty and no
-    /// point visible. The colours are left as the last view wrote them: a view reads the colour
-    /// of a rank only after it has shaded that rank.
-    fn take(&self, pixels: usize, points: usize) -> ViewBuffers {
+    /// A set for a view of `width` × `height` sub-pixels and `points` points: the z-buffer empty
+    /// and no point visible. The colours are left as the last view wrote them: a view reads the
+    /// colour of a rank only after it has shaded that rank.
+    fn take(&self, width: usize, height: usize, points: usize) -> Box<ViewBuffers> {
         let reused = self.0.lock().unwrap_or_else(PoisonError::into_inner).take();
         match reused {
-            Some(mut b) if b.zbuf.len() == pixels && b.visible.len() == points => {
+            Some(mut b)
+                if (b.zbuf.width(), b.zbuf.height()) == (width, height)
+                    && b.visible.len() == points =>
+            {
                 b.zbuf.clear();
                 b.visible
                     .par_iter_mut()
@@ -94,16 +98,16 @@ impl ViewBuffersPool {
                     .for_each(|v| *v.get_mut() = false);
                 b
             }
-            _ => ViewBuffers {
-                zbuf: ZBuffer::new(pixels),
+            _ => Box::new(ViewBuffers {
+                zbuf: ZBuffer::new(width, height),
                 visible: (0..points).map(|_| AtomicBool::new(false)).collect(),
                 colours: vec![[0.0; 3]; points],
-            },
+            }),
         }
     }
 
     /// Returns a set for a later view, or frees it when one is already waiting.
-    fn give_back(&self, b: ViewBuffers) {
+    fn give_back(&self, b: Box<ViewBuffers>) {
         self.0
             .lock()
             .unwrap_or_else(PoisonError::into_inner)
@@ -146,12 +150,13 @@ impl<'a> PreparedCloud<'a> {
     fn render_once(&self, camera: &Camera) -> Result<ViewImage, Error> {
         let (cloud, opts) = (self.cloud, &self.opts);
         let view = ViewCamera::new(camera)?;
-        let mut buffers = self.buffers.take(view.pixels(), cloud.len());
+        let (width, height) = (view.width as usize, view.height as usize);
+        let mut buffers = self.buffers.take(width, height, cloud.len());
         let ViewBuffers {
             zbuf,
             visible,
             colours,
-        } = &mut buffers;
+        } = &mut *buffers;
         match opts.point_shape {
             PointShape::Cube => draw_cubes(
                 &self.positions,
@@ -166,14 +171,13 @@ impl<'a> PreparedCloud<'a> {
         }
         // A point's colour depends on the point and the viewer, not on the pixel: shade each
         // visible point once rather than each of its pixels (a supersampled point covers many).
-        (0..view.pixels())
-            .into_par_iter()
-            .with_min_len(CHUNK)
-            .for_each(|pixel| {
-                if let Some((_, rank)) = zbuf.get(pixel) {
+        (0..height).into_par_iter().with_min_len(16).for_each(|y| {
+            for x in zbuf.row_span(y).into_iter().flatten() {
+                if let Some((_, rank)) = zbuf.get(x, y) {
                     visible[rank as usize].store(true, Ordering::Relaxed);
                 }
-            });
+            }
+        });
         // Visible points as (index in the cloud, rank), shaded in the cloud's order: their
         // per-camera colours (13 × 12 bytes a point at 8iVSLF's size) are then read forwards
         // through memory. Read in rank (Morton) order they came from all over a 490 MB array,
@@ -429,7 +433,6 @@ impl Cubes<'_> {
     #[inline(always)]
     fn draw_portable(&self, points: &[Vec3], first: usize) {
         let (view, h, extent) = (self.view, self.h, self.extent);
-        let w = view.width as usize;
         for (j, &p) in points.iter().enumerate() {
             let c = view.rotation * p + view.translation;
             let Some((x0, x1, y0, y1)) = view.pixel_range(c - extent, c + extent) else {
@@ -441,7 +444,6 @@ impl Cubes<'_> {
                 (c.z - extent.z) * DEPTH_BOUND_SLACK,
                 (x0 as usize, x1 as usize),
                 (y0 as usize, y1 as usize),
-                w,
             ) {
                 continue;
             }
@@ -458,7 +460,7 @@ impl Cubes<'_> {
                     let near = t0.min(t1).max_element();
                     let far = t0.max(t1).min_element();
                     if near <= far && near > 0.0 {
-                        self.zbuf.insert(y as usize * w + x as usize, near, rank);
+                        self.zbuf.insert(x, y, near, rank);
                     }
                 }
             }
@@ -470,7 +472,6 @@ impl Cubes<'_> {
 /// index as [`draw_cubes`] does; a disc whose centre is not more than `radius` in front of the
 /// camera is not drawn (see [`render_cloud`]).
 fn draw_discs(positions: &[Vec3], view: &ViewCamera, radius: f32, zbuf: &ZBuffer) {
-    let w = view.width as usize;
     let extent = Vec3::new(radius, radius, 0.0);
     let r2 = radius * radius;
     positions
@@ -492,7 +493,7 @@ fn draw_discs(positions: &[Vec3], view: &ViewCamera, radius: f32, zbuf: &ZBuffer
                         let q = view.camera_ray(x, y) * c.z;
                         let (dx, dy) = (q.x - c.x, q.y - c.y);
                         if dx * dx + dy * dy <= r2 {
-                            zbuf.insert(y as usize * w + x as usize, c.z, rank);
+                            zbuf.insert(x, y, c.z, rank);
                         }
                     }
                 }
@@ -630,12 +631,13 @@ mod tests {
         ] {
             let cam = camera(eye, DVec3::new(2.0, 1.0, -12.0), 96, 96, 25.0);
             let view = ViewCamera::new(&cam).unwrap();
-            let zbuf = ZBuffer::new(view.pixels());
+            let zbuf = ZBuffer::new(view.width as usize, view.height as usize);
             draw_cubes(&pts, &run_centres(&pts), &view, h, &zbuf);
             let expected = brute_force_z_buffer(&pts, &view, h);
             let mut covered = 0;
             for (pixel, want) in expected.iter().enumerate() {
-                let got = zbuf.get(pixel).map(|(z, id)| (z.to_bits(), id));
+                let (x, y) = (pixel % zbuf.width(), pixel / zbuf.width());
+                let got = zbuf.get(x, y).map(|(z, id)| (z.to_bits(), id));
                 assert_eq!(got, *want, "pixel {pixel} seen from {eye}");
                 covered += usize::from(want.is_some());
             }
@@ -658,13 +660,15 @@ mod tests {
         ] {
             let cam = camera(eye, DVec3::new(0.3, -0.2, 0.1), w, w, 40.0);
             let view = ViewCamera::new(&cam).unwrap();
-            let (portable, vector) = (ZBuffer::new(view.pixels()), ZBuffer::new(view.pixels()));
+            let (width, height) = (view.width as usize, view.height as usize);
+            let (portable, vector) = (ZBuffer::new(width, height), ZBuffer::new(width, height));
             let runs = run_centres(&pts);
             draw_cubes_using(&pts, &runs, &view, h, &portable, false);
             draw_cubes_using(&pts, &runs, &view, h, &vector, has_avx2());
             let mut covered = 0;
             for pixel in 0..view.pixels() {
-                let (a, b) = (portable.get(pixel), vector.get(pixel));
+                let (x, y) = (pixel % width, pixel / width);
+                let (a, b) = (portable.get(x, y), vector.get(x, y));
                 assert_eq!(
                     a.map(|(z, id)| (z.to_bits(), id)),
                     b.map(|(z, id)| (z.to_bits(), id)),

@@ -129,7 +129,7 @@ fn render_once(mesh: &Mesh, camera: &Camera, opts: &ViewOptions) -> Result<ViewI
         .par_iter()
         .map(|&p| view.rotation * p + view.translation)
         .collect();
-    let zbuf = ZBuffer::new(view.pixels());
+    let zbuf = ZBuffer::new(view.width as usize, view.height as usize);
     draw_triangles(&mesh.triangles, &cam_space, &view, &zbuf);
     let plenoptic = vertex_view_colors(mesh, view.center, opts.exponent);
     Ok(resolve(&view, &zbuf, opts, |id, x, y| {
@@ -172,7 +172,6 @@ fn vertex_view_colors(mesh: &Mesh, viewer: Vec3, exponent: i32) -> Option<Vec<[f
 
 /// Visibility pass: the nearest triangle under each pixel centre.
 fn draw_triangles(triangles: &[[u32; 3]], cam_space: &[Vec3], view: &ViewCamera, zbuf: &ZBuffer) {
-    let w = view.width as usize;
     triangles
         .par_chunks(CHUNK)
         .enumerate()
@@ -186,7 +185,7 @@ fn draw_triangles(triangles: &[[u32; 3]], cam_space: &[Vec3], view: &ViewCamera,
                 for y in y0..=y1 {
                     for x in x0..=x1 {
                         if let Some((t, _)) = intersect(view.camera_ray(x, y), a, b, c) {
-                            zbuf.insert(y as usize * w + x as usize, t, id);
+                            zbuf.insert(x, y, t, id);
                         }
                     }
                 }

@@ -1,7 +1,9 @@
 //! A z-buffer that many threads can write at once: one atomic word per pixel holding
-//! (depth, primitive id), resolved by `fetch_min`.
+//! (depth, primitive id), resolved by `fetch_min`; each row remembers the span of columns it has
+//! been written in, so the passes after it read (and `clear` empties) only those.
 
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::ops::RangeInclusive;
+use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 
 use rayon::prelude::*;
 
@@ -13,54 +15,111 @@ const EMPTY: u64 = u64::MAX;
 /// The key is `depth_bits << 32 | id`: the bit pattern of a positive f32 orders like its value,
 /// so the minimum key is the nearest depth, and equal depths go to the lowest id, which makes the
 /// result independent of thread scheduling.
+///
+/// Every cell outside its row's [`ZBuffer::row_span`] is empty. A reference view of a
+/// paper-scale frame covers about a tenth of its pixels, and the spans a fifth: reading whole
+/// rows, the visible-point, filter and depth passes and the clear between views spent most of
+/// their time on empty cells (docs/benchmarks/views.md, session 43).
 pub(crate) struct ZBuffer {
+    width: usize,
     cells: Vec<AtomicU64>,
+    /// Per row, the least and greatest column written since the last clear (least > greatest
+    /// when none has been).
+    first: Vec<AtomicU32>,
+    last: Vec<AtomicU32>,
 }
 
 impl ZBuffer {
-    /// An empty buffer of `n` pixels.
-    pub fn new(n: usize) -> Self {
+    /// An empty buffer of `width` × `height` pixels.
+    pub fn new(width: usize, height: usize) -> Self {
         Self {
-            cells: (0..n).map(|_| AtomicU64::new(EMPTY)).collect(),
+            width,
+            cells: (0..width * height).map(|_| AtomicU64::new(EMPTY)).collect(),
+            first: (0..height).map(|_| AtomicU32::new(u32::MAX)).collect(),
+            last: (0..height).map(|_| AtomicU32::new(0)).collect(),
         }
     }
 
-    /// Pixels of the buffer.
-    pub fn len(&self) -> usize {
-        self.cells.len()
+    /// Pixels in a row.
+    pub fn width(&self) -> usize {
+        self.width
     }
 
-    /// Empties every pixel (in parallel: a supersampled 1024² view has 9.4M cells).
+    /// Rows.
+    pub fn height(&self) -> usize {
+        self.first.len()
+    }
+
+    /// Empties every pixel: the written span of each row (in parallel over rows).
     pub fn clear(&mut self) {
+        let width = self.width;
         self.cells
-            .par_iter_mut()
-            .with_min_len(1 << 16)
-            .for_each(|c| *c.get_mut() = EMPTY);
+            .par_chunks_mut(width.max(1))
+            .zip(self.first.par_iter_mut())
+            .zip(self.last.par_iter_mut())
+            .with_min_len(16)
+            .for_each(|((row, first), last)| {
+                let (a, b) = (*first.get_mut() as usize, *last.get_mut() as usize);
+                if a <= b {
+                    for c in &mut row[a..=b] {
+                        *c.get_mut() = EMPTY;
+                    }
+                }
+                *first.get_mut() = u32::MAX;
+                *last.get_mut() = 0;
+            });
     }
 
-    /// Keeps (depth, id) at `pixel` if it is nearer than what is there. `depth` must be positive.
+    /// Keeps (depth, id) at pixel (`x`, `y`) if it is nearer than what is there. `depth` must be
+    /// positive.
     #[inline]
-    pub fn insert(&self, pixel: usize, depth: f32, id: u32) {
+    pub fn insert(&self, x: u32, y: u32, depth: f32, id: u32) {
         let key = (u64::from(depth.to_bits()) << 32) | u64::from(id);
-        let cell = &self.cells[pixel];
+        let cell = &self.cells[y as usize * self.width + x as usize];
         // A plain load first: most candidates lose, and a failed comparison costs no write.
-        if key < cell.load(Ordering::Relaxed) {
+        let old = cell.load(Ordering::Relaxed);
+        if key < old {
             cell.fetch_min(key, Ordering::Relaxed);
+            // Whichever insert first fills an empty cell loaded it empty, so it widens the span.
+            if old == EMPTY {
+                self.widen(x, y as usize);
+            }
         }
     }
 
-    /// Whether every pixel of the rectangle `xs` × `ys` (inclusive ranges, rows `width` wide)
-    /// already holds a primitive nearer than `depth` (positive): then nothing at `depth` or
-    /// beyond can be inserted there.
+    /// Widens row `y`'s written span to column `x`.
+    #[inline]
+    fn widen(&self, x: u32, y: usize) {
+        let (first, last) = (&self.first[y], &self.last[y]);
+        if x < first.load(Ordering::Relaxed) {
+            first.fetch_min(x, Ordering::Relaxed);
+        }
+        if x > last.load(Ordering::Relaxed) {
+            last.fetch_max(x, Ordering::Relaxed);
+        }
+    }
+
+    /// The columns of row `y` that may hold a primitive (every other cell of the row is empty),
+    /// or `None` when the row is empty.
+    #[inline]
+    pub fn row_span(&self, y: usize) -> Option<RangeInclusive<usize>> {
+        let a = self.first[y].load(Ordering::Relaxed) as usize;
+        let b = self.last[y].load(Ordering::Relaxed) as usize;
+        (a <= b).then_some(a..=b)
+    }
+
+    /// Whether every pixel of the rectangle `xs` × `ys` (inclusive ranges) already holds a
+    /// primitive nearer than `depth` (positive): then nothing at `depth` or beyond can be
+    /// inserted there.
     #[inline]
     pub fn all_nearer(
         &self,
         depth: f32,
         (x0, x1): (usize, usize),
         (y0, y1): (usize, usize),
-        width: usize,
     ) -> bool {
         let bound = u64::from(depth.to_bits()) << 32;
+        let width = self.width;
         (y0..=y1).all(|y| {
             self.cells[y * width + x0..=y * width + x1]
                 .iter()
@@ -68,10 +127,10 @@ impl ZBuffer {
         })
     }
 
-    /// The nearest (depth, id) at `pixel`, if any primitive covers it.
+    /// The nearest (depth, id) at pixel (`x`, `y`), if any primitive covers it.
     #[inline]
-    pub fn get(&self, pixel: usize) -> Option<(f32, u32)> {
-        let key = self.cells[pixel].load(Ordering::Relaxed);
+    pub fn get(&self, x: usize, y: usize) -> Option<(f32, u32)> {
+        let key = self.cells[y * self.width + x].load(Ordering::Relaxed);
         (key != EMPTY).then(|| (f32::from_bits((key >> 32) as u32), key as u32))
     }
 }
@@ -82,15 +141,58 @@ mod tests {
 
     #[test]
     fn keeps_the_nearest_and_breaks_ties_by_id() {
-        let z = ZBuffer::new(2);
-        assert_eq!(z.get(0), None);
-        z.insert(0, 5.0, 7);
-        z.insert(0, 6.0, 1);
-        assert_eq!(z.get(0), Some((5.0, 7)));
-        z.insert(0, 5.0, 3);
-        assert_eq!(z.get(0), Some((5.0, 3)));
-        z.insert(0, 0.25, 9);
-        assert_eq!(z.get(0), Some((0.25, 9)));
-        assert_eq!(z.get(1), None);
+        let z = ZBuffer::new(2, 1);
+        assert_eq!(z.get(0, 0), None);
+        z.insert(0, 0, 5.0, 7);
+        z.insert(0, 0, 6.0, 1);
+        assert_eq!(z.get(0, 0), Some((5.0, 7)));
+        z.insert(0, 0, 5.0, 3);
+        assert_eq!(z.get(0, 0), Some((5.0, 3)));
+        z.insert(0, 0, 0.25, 9);
+        assert_eq!(z.get(0, 0), Some((0.25, 9)));
+        assert_eq!(z.get(1, 0), None);
+    }
+
+    /// Inserts from many threads at once: every written cell lies in its row's span, the spans
+    /// are exactly the written columns' extremes, and a clear empties everything and resets them.
+    #[test]
+    fn spans_hold_every_written_cell_and_clear_empties_them() {
+        let (w, h) = (97usize, 31usize);
+        let mut z = ZBuffer::new(w, h);
+        let mut seed = 5u64;
+        let mut writes: Vec<(u32, u32, f32)> = (0..4000)
+            .map(|_| {
+                seed = seed
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                let r = seed >> 33;
+                (
+                    (r % w as u64) as u32,
+                    ((r / 97) % 23) as u32,
+                    1.0 + (r % 1000) as f32,
+                )
+            })
+            .collect();
+        // Row 5 written at one column only; rows 23.. never.
+        writes.push((40, 5, 0.5));
+        writes.retain(|&(x, y, _)| y != 5 || x == 40);
+        for round in 0..2 {
+            writes
+                .par_iter()
+                .enumerate()
+                .for_each(|(i, &(x, y, d))| z.insert(x, y, d, i as u32));
+            for y in 0..h {
+                let cols: Vec<usize> = (0..w).filter(|&x| z.get(x, y).is_some()).collect();
+                let span = z.row_span(y);
+                match cols.first() {
+                    None => assert_eq!(span, None, "row {y}, round {round}"),
+                    Some(&a) => assert_eq!(span, Some(a..=*cols.last().unwrap()), "row {y}"),
+                }
+            }
+            assert_eq!(z.row_span(5), Some(40..=40));
+            z.clear();
+            assert!((0..h).all(|y| z.row_span(y).is_none()));
+            assert!((0..h).all(|y| (0..w).all(|x| z.get(x, y).is_none())));
+        }
     }
 }
