@@ -653,13 +653,16 @@ fn weighted_sums(dst: &mut [f32], rows: &[TapRow<'_>; TAPS]) {
         }
         out.copy_from_slice(&acc);
     }
-    // The last values one by one, the taps in the same order.
-    for (q, out) in dst.iter_mut().enumerate().skip(whole) {
-        let mut acc = 0.0_f32;
-        for row in rows.iter().filter(|r| (r.lo..r.hi).contains(&q)) {
-            acc += row.weight * row.src[row.at(q)];
+    // The last values as one block padded with zeros (which add +0, as in `TapRow::part`).
+    if whole < n {
+        let mut acc = [0.0_f32; BLOCK];
+        for row in rows {
+            let (lo, hi) = (row.lo.max(whole), row.hi.min(n));
+            if lo < hi {
+                add_block(&mut acc, row.weight, &row.part(whole, lo, hi));
+            }
         }
-        *out = acc;
+        dst[whole..].copy_from_slice(&acc[..n - whole]);
     }
 }
 
