@@ -97,43 +97,83 @@ impl ViewCamera {
         Vec3::new(u, v, 1.0)
     }
 
+    /// Camera-space positions of `N` world points, `[axis][lane]`: `rotation * p + translation`
+    /// as glam computes it (the same operations in the same order, so the same bits), written
+    /// lane by lane so that a caller compiled for 8-wide vectors moves 8 points with each
+    /// vector operation.
+    #[inline(always)]
+    pub fn camera_space_lanes<const N: usize>(&self, points: &[Vec3; N]) -> [[f32; N]; 3] {
+        let (r, t) = (self.rotation, self.translation);
+        std::array::from_fn(|axis| {
+            let (rx, ry, rz) = (r.x_axis[axis], r.y_axis[axis], r.z_axis[axis]);
+            std::array::from_fn(|l| {
+                let p = points[l];
+                rx * p.x + ry * p.y + rz * p.z + t[axis]
+            })
+        })
+    }
+
     /// Pixel-index ranges (inclusive) whose centres can fall inside the camera-space box
-    /// [lo, hi] (lo.z > 0), or `None` when none can.
+    /// [lo, hi] (lo.z > 0), or `None` when none can: one lane of [`ViewCamera::pixel_ranges`].
     #[inline]
     pub fn pixel_range(&self, lo: Vec3, hi: Vec3) -> Option<(u32, u32, u32, u32)> {
-        if lo.z <= 0.0 {
-            return None;
+        let [range] = self.pixel_ranges(lo.to_array().map(|v| [v]), hi.to_array().map(|v| [v]));
+        range
+    }
+
+    /// [`ViewCamera::pixel_range`] of `N` boxes at once, `lo[axis][lane]` and `hi[axis][lane]`
+    /// their corners: written as fixed-length loops over the lanes without branches, so a
+    /// caller compiled for 8-wide vectors bounds 8 boxes with each vector operation (a
+    /// paper-scale frame's cube pass bounded 3 million boxes a view one at a time, four
+    /// divisions each, a third of its time).
+    #[inline(always)]
+    pub fn pixel_ranges<const N: usize>(
+        &self,
+        lo: [[f32; N]; 3],
+        hi: [[f32; N]; 3],
+    ) -> [Option<(u32, u32, u32, u32)>; N] {
+        let mut bounds = [[0.0f32; N]; 4];
+        let mut inside = [false; N];
+        for l in 0..N {
+            let (lo_z, hi_z) = (lo[2][l], hi[2][l]);
+            // Extremes of x/z and y/z over the box: the divisor that makes the ratio extreme
+            // depends on the sign.
+            let ratio = |a: f32, b: f32| -> (f32, f32) {
+                let min = a / if a < 0.0 { lo_z } else { hi_z };
+                let max = b / if b > 0.0 { lo_z } else { hi_z };
+                (min, max)
+            };
+            let (xa, xb) = ratio(lo[0][l], hi[0][l]);
+            let (ya, yb) = ratio(lo[1][l], hi[1][l]);
+            let (sa, sb) = if self.skew >= 0.0 {
+                (self.skew * ya, self.skew * yb)
+            } else {
+                (self.skew * yb, self.skew * ya)
+            };
+            let (fxa, fxb) = if self.fx >= 0.0 { (xa, xb) } else { (xb, xa) };
+            let (fya, fyb) = if self.fy >= 0.0 { (ya, yb) } else { (yb, ya) };
+            let umin = self.fx * fxa + sa + self.cx;
+            let umax = self.fx * fxb + sb + self.cx;
+            let vmin = self.fy * fya + self.cy;
+            let vmax = self.fy * fyb + self.cy;
+            // Pixel i's centre is i + 0.5: the covered indices are ceil(min − 0.5) ..= floor(max − 0.5).
+            let x0 = (umin - 0.5).ceil().max(0.0);
+            let x1 = (umax - 0.5).floor().min(self.width as f32 - 1.0);
+            let y0 = (vmin - 0.5).ceil().max(0.0);
+            let y1 = (vmax - 0.5).floor().min(self.height as f32 - 1.0);
+            bounds[0][l] = x0;
+            bounds[1][l] = x1;
+            bounds[2][l] = y0;
+            bounds[3][l] = y1;
+            // NaN fails the comparisons and is refused here too.
+            inside[l] = lo_z > 0.0 && x0 <= x1 && y0 <= y1;
         }
-        // Extremes of x/z and y/z over the box: the divisor that makes the ratio extreme depends on the sign.
-        let ratio = |a: f32, b: f32| -> (f32, f32) {
-            let min = if a < 0.0 { a / lo.z } else { a / hi.z };
-            let max = if b > 0.0 { b / lo.z } else { b / hi.z };
-            (min, max)
-        };
-        let (xa, xb) = ratio(lo.x, hi.x);
-        let (ya, yb) = ratio(lo.y, hi.y);
-        let (sa, sb) = if self.skew >= 0.0 {
-            (self.skew * ya, self.skew * yb)
-        } else {
-            (self.skew * yb, self.skew * ya)
-        };
-        let (fxa, fxb) = if self.fx >= 0.0 { (xa, xb) } else { (xb, xa) };
-        let (fya, fyb) = if self.fy >= 0.0 { (ya, yb) } else { (yb, ya) };
-        let umin = self.fx * fxa + sa + self.cx;
-        let umax = self.fx * fxb + sb + self.cx;
-        let vmin = self.fy * fya + self.cy;
-        let vmax = self.fy * fyb + self.cy;
-        // Pixel i's centre is i + 0.5: the covered indices are ceil(min − 0.5) ..= floor(max − 0.5).
-        let x0 = (umin - 0.5).ceil().max(0.0);
-        let x1 = (umax - 0.5).floor().min(self.width as f32 - 1.0);
-        let y0 = (vmin - 0.5).ceil().max(0.0);
-        let y1 = (vmax - 0.5).floor().min(self.height as f32 - 1.0);
-        // NaN fails both comparisons and is refused here too.
-        if x0 <= x1 && y0 <= y1 {
-            Some((x0 as u32, x1 as u32, y0 as u32, y1 as u32))
-        } else {
-            None
-        }
+        std::array::from_fn(|l| {
+            inside[l].then(|| {
+                let [x0, x1, y0, y1] = bounds.map(|b| b[l] as u32);
+                (x0, x1, y0, y1)
+            })
+        })
     }
 }
 
@@ -153,4 +193,122 @@ pub(crate) fn scaled_camera(camera: &Camera, k: u32) -> Camera {
         },
         camera.pose,
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use camera_model::Pose;
+    use glam::DVec3;
+
+    #[test]
+    fn camera_space_lanes_are_glams_transform_bit_for_bit() {
+        let camera = Camera::new(
+            Intrinsics::from_fov_y(640, 480, 35.0),
+            Pose::look_at(
+                DVec3::new(3100.0, -800.0, 2500.0),
+                DVec3::splat(2048.0),
+                DVec3::Y,
+            ),
+        );
+        let view = ViewCamera::new(&camera).unwrap();
+        let points: [Vec3; 8] = std::array::from_fn(|l| {
+            let l = l as f32;
+            Vec3::new(2048.0 + 37.3 * l, 1900.0 - 11.9 * l * l, 2200.0 + 0.017 * l)
+        });
+        let lanes = view.camera_space_lanes(&points);
+        for (l, &p) in points.iter().enumerate() {
+            let c = view.rotation * p + view.translation;
+            let lane = Vec3::new(lanes[0][l], lanes[1][l], lanes[2][l]);
+            assert_eq!(
+                lane.to_array().map(f32::to_bits),
+                c.to_array().map(f32::to_bits)
+            );
+        }
+    }
+
+    /// The pixels whose centres the projection of each box covers, in f64 from its eight
+    /// corners (the extremes of x/z and y/z over a box lie at corners), or `None`.
+    fn covered_pixels(view: &ViewCamera, lo: Vec3, hi: Vec3) -> Option<(u32, u32, u32, u32)> {
+        if lo.z <= 0.0 {
+            return None;
+        }
+        let (mut u, mut v) = ((f64::MAX, f64::MIN), (f64::MAX, f64::MIN));
+        for k in 0..8 {
+            let pick =
+                |bit: usize, a: f32, b: f32| f64::from(if k >> bit & 1 == 0 { a } else { b });
+            let (x, y, z) = (
+                pick(0, lo.x, hi.x),
+                pick(1, lo.y, hi.y),
+                pick(2, lo.z, hi.z),
+            );
+            let (px, py) = (
+                f64::from(view.fx) * x / z + f64::from(view.skew) * y / z + f64::from(view.cx),
+                f64::from(view.fy) * y / z + f64::from(view.cy),
+            );
+            u = (u.0.min(px), u.1.max(px));
+            v = (v.0.min(py), v.1.max(py));
+        }
+        let first = |m: f64| (m - 0.5).ceil().max(0.0);
+        let (x0, x1) = (
+            first(u.0),
+            (u.1 - 0.5).floor().min(f64::from(view.width) - 1.0),
+        );
+        let (y0, y1) = (
+            first(v.0),
+            (v.1 - 0.5).floor().min(f64::from(view.height) - 1.0),
+        );
+        (x0 <= x1 && y0 <= y1).then_some((x0 as u32, x1 as u32, y0 as u32, y1 as u32))
+    }
+
+    /// Without skew a box's pixel range is exactly the pixels its projection covers; with skew
+    /// it bounds x/z and y/z apart, so it may hold a column more on either side.
+    #[test]
+    fn pixel_ranges_in_lanes_are_the_pixels_each_box_covers() {
+        for skew in [0.0, 0.7] {
+            let mut camera = Camera::new(
+                Intrinsics::from_fov_y(320, 240, 40.0),
+                Pose::look_at(DVec3::new(0.0, 0.0, 50.0), DVec3::ZERO, DVec3::Y),
+            );
+            camera.intrinsics.skew = skew;
+            let checked = check_pixel_ranges(&ViewCamera::new(&camera).unwrap());
+            assert!(checked > 200, "only {checked} boxes on the image");
+        }
+    }
+
+    fn check_pixel_ranges(view: &ViewCamera) -> usize {
+        let mut checked = 0;
+        for round in 0..64 {
+            // Boxes spread over and past the image, some reaching behind the camera, of
+            // sizes from a hundredth of a pixel to many pixels.
+            let boxes: [(Vec3, Vec3); 8] = std::array::from_fn(|l| {
+                let t = (round * 8 + l) as f32;
+                let centre = Vec3::new(
+                    30.0 * (0.37 * t).sin(),
+                    22.0 * (0.23 * t).cos(),
+                    50.0 + 48.0 * (0.11 * t).sin(),
+                );
+                let half = Vec3::new(0.003, 0.005, 0.004) * (1.0 + (t % 13.0) * 90.0);
+                (centre - half, centre + half)
+            });
+            let lo = std::array::from_fn(|axis| boxes.map(|b| b.0[axis]));
+            let hi = std::array::from_fn(|axis| boxes.map(|b| b.1[axis]));
+            for (l, range) in view.pixel_ranges(lo, hi).into_iter().enumerate() {
+                let (lo, hi) = boxes[l];
+                assert_eq!(range, view.pixel_range(lo, hi), "box {lo} {hi}");
+                let exact = covered_pixels(view, lo, hi);
+                if view.skew == 0.0 {
+                    assert_eq!(range, exact, "box {lo} {hi}");
+                } else if let Some((x0, x1, y0, y1)) = exact {
+                    let (a0, a1, b0, b1) = range.expect("a covering box has a range");
+                    assert!(
+                        a0 <= x0 && x1 <= a1 && (b0, b1) == (y0, y1),
+                        "box {lo} {hi}: {range:?} does not hold {exact:?}"
+                    );
+                }
+                checked += usize::from(range.is_some());
+            }
+        }
+        checked
+    }
 }

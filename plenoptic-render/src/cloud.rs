@@ -317,6 +317,10 @@ const RUN: usize = 256;
 /// Runs a thread of the cube pass takes at a time.
 const RUNS_TAKEN: usize = 4;
 
+/// Cubes the cube pass moves into camera space and bounds on the screen at once (one AVX2
+/// vector of f32).
+const CUBE_LANES: usize = 8;
+
 /// The centres of the runs of [`RUN`] consecutive `positions` (the middle of each run's box).
 fn run_centres(positions: &[Vec3]) -> Vec<Vec3> {
     positions
@@ -430,38 +434,61 @@ impl Cubes<'_> {
         self.draw_portable(points, first);
     }
 
+    /// The cubes are moved into camera space and bounded on the screen [`CUBE_LANES`] at a
+    /// time (bounding 3 million cubes a view one at a time, four divisions each, took a fifth
+    /// of the pass), then drawn one by one.
     #[inline(always)]
     fn draw_portable(&self, points: &[Vec3], first: usize) {
-        let (view, h, extent) = (self.view, self.h, self.extent);
-        for (j, &p) in points.iter().enumerate() {
-            let c = view.rotation * p + view.translation;
-            let Some((x0, x1, y0, y1)) = view.pixel_range(c - extent, c + extent) else {
-                continue;
-            };
-            // A cube behind everything its rectangle already holds cannot win a pixel: skip
-            // its slab tests (the z-buffer ends the same whatever the order of the cubes).
-            if self.zbuf.all_nearer(
-                (c.z - extent.z) * DEPTH_BOUND_SLACK,
-                (x0 as usize, x1 as usize),
-                (y0 as usize, y1 as usize),
-            ) {
-                continue;
+        let extent = self.extent;
+        for (g, group) in points.chunks(CUBE_LANES).enumerate() {
+            // A short last group repeats its first point in the spare lanes.
+            let lanes: [Vec3; CUBE_LANES] =
+                std::array::from_fn(|l| *group.get(l).unwrap_or(&group[0]));
+            let centres = self.view.camera_space_lanes(&lanes);
+            let lo = std::array::from_fn(|axis| centres[axis].map(|c| c - extent[axis]));
+            let hi = std::array::from_fn(|axis| centres[axis].map(|c| c + extent[axis]));
+            let ranges = self.view.pixel_ranges(lo, hi);
+            for (l, &p) in group.iter().enumerate() {
+                if let Some(range) = ranges[l] {
+                    let rank = (first + g * CUBE_LANES + l) as u32;
+                    self.draw_cube(p, lo[2][l], range, rank);
+                }
             }
-            let rank = (first + j) as u32;
-            // Slab test in world axes, relative to the camera centre for precision.
-            let rel = p - view.center;
-            let (lo, hi) = (rel - h, rel + h);
-            for y in y0..=y1 {
-                for x in x0..=x1 {
-                    let d = view.world_ray(x, y);
-                    let inv = d.recip();
-                    let t0 = lo * inv;
-                    let t1 = hi * inv;
-                    let near = t0.min(t1).max_element();
-                    let far = t0.max(t1).min_element();
-                    if near <= far && near > 0.0 {
-                        self.zbuf.insert(x, y, near, rank);
-                    }
+        }
+    }
+
+    /// Draws the cube centred on `p` whose camera-space box starts at depth `near` and whose
+    /// pixel rectangle is `(x0, x1, y0, y1)`.
+    #[inline(always)]
+    fn draw_cube(&self, p: Vec3, near: f32, (x0, x1, y0, y1): (u32, u32, u32, u32), rank: u32) {
+        let view = self.view;
+        let bound = near * DEPTH_BOUND_SLACK;
+        // A cube behind everything its rectangle already holds cannot win a pixel: skip
+        // its slab tests (the z-buffer ends the same whatever the order of the cubes).
+        if self.zbuf.all_nearer(
+            bound,
+            (x0 as usize, x1 as usize),
+            (y0 as usize, y1 as usize),
+        ) {
+            return;
+        }
+        // Slab test in world axes, relative to the camera centre for precision.
+        let rel = p - view.center;
+        let (lo, hi) = (rel - self.h, rel + self.h);
+        for y in y0..=y1 {
+            for x in x0..=x1 {
+                // Nor can it win a pixel that holds something nearer than its box.
+                if self.zbuf.nearer(x, y, bound) {
+                    continue;
+                }
+                let d = view.world_ray(x, y);
+                let inv = d.recip();
+                let t0 = lo * inv;
+                let t1 = hi * inv;
+                let near = t0.min(t1).max_element();
+                let far = t0.max(t1).min_element();
+                if near <= far && near > 0.0 {
+                    self.zbuf.insert(x, y, near, rank);
                 }
             }
         }

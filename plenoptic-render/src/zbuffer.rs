@@ -127,6 +127,14 @@ impl ZBuffer {
         })
     }
 
+    /// Whether pixel (`x`, `y`) already holds a primitive nearer than `depth` (positive): then
+    /// nothing at `depth` or beyond can be inserted there.
+    #[inline]
+    pub fn nearer(&self, x: u32, y: u32, depth: f32) -> bool {
+        let bound = u64::from(depth.to_bits()) << 32;
+        self.cells[y as usize * self.width + x as usize].load(Ordering::Relaxed) < bound
+    }
+
     /// The nearest (depth, id) at pixel (`x`, `y`), if any primitive covers it.
     #[inline]
     pub fn get(&self, x: usize, y: usize) -> Option<(f32, u32)> {
