@@ -7,12 +7,12 @@ use std::sync::{Mutex, PoisonError};
 use camera_model::Camera;
 use glam::Vec3;
 use plenoptic_io::PlenopticCloud;
-use plenoptic_io::view_color::interpolate_lanes;
 use rayon::prelude::*;
 
 use crate::camera::ViewCamera;
-use crate::cpu::{has_avx2, prefetch};
+use crate::cpu::has_avx2;
 use crate::pixels::{render_supersampled, resolve};
+use crate::shading::{Shader, ShadingColours};
 use crate::zbuffer::ZBuffer;
 use crate::{Error, PointShape, ViewImage, ViewOptions};
 
@@ -44,11 +44,10 @@ pub fn render_cloud(
 pub(crate) struct PreparedCloud<'a> {
     cloud: &'a PlenopticCloud,
     capture: Vec<Vec3>,
-    /// Each point's rank in Morton order. The visibility pass draws points in this order and
-    /// keys the z-buffer by rank in it, so consecutive points write neighbouring pixels and the
-    /// shading pass reads neighbouring colours; by rank, a view lists its visible points in
-    /// cloud order with one pass over the cloud instead of a sort.
-    rank_of: Vec<u32>,
+    /// The points' colours in Morton order, the order the visibility pass draws them in and
+    /// keys the z-buffer by (their rank in it): consecutive points write neighbouring pixels,
+    /// and the shading pass reads neighbouring colours.
+    colours: ShadingColours,
     /// The points' positions in that order. Read through an index list instead, a paper-scale
     /// frame listed in random order spent half its drawing time waiting for positions from memory
     /// (docs/benchmarks/views.md).
@@ -126,14 +125,11 @@ impl<'a> PreparedCloud<'a> {
             .map(|&i| cloud.positions[i as usize])
             .collect();
         let run_centres = run_centres(&positions);
-        let mut rank_of = vec![0; order.len()];
-        for (rank, &i) in order.iter().enumerate() {
-            rank_of[i as usize] = rank as u32;
-        }
+        let colours = ShadingColours::new(cloud, &order);
         Ok(Self {
             cloud,
             capture: cloud.camera_positions(),
-            rank_of,
+            colours,
             positions,
             run_centres,
             opts: opts.for_cloud(cloud),
@@ -178,30 +174,28 @@ impl<'a> PreparedCloud<'a> {
                 }
             }
         });
-        // Visible points as (index in the cloud, rank), shaded in the cloud's order: their
-        // per-camera colours (13 × 12 bytes a point at 8iVSLF's size) are then read forwards
-        // through memory. Read in rank (Morton) order they came from all over a 490 MB array,
-        // and the shading pass spent most of its time waiting for them (docs/benchmarks/views.md).
-        let by_index: Vec<(u32, u32)> = self
-            .rank_of
+        // The visible points' ranks, increasing: their colours are read forwards.
+        let ranks: Vec<u32> = visible
             .par_iter()
+            .with_min_len(CHUNK)
             .enumerate()
-            .filter(|&(_, &rank)| visible[rank as usize].load(Ordering::Relaxed))
-            .map(|(i, &rank)| (i as u32, rank))
+            .filter(|(_, v)| v.load(Ordering::Relaxed))
+            .map(|(rank, _)| rank as u32)
             .collect();
         let shader = Shader {
-            cloud,
+            positions: &self.positions,
+            colours: &self.colours,
             capture: &self.capture,
             viewer: view.center,
             exponent: opts.exponent,
         };
         let avx2 = has_avx2();
-        let mut shaded = vec![[0.0f32; 3]; by_index.len()];
+        let mut shaded = vec![[0.0f32; 3]; ranks.len()];
         shaded
             .par_chunks_mut(CHUNK)
-            .zip(by_index.par_chunks(CHUNK))
-            .for_each(|(out, points)| shader.shade(points, out, avx2));
-        for (&(_, rank), colour) in by_index.iter().zip(shaded) {
+            .zip(ranks.par_chunks(CHUNK))
+            .for_each(|(out, ranks)| shader.shade(ranks, out, avx2));
+        for (&rank, colour) in ranks.iter().zip(shaded) {
             colours[rank as usize] = colour;
         }
         // Every rank the z-buffer holds is visible, so shaded this view: no stale colour of an
@@ -209,74 +203,6 @@ impl<'a> PreparedCloud<'a> {
         let image = resolve(&view, zbuf, opts, |rank, _, _| colours[rank as usize]);
         self.buffers.give_back(buffers);
         Ok(image)
-    }
-}
-
-/// What the shading of one view's visible points shares.
-struct Shader<'a> {
-    cloud: &'a PlenopticCloud,
-    capture: &'a [Vec3],
-    viewer: Vec3,
-    exponent: i32,
-}
-
-/// Points [`Shader::shade`] colours at once (one AVX2 vector of f32).
-const SHADE_LANES: usize = 8;
-
-/// How many points ahead [`Shader::shade`] asks for the colours it will read.
-const PREFETCH_AHEAD: usize = 32;
-
-impl Shader<'_> {
-    /// Colours the points `(index in the cloud, rank)` of `points` into `out`, [`SHADE_LANES`]
-    /// at a time: the AVX2 instantiation where the CPU has it, else the portable one (the
-    /// same operations either way, so the same bits).
-    fn shade(&self, points: &[(u32, u32)], out: &mut [[f32; 3]], avx2: bool) {
-        #[cfg(target_arch = "x86_64")]
-        if avx2 {
-            // SAFETY: `avx2` is only true when `has_avx2()` is, so the CPU has AVX2.
-            #[allow(unsafe_code)]
-            return unsafe { self.shade_avx2(points, out) };
-        }
-        let _ = avx2;
-        self.shade_portable(points, out);
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    fn shade_avx2(&self, points: &[(u32, u32)], out: &mut [[f32; 3]]) {
-        self.shade_portable(points, out);
-    }
-
-    #[inline(always)]
-    fn shade_portable(&self, points: &[(u32, u32)], out: &mut [[f32; 3]]) {
-        let cloud = self.cloud;
-        for (g, (group, out)) in points
-            .chunks(SHADE_LANES)
-            .zip(out.chunks_mut(SHADE_LANES))
-            .enumerate()
-        {
-            // The colours of the points PREFETCH_AHEAD places on are requested now, so they are
-            // in the cache when their group comes (the points are a sparse subset of the cloud).
-            let ahead = (g * SHADE_LANES + PREFETCH_AHEAD..(g + 1) * SHADE_LANES + PREFETCH_AHEAD)
-                .filter_map(|k| points.get(k));
-            for &(index, _) in ahead {
-                let i = index as usize;
-                prefetch(cloud.camera_colors_of(i));
-                prefetch(std::slice::from_ref(&cloud.positions[i]));
-                prefetch(std::slice::from_ref(&cloud.colors[i]));
-            }
-            // A short last group repeats its first point in the spare lanes.
-            let index = |l: usize| group.get(l).unwrap_or(&group[0]).0 as usize;
-            let colours = interpolate_lanes(
-                std::array::from_fn::<_, SHADE_LANES, _>(|l| cloud.positions[index(l)]),
-                [self.viewer; SHADE_LANES],
-                self.capture,
-                std::array::from_fn(|l| cloud.camera_colors_of(index(l))),
-                std::array::from_fn(|l| cloud.colors[index(l)]),
-                self.exponent,
-            );
-            out.copy_from_slice(&colours[..out.len()]);
-        }
     }
 }
 

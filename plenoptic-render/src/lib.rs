@@ -56,6 +56,7 @@ pub mod output;
 mod pixels;
 mod render;
 pub mod rig;
+mod shading;
 mod zbuffer;
 
 pub use closing::{closing_point_size, surface_spacing};

@@ -1,0 +1,287 @@
+//! The shading of a view's visible points: each point's colour towards the viewer
+//! ([`interpolate_lanes`]), read from a copy of the cloud's colours in the order the cube pass
+//! draws the points (Morton's), compact where the colours are 8-bit levels.
+
+use glam::Vec3;
+use plenoptic_io::PlenopticCloud;
+use plenoptic_io::ply::uchar_color;
+use plenoptic_io::view_color::interpolate_lanes;
+use rayon::prelude::*;
+
+use crate::cpu::prefetch;
+
+/// Points [`Shader::shade`] colours at once (one AVX2 vector of f32).
+const SHADE_LANES: usize = 8;
+
+/// How many points ahead [`Shader::shade`] asks for the colours it will read.
+const PREFETCH_AHEAD: usize = 32;
+
+/// Points per parallel work item of the copy.
+const CHUNK: usize = 16_384;
+
+/// The 256 colours an 8-bit channel stores, as a PLY file's uchar colours read.
+fn levels() -> [f32; 256] {
+    std::array::from_fn(|k| uchar_color(k as u8))
+}
+
+/// The 8-bit level of each of `values`, or `None` when one of them is not exactly a level.
+fn to_levels(values: &[f32]) -> Option<Vec<u8>> {
+    let levels = levels();
+    let mut out = vec![0u8; values.len()];
+    let exact = out
+        .par_chunks_mut(LEVEL_CHUNK)
+        .zip(values.par_chunks(LEVEL_CHUNK))
+        .all(|(out, values)| {
+            // No early exit inside a chunk, so the loop vectorises.
+            let mut exact = true;
+            for (o, &v) in out.iter_mut().zip(values) {
+                // The nearest level, rounding half up (NaN and values below 0 give 0, which
+                // the comparison then refuses).
+                let k = (v * 255.0 + 0.5).clamp(0.0, 255.0) as u8;
+                exact &= levels[usize::from(k)].to_bits() == v.to_bits();
+                *o = k;
+            }
+            exact
+        });
+    exact.then_some(out)
+}
+
+/// Values per parallel work item of [`to_levels`].
+const LEVEL_CHUNK: usize = 1 << 16;
+
+/// The cloud's main and per-camera colours of each point, by rank in the drawing order.
+///
+/// A view's visible points are the near side of the surface: whole runs of that order and
+/// none of the far side. Read from the cloud's own arrays, in the file's order (a synthetic
+/// frame's is random), each visible point's 13 per-camera colours were three cache lines on
+/// their own in a 490 MB array, and the shading spent most of its time waiting for them
+/// (docs/benchmarks/views.md, session 44). In the drawing order the visible points' colours
+/// lie together; as 8-bit levels they take a quarter of the memory (122 MB at 8iVSLF's size).
+pub(crate) struct ShadingColours {
+    /// Per-camera colours of a point.
+    cameras: usize,
+    store: Store,
+    /// The colour of each 8-bit level.
+    levels: Box<[f32; 256]>,
+}
+
+enum Store {
+    /// Every colour is an 8-bit level ([`levels`]): the level's index, 3 bytes a colour, the
+    /// main colour first and then each camera's.
+    Levels(Vec<u8>),
+    /// Otherwise the colours themselves, in the same layout.
+    Floats(Vec<[f32; 3]>),
+}
+
+impl ShadingColours {
+    /// The colours of `cloud`'s points in `order` (rank → index in the cloud).
+    pub(crate) fn new(cloud: &PlenopticCloud, order: &[u32]) -> Self {
+        let cameras = cloud.num_cameras;
+        let stride = 3 * (cameras + 1);
+        // The levels of the cloud's colours in its own order first, read and written forwards
+        // (taken in Morton order straight from the cloud's colours, each point's were three
+        // cache lines of their own, and the copy cost as much as it saved), then moved into
+        // Morton order a point's 42 bytes at a time.
+        let main = to_levels(cloud.colors.as_flattened());
+        let per_camera = to_levels(cloud.camera_colors.as_flattened());
+        let store = match (main, per_camera) {
+            (Some(main), Some(per_camera)) => {
+                let mut bytes = vec![0u8; order.len() * stride];
+                bytes
+                    .par_chunks_mut(stride)
+                    .zip(order.par_iter())
+                    .with_min_len(CHUNK)
+                    .for_each(|(out, &i)| {
+                        let i = i as usize;
+                        let (head, tail) = out.split_at_mut(3);
+                        head.copy_from_slice(&main[3 * i..3 * i + 3]);
+                        tail.copy_from_slice(&per_camera[3 * cameras * i..3 * cameras * (i + 1)]);
+                    });
+                Store::Levels(bytes)
+            }
+            _ => {
+                let mut floats = vec![[0.0f32; 3]; order.len() * (cameras + 1)];
+                floats
+                    .par_chunks_mut(cameras + 1)
+                    .zip(order.par_iter())
+                    .with_min_len(CHUNK)
+                    .for_each(|(out, &i)| {
+                        let i = i as usize;
+                        out[0] = cloud.colors[i];
+                        out[1..].copy_from_slice(cloud.camera_colors_of(i));
+                    });
+                Store::Floats(floats)
+            }
+        };
+        Self {
+            cameras,
+            store,
+            levels: Box::new(levels()),
+        }
+    }
+
+    /// Whether the colours are kept as 8-bit levels.
+    #[cfg(test)]
+    fn is_compact(&self) -> bool {
+        matches!(self.store, Store::Levels(_))
+    }
+
+    /// Asks for the colours of rank `rank` to be loaded (see [`prefetch`]).
+    #[inline(always)]
+    fn prefetch(&self, rank: usize) {
+        let stride = self.cameras + 1;
+        match &self.store {
+            Store::Levels(bytes) => {
+                prefetch(&bytes[rank * stride * 3..(rank + 1) * stride * 3]);
+            }
+            Store::Floats(floats) => prefetch(&floats[rank * stride..(rank + 1) * stride]),
+        }
+    }
+
+    /// Writes the colours of rank `rank` into `out` (`1 + cameras` long): the main colour,
+    /// then each camera's.
+    #[inline(always)]
+    fn read(&self, rank: usize, out: &mut [[f32; 3]]) {
+        let stride = self.cameras + 1;
+        match &self.store {
+            Store::Levels(bytes) => {
+                let levels = &self.levels;
+                let bytes = &bytes[rank * stride * 3..(rank + 1) * stride * 3];
+                for (o, b) in out.iter_mut().zip(bytes.chunks_exact(3)) {
+                    *o = [
+                        levels[b[0] as usize],
+                        levels[b[1] as usize],
+                        levels[b[2] as usize],
+                    ];
+                }
+            }
+            Store::Floats(floats) => {
+                out.copy_from_slice(&floats[rank * stride..(rank + 1) * stride])
+            }
+        }
+    }
+}
+
+/// What the shading of one view's visible points shares.
+pub(crate) struct Shader<'a> {
+    /// The points' positions by rank.
+    pub positions: &'a [Vec3],
+    pub colours: &'a ShadingColours,
+    /// Capture-camera positions.
+    pub capture: &'a [Vec3],
+    pub viewer: Vec3,
+    pub exponent: i32,
+}
+
+impl Shader<'_> {
+    /// Colours the points of ranks `ranks` (increasing) into `out`, [`SHADE_LANES`] at a time:
+    /// the AVX2 instantiation where the CPU has it, else the portable one (the same
+    /// operations either way, so the same bits).
+    pub(crate) fn shade(&self, ranks: &[u32], out: &mut [[f32; 3]], avx2: bool) {
+        #[cfg(target_arch = "x86_64")]
+        if avx2 {
+            // SAFETY: `avx2` is only true when `has_avx2()` is, so the CPU has AVX2.
+            #[allow(unsafe_code)]
+            return unsafe { self.shade_avx2(ranks, out) };
+        }
+        let _ = avx2;
+        self.shade_portable(ranks, out);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn shade_avx2(&self, ranks: &[u32], out: &mut [[f32; 3]]) {
+        self.shade_portable(ranks, out);
+    }
+
+    #[inline(always)]
+    fn shade_portable(&self, ranks: &[u32], out: &mut [[f32; 3]]) {
+        let stride = self.colours.cameras + 1;
+        // The lanes' colours as f32, lane after lane (main colour first).
+        let mut lanes = vec![[0.0f32; 3]; SHADE_LANES * stride];
+        for (g, (group, out)) in ranks
+            .chunks(SHADE_LANES)
+            .zip(out.chunks_mut(SHADE_LANES))
+            .enumerate()
+        {
+            // The colours of the points PREFETCH_AHEAD places on are requested now, so they
+            // are in the cache when their group comes (the visible points skip the far side).
+            let ahead = (g * SHADE_LANES + PREFETCH_AHEAD..(g + 1) * SHADE_LANES + PREFETCH_AHEAD)
+                .filter_map(|k| ranks.get(k));
+            for &rank in ahead {
+                self.colours.prefetch(rank as usize);
+            }
+            // A short last group repeats its first point in the spare lanes.
+            let rank = |l: usize| *group.get(l).unwrap_or(&group[0]) as usize;
+            for (l, lane) in lanes.chunks_exact_mut(stride).enumerate() {
+                self.colours.read(rank(l), lane);
+            }
+            let lane = |l: usize| &lanes[l * stride..(l + 1) * stride];
+            let colours = interpolate_lanes(
+                std::array::from_fn::<_, SHADE_LANES, _>(|l| self.positions[rank(l)]),
+                [self.viewer; SHADE_LANES],
+                self.capture,
+                std::array::from_fn(|l| &lane(l)[1..]),
+                std::array::from_fn(|l| lane(l)[0]),
+                self.exponent,
+            );
+            out.copy_from_slice(&colours[..out.len()]);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cloud(camera_colors: Vec<[f32; 3]>) -> PlenopticCloud {
+        let n = camera_colors.len() / 2;
+        PlenopticCloud {
+            positions: (0..n).map(|i| Vec3::splat(i as f32)).collect(),
+            colors: (0..n)
+                .map(|i| [(i % 256) as f32 / 255.0, 0.0, 1.0])
+                .collect(),
+            num_cameras: 2,
+            camera_colors,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn colours_read_back_bit_for_bit_in_the_order_given() {
+        // 8-bit levels (every level of a channel) are kept compact; a colour off the levels
+        // keeps them all as floats. Either way each rank reads its point's colours exactly.
+        let levels: Vec<[f32; 3]> = (0..512)
+            .map(|i| {
+                [
+                    (i % 256) as f32 / 255.0,
+                    ((i * 7) % 256) as f32 / 255.0,
+                    1.0,
+                ]
+            })
+            .collect();
+        let mut floats = levels.clone();
+        floats[77][1] = 0.123_456_7;
+        for (camera_colors, compact) in [(levels, true), (floats, false)] {
+            let cloud = cloud(camera_colors);
+            let order: Vec<u32> = (0..cloud.len() as u32).rev().collect();
+            let colours = ShadingColours::new(&cloud, &order);
+            assert_eq!(colours.is_compact(), compact);
+            let mut out = [[9.0f32; 3]; 3];
+            for (rank, &i) in order.iter().enumerate() {
+                colours.read(rank, &mut out);
+                let i = i as usize;
+                let want = [
+                    cloud.colors[i],
+                    cloud.camera_colors_of(i)[0],
+                    cloud.camera_colors_of(i)[1],
+                ];
+                assert_eq!(
+                    out.map(|c| c.map(f32::to_bits)),
+                    want.map(|c| c.map(f32::to_bits)),
+                    "rank {rank}"
+                );
+            }
+        }
+    }
+}
