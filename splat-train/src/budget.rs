@@ -970,13 +970,43 @@ pub fn merge_group(splats: &mut Splats, group: &[usize], weights: &[f64]) {
 /// it is a dozen lines and the crate has no linear-algebra dependency; merges call it once per
 /// group.
 fn symmetric_eigen(m: Mat3) -> (Quat, Vec3) {
-    let mut a = [
+    let mut a = widened(m);
+    let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0_f64]];
+    diagonalise(&mut a, Some(&mut v));
+    let col = |j: usize| Vec3::new(v[0][j] as f32, v[1][j] as f32, v[2][j] as f32);
+    let (x, y) = (col(0), col(1));
+    // A proper rotation: the third axis from the first two.
+    let z = x.cross(y);
+    let rot = Mat3::from_cols(x, y, z);
+    (Quat::from_mat3(&rot), eigenvalues_of(&a))
+}
+
+/// The eigenvalues of a symmetric 3×3 matrix, as [`symmetric_eigen`] finds them (the same
+/// rotations, without keeping the eigenvectors).
+fn symmetric_eigenvalues(m: Mat3) -> Vec3 {
+    let mut a = widened(m);
+    diagonalise(&mut a, None);
+    eigenvalues_of(&a)
+}
+
+/// `m` as rows of f64.
+fn widened(m: Mat3) -> [[f64; 3]; 3] {
+    [
         [m.x_axis.x, m.y_axis.x, m.z_axis.x],
         [m.x_axis.y, m.y_axis.y, m.z_axis.y],
         [m.x_axis.z, m.y_axis.z, m.z_axis.z],
     ]
-    .map(|r| r.map(f64::from));
-    let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0_f64]];
+    .map(|r| r.map(f64::from))
+}
+
+/// The diagonal of a diagonalised matrix, narrowed to f32.
+fn eigenvalues_of(a: &[[f64; 3]; 3]) -> Vec3 {
+    Vec3::new(a[0][0] as f32, a[1][1] as f32, a[2][2] as f32)
+}
+
+/// Jacobi rotations on the symmetric `a` until it is diagonal, applied to `v` as well where
+/// given (the rotations do not depend on `v`, so the eigenvalues are the same either way).
+fn diagonalise(a: &mut [[f64; 3]; 3], mut v: Option<&mut [[f64; 3]; 3]>) {
     for _ in 0..32 {
         let off = a[0][1].abs() + a[0][2].abs() + a[1][2].abs();
         let scale = a[0][0].abs() + a[1][1].abs() + a[2][2].abs();
@@ -992,7 +1022,7 @@ fn symmetric_eigen(m: Mat3) -> (Quat, Vec3) {
             let t = if theta == 0.0 { 1.0 } else { t };
             let c = 1.0 / (t * t + 1.0).sqrt();
             let s = t * c;
-            for row in &mut a {
+            for row in a.iter_mut() {
                 let (x, y) = (row[p], row[q]);
                 row[p] = c * x - s * y;
                 row[q] = s * x + c * y;
@@ -1002,20 +1032,15 @@ fn symmetric_eigen(m: Mat3) -> (Quat, Vec3) {
                 a[p][col] = c * row_p[col] - s * row_q[col];
                 a[q][col] = s * row_p[col] + c * row_q[col];
             }
-            for row in &mut v {
-                let (x, y) = (row[p], row[q]);
-                row[p] = c * x - s * y;
-                row[q] = s * x + c * y;
+            if let Some(v) = v.as_deref_mut() {
+                for row in v.iter_mut() {
+                    let (x, y) = (row[p], row[q]);
+                    row[p] = c * x - s * y;
+                    row[q] = s * x + c * y;
+                }
             }
         }
     }
-    let col = |j: usize| Vec3::new(v[0][j] as f32, v[1][j] as f32, v[2][j] as f32);
-    let (x, y) = (col(0), col(1));
-    // A proper rotation: the third axis from the first two.
-    let z = x.cross(y);
-    let rot = Mat3::from_cols(x, y, z);
-    let values = Vec3::new(a[0][0] as f32, a[1][1] as f32, a[2][2] as f32);
-    (Quat::from_mat3(&rot), values)
 }
 
 #[cfg(test)]
