@@ -10,6 +10,12 @@ use rayon::prelude::*;
 /// The empty cell: larger than any (depth, id) key.
 const EMPTY: u64 = u64::MAX;
 
+/// The key of primitive `id` at `depth` (positive): keys order by depth, then by id.
+#[inline(always)]
+fn key(depth: f32, id: u32) -> u64 {
+    (u64::from(depth.to_bits()) << 32) | u64::from(id)
+}
+
 /// Per-pixel nearest (depth, primitive id).
 ///
 /// The key is `depth_bits << 32 | id`: the bit pattern of a positive f32 orders like its value,
@@ -74,7 +80,7 @@ impl ZBuffer {
     /// positive.
     #[inline]
     pub fn insert(&self, x: u32, y: u32, depth: f32, id: u32) {
-        let key = (u64::from(depth.to_bits()) << 32) | u64::from(id);
+        let key = key(depth, id);
         let cell = &self.cells[y as usize * self.width + x as usize];
         // A plain load first: most candidates lose, and a failed comparison costs no write.
         let old = cell.load(Ordering::Relaxed);
@@ -118,7 +124,8 @@ impl ZBuffer {
         (x0, x1): (usize, usize),
         (y0, y1): (usize, usize),
     ) -> bool {
-        let bound = u64::from(depth.to_bits()) << 32;
+        // Every key at `depth` or beyond is at least this one.
+        let bound = key(depth, 0);
         let width = self.width;
         (y0..=y1).all(|y| {
             self.cells[y * width + x0..=y * width + x1]
@@ -131,7 +138,8 @@ impl ZBuffer {
     /// nothing at `depth` or beyond can be inserted there.
     #[inline]
     pub fn nearer(&self, x: u32, y: u32, depth: f32) -> bool {
-        let bound = u64::from(depth.to_bits()) << 32;
+        // Every key at `depth` or beyond is at least this one.
+        let bound = key(depth, 0);
         self.cells[y as usize * self.width + x as usize].load(Ordering::Relaxed) < bound
     }
 
