@@ -112,8 +112,9 @@ impl Sums {
             f64::from(limits.flat).powi(2),
         );
         let margin = |limit2: f64| 1e-5 * (tr.abs() + limit2);
+        // The standard deviations along the principal axes, least first, from the sweeps.
         let mut exact = None;
-        let mut eigenvalues = || {
+        let mut deviations = || {
             *exact.get_or_insert_with(|| {
                 let mut v = symmetric_eigenvalues(cov).to_array();
                 v.sort_by(f32::total_cmp);
@@ -127,7 +128,7 @@ impl Sums {
         } else if largest_below > reach2 + margin(reach2) {
             true
         } else {
-            eigenvalues()[2] > limits.reach
+            deviations()[2] > limits.reach
         };
         if beyond {
             return None;
@@ -149,7 +150,7 @@ impl Sums {
         } else if least_below > flat2 + margin(flat2) {
             true
         } else {
-            eigenvalues()[0] > limits.flat
+            deviations()[0] > limits.flat
         })
     }
 }
