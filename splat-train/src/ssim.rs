@@ -15,6 +15,9 @@
 //! dense filter's; outside them the value is the exact 1 and the gradient the exact 0 that the
 //! dense filter approaches up to rounding.
 
+use std::ops::Range;
+use std::sync::{Mutex, PoisonError};
+
 use rayon::prelude::*;
 
 /// Half-width of the Gaussian window (11 taps), as in Inria's `create_window(11, ...)`.
@@ -118,36 +121,85 @@ struct Spans {
 }
 
 /// Reusable buffers for SSIM at one image size: no allocation per evaluation once warm.
+///
+/// The passes run band by band: each band of rows streams its horizontal window sums, its map
+/// rows and their partials' horizontal sums through rings of [`TAPS`] rows, so that what the
+/// vertical passes read was written a few rows earlier and is still in cache (whole-image
+/// buffers of the eight quantities, 100 MB at 1024², were written out and read back from
+/// memory, and the vertical pass waited on each newly read row). A band also works out the rows
+/// just outside it that its own rows' windows reach, which its neighbours work out too: the
+/// same operations on the same values, so every value, and the result, is the same bit for bit
+/// whatever the bands.
 #[derive(Debug)]
 pub struct Ssim {
     width: usize,
     height: usize,
     taps: [f32; TAPS],
     spans: Spans,
-    /// Horizontal window sums of x, y, x², y² and xy, 3·W·H each.
-    sums: [Vec<f32>; 5],
-    /// Horizontal window sums of the map's partials ∂SSIM/∂μx (with the chain through σx² and
-    /// σxy folded in), ∂SSIM/∂E[x²] and ∂SSIM/∂E[xy], 3·W·H each. The partials themselves live
-    /// one row at a time in a thread's scratch: a row's horizontal sums need only that row, so
-    /// they are taken as soon as the row's map is done instead of written out whole and read
-    /// back (at 1024², 72 MB of memory traffic an evaluation; on many threads the passes are
-    /// bound by memory bandwidth).
-    partial_sums: [Vec<f32>; 3],
+    /// Bands' buffers not in use, for the next evaluation's bands.
+    scratch: Mutex<Vec<BandScratch>>,
     row_sums: Vec<f64>,
+}
+
+/// One band's buffers at a row width of `row` floats (3 a pixel).
+#[derive(Debug)]
+struct BandScratch {
+    /// x², y² and xy of one row.
+    products: Vec<f32>,
+    /// Rings of the horizontal window sums of x, y, x², y² and xy: row k in slot k % TAPS.
+    sums: [Vec<f32>; 5],
+    /// One row's window means μx, μy, E[x²], E[y²], E[xy].
+    means: Vec<f32>,
+    /// One row's map partials ∂SSIM/∂μx (with the chain through σx² and σxy folded in),
+    /// ∂SSIM/∂E[x²] and ∂SSIM/∂E[xy].
+    partials: Vec<f32>,
+    /// Rings of the partials' horizontal window sums.
+    partial_sums: [Vec<f32>; 3],
+    /// One row's partials blurred vertically too.
+    blurred: Vec<f32>,
+}
+
+impl BandScratch {
+    fn new(row: usize) -> Self {
+        Self {
+            products: vec![0.0; 3 * row],
+            sums: std::array::from_fn(|_| vec![0.0; TAPS * row]),
+            means: vec![0.0; 5 * row],
+            partials: vec![0.0; 3 * row],
+            partial_sums: std::array::from_fn(|_| vec![0.0; TAPS * row]),
+            blurred: vec![0.0; 3 * row],
+        }
+    }
+}
+
+/// Bands each thread gets about, so that a thread that finishes early finds work.
+const BANDS_PER_THREAD: usize = 3;
+
+/// Fewest rows of a band (past the image's first and last): a band works out up to
+/// `2 · RADIUS` rows beyond each end, so narrower bands would repeat much of their work.
+const MIN_BAND_ROWS: usize = 64;
+
+/// What every band of one evaluation reads.
+struct Pass<'a> {
+    x: &'a [f32],
+    y: &'a [f32],
+    w: usize,
+    h: usize,
+    taps: &'a [f32; TAPS],
+    spans: &'a Spans,
+    avx2: bool,
 }
 
 impl Ssim {
     /// Buffers for `width × height` RGB images.
     #[must_use]
     pub fn new(width: u32, height: u32) -> Self {
-        let n = 3 * width as usize * height as usize;
         Self {
             width: width as usize,
             height: height as usize,
             taps: gaussian_taps(),
             spans: Spans::default(),
-            sums: std::array::from_fn(|_| vec![0.0; n]),
-            partial_sums: std::array::from_fn(|_| vec![0.0; n]),
+            scratch: Mutex::new(Vec::new()),
             row_sums: Vec::with_capacity(height as usize),
         }
     }
@@ -178,161 +230,79 @@ impl Ssim {
     /// # Panics
     /// If the image sizes do not match the buffers (a caller bug).
     pub fn evaluate(&mut self, x: &[f32], y: &[f32], grad: Option<(f32, &mut [f32])>) -> f64 {
-        let n = self.sums[0].len();
+        let n = 3 * self.width * self.height;
         assert!(
             x.len() == n && y.len() == n,
             "image size does not match SSIM buffers"
         );
-        let (w, h) = (self.width, self.height);
         if n == 0 {
             return f64::NAN;
         }
-        let row = 3 * w;
-        let avx2 = splat_core::has_avx2();
         self.find_spans(x, y);
-        let taps = &self.taps;
-        let sp = &self.spans;
+        let bands = plan_bands(
+            &self.spans.map,
+            BANDS_PER_THREAD * rayon::current_num_threads(),
+            MIN_BAND_ROWS,
+        );
+        self.evaluate_in_bands(x, y, grad, &bands)
+    }
 
-        // Horizontal window sums of x, y, x², y², xy over each row's `sums` span.
-        let [s_x, s_y, s_xx, s_yy, s_xy] = &mut self.sums;
-        s_x.par_chunks_mut(row)
-            .zip(s_y.par_chunks_mut(row))
-            .zip(s_xx.par_chunks_mut(row))
-            .zip(s_yy.par_chunks_mut(row))
-            .zip(s_xy.par_chunks_mut(row))
-            .zip(x.par_chunks(row).zip(y.par_chunks(row)))
-            .enumerate()
-            .for_each_init(
-                || vec![0.0_f32; 3 * row],
-                |products, (r, (((((ox, oy), oxx), oyy), oxy), (xr, yr)))| {
-                    let out = sp.sums[r];
-                    if out.is_empty() {
-                        return;
-                    }
-                    // The products are only needed where the sums read them.
-                    let need = out.widen(RADIUS, w);
-                    let (pxx, rest) = products.split_at_mut(row);
-                    let (pyy, pxy) = rest.split_at_mut(row);
-                    let cols = 3 * need.lo..3 * need.hi;
-                    let dst = [
-                        &mut pxx[cols.clone()],
-                        &mut pyy[cols.clone()],
-                        &mut pxy[cols.clone()],
-                    ];
-                    square_products(&xr[cols.clone()], &yr[cols], dst, avx2);
-                    let whole = Span { lo: 0, hi: w };
-                    horizontal(xr, whole, ox, out, taps, avx2);
-                    horizontal(yr, whole, oy, out, taps, avx2);
-                    horizontal(pxx, need, oxx, out, taps, avx2);
-                    horizontal(pyy, need, oyy, out, taps, avx2);
-                    horizontal(pxy, need, oxy, out, taps, avx2);
-                },
-            );
-
-        // Vertical window sums and the map over each row's `map` span, with its partials. Per
-        // SSIM = A1·A2 / (B1·B2) with A1 = 2μxμy + C1, A2 = 2σxy + C2, B1 = μx² + μy² + C1,
-        // B2 = σx² + σy² + C2, σx² = E[x²] − μx², σxy = E[xy] − μxμy. With a gradient wanted,
-        // each row's partials are blurred horizontally at once: the adjoint of a zero-padded
-        // "same" convolution with a symmetric kernel is the same convolution, so each partial
-        // is blurred back onto the pixels of x.
-        let want_grad = grad.is_some();
-        let sums = &self.sums;
-        let [h_mu, h_xx, h_xy] = &mut self.partial_sums;
-        // Per-row partial sums, added in row order afterwards: rayon's reduction tree depends on
-        // scheduling, and a fixed order keeps the value bit-identical from run to run.
-        h_mu.par_chunks_mut(row)
-            .zip(h_xx.par_chunks_mut(row))
-            .zip(h_xy.par_chunks_mut(row))
-            .enumerate()
-            .map_init(
-                || vec![0.0_f32; 8 * row],
-                |scratch, (r, ((o_mu, o_xx), o_xy))| {
-                    let span = sp.map[r];
-                    // Every pixel outside the span has SSIM exactly 1.
-                    let s = (3 * (w - span.len())) as f64;
-                    if span.is_empty() {
-                        return s;
-                    }
-                    let cols = 3 * span.lo..3 * span.hi;
-                    let (means, partials) = scratch.split_at_mut(5 * row);
-                    let mut v: [&mut [f32]; 5] = {
-                        let (a, rest) = means.split_at_mut(row);
-                        let (b, rest) = rest.split_at_mut(row);
-                        let (c, rest) = rest.split_at_mut(row);
-                        let (d, e) = rest.split_at_mut(row);
-                        [a, b, c, d, e]
-                    };
-                    for (q, out) in v.iter_mut().enumerate() {
-                        let rows = RowSums {
-                            src: &sums[q],
-                            h,
-                            row,
-                            filled: &sp.sums,
-                        };
-                        vertical(rows, r, span, &mut out[cols.clone()], taps, avx2);
-                    }
-                    let means = v.each_ref().map(|b| &b[cols.clone()]);
-                    if !want_grad {
-                        return s + map_row(means, None, avx2);
-                    }
-                    let (d_mu, rest) = partials.split_at_mut(row);
-                    let (d_xx, d_xy) = rest.split_at_mut(row);
-                    let grads = [
-                        &mut d_mu[cols.clone()],
-                        &mut d_xx[cols.clone()],
-                        &mut d_xy[cols.clone()],
-                    ];
-                    let value = s + map_row(means, Some(grads), avx2);
-                    // The partials are valid over the map's span only; the blur reads nothing
-                    // outside it.
-                    let out = sp.partial_sums[r];
-                    horizontal(d_mu, span, o_mu, out, taps, avx2);
-                    horizontal(d_xx, span, o_xx, out, taps, avx2);
-                    horizontal(d_xy, span, o_xy, out, taps, avx2);
-                    value
-                },
-            )
-            .collect_into_vec(&mut self.row_sums);
-        let sum: f64 = self.row_sums.iter().sum();
-
-        if let Some((scale, out)) = grad {
-            assert_eq!(
-                out.len(),
-                n,
-                "gradient buffer size does not match SSIM buffers"
-            );
-            let partial_sums = &self.partial_sums;
-            let k = scale / n as f32;
-            out.par_chunks_mut(row)
-                .zip(x.par_chunks(row).zip(y.par_chunks(row)))
-                .enumerate()
-                .for_each_init(
-                    || vec![0.0_f32; 3 * row],
-                    |scratch, (r, (o, (xr, yr)))| {
-                        let span = sp.grad[r];
-                        if span.is_empty() {
-                            return;
-                        }
-                        let cols = 3 * span.lo..3 * span.hi;
-                        let (a, rest) = scratch.split_at_mut(row);
-                        let (b, c) = rest.split_at_mut(row);
-                        let mut v = [a, b, c];
-                        for (q, buf) in v.iter_mut().enumerate() {
-                            let dst = &mut buf[cols.clone()];
-                            let rows = RowSums {
-                                src: &partial_sums[q],
-                                h,
-                                row,
-                                filled: &sp.partial_sums,
-                            };
-                            vertical(rows, r, span, dst, taps, avx2);
-                        }
-                        let partials = v.each_ref().map(|b| &b[cols.clone()]);
-                        let images = [&xr[cols.clone()], &yr[cols.clone()]];
-                        add_gradient_row(&mut o[cols], images, partials, k, avx2);
-                    },
+    /// [`Ssim::evaluate`] over the given bands of rows (consecutive, covering the image), the
+    /// spans already found.
+    fn evaluate_in_bands(
+        &mut self,
+        x: &[f32],
+        y: &[f32],
+        grad: Option<(f32, &mut [f32])>,
+        bands: &[Range<usize>],
+    ) -> f64 {
+        let (w, h) = (self.width, self.height);
+        let n = 3 * w * h;
+        let pass = Pass {
+            x,
+            y,
+            w,
+            h,
+            taps: &self.taps,
+            spans: &self.spans,
+            avx2: splat_core::has_avx2(),
+        };
+        let lengths: Vec<usize> = bands.iter().map(ExactSizeIterator::len).collect();
+        self.row_sums.clear();
+        self.row_sums.resize(h, 0.0);
+        let values = split_by_lengths(&mut self.row_sums, lengths.iter().copied());
+        let k = grad.as_ref().map(|(scale, _)| scale / n as f32);
+        let outs: Vec<Option<&mut [f32]>> = match grad {
+            Some((_, out)) => {
+                assert_eq!(
+                    out.len(),
+                    n,
+                    "gradient buffer size does not match SSIM buffers"
                 );
-        }
+                split_by_lengths(out, lengths.iter().map(|&len| 3 * w * len))
+                    .into_iter()
+                    .map(Some)
+                    .collect()
+            }
+            None => bands.iter().map(|_| None).collect(),
+        };
+        let pool = &self.scratch;
+        bands
+            .par_iter()
+            .zip(values)
+            .zip(outs)
+            .with_max_len(1)
+            .for_each(|((band, values), out)| {
+                let taken = pool.lock().unwrap_or_else(PoisonError::into_inner).pop();
+                let mut scratch = taken.unwrap_or_else(|| BandScratch::new(3 * w));
+                let grad = k.zip(out);
+                pass.band(band.clone(), values, grad, &mut scratch);
+                pool.lock()
+                    .unwrap_or_else(PoisonError::into_inner)
+                    .push(scratch);
+            });
+        // Per-row sums added in row order: the value is the same bits whatever the bands.
+        let sum: f64 = self.row_sums.iter().sum();
         sum / n as f64
     }
 
@@ -359,6 +329,214 @@ impl Ssim {
         sp.partial_sums
             .extend(sp.map.iter().map(|s| s.widen(RADIUS, w)));
         spread(&sp.partial_sums, 0, w, &mut sp.grad);
+    }
+}
+
+/// Splits `rows` into bands of consecutive rows for [`Ssim::evaluate`]: about `bands` of them
+/// with equal work (the length of each row's map span; rows without one cost nothing), none
+/// narrower than `min_rows` unless the image is, covering every row.
+fn plan_bands(map: &[Span], bands: usize, min_rows: usize) -> Vec<Range<usize>> {
+    let h = map.len();
+    let bands = bands.max(1);
+    let total: usize = map.iter().map(|s| s.len()).sum();
+    let mut out = Vec::new();
+    let (mut start, mut work) = (0, 0);
+    for (r, span) in map.iter().enumerate() {
+        work += span.len();
+        // A band ends once the work so far reaches its share of the whole, unless it is too
+        // narrow, too near the end, or the last one.
+        let share = (out.len() + 1) * total / bands;
+        if out.len() + 1 < bands
+            && work >= share.max(1)
+            && r + 1 - start >= min_rows
+            && h - (r + 1) >= min_rows
+        {
+            out.push(start..r + 1);
+            start = r + 1;
+        }
+    }
+    out.push(start..h);
+    out
+}
+
+/// `data` cut into consecutive pieces of the given lengths (which must add up to its length).
+fn split_by_lengths<T>(data: &mut [T], lengths: impl Iterator<Item = usize>) -> Vec<&mut [T]> {
+    let mut rest = data;
+    let mut pieces = Vec::new();
+    for len in lengths {
+        let (piece, tail) = rest.split_at_mut(len);
+        pieces.push(piece);
+        rest = tail;
+    }
+    debug_assert!(rest.is_empty(), "the lengths cover the data");
+    pieces
+}
+
+impl Pass<'_> {
+    /// The band `rows`: each row's SSIM map sum into `values` and, with `grad` as `(k, out)`,
+    /// `k` times the gradient added into `out` (the band's rows of the gradient image).
+    ///
+    /// Row k's horizontal sums go into the rings at step k, the map of row k − R (whose window
+    /// reaches rows k − 2R ..= k) and its partials' horizontal sums at the same step, and the
+    /// gradient of row k − 2R (whose window reaches the partials of rows k − 3R ..= k − R) too:
+    /// each ring of TAPS rows holds exactly the rows its readers need. The band starts 2R rows
+    /// early (R without a gradient) so that its first rows see whole windows.
+    fn band(
+        &self,
+        rows: Range<usize>,
+        values: &mut [f64],
+        mut grad: Option<(f32, &mut [f32])>,
+        scratch: &mut BandScratch,
+    ) {
+        let (a, b, h) = (rows.start, rows.end, self.h);
+        let reach = if grad.is_some() { 2 * RADIUS } else { RADIUS };
+        // The map rows the band needs: its own, and R more each way for the gradient's window.
+        let maps = if grad.is_some() {
+            a.saturating_sub(RADIUS)..(b + RADIUS).min(h)
+        } else {
+            rows.clone()
+        };
+        for k in a.saturating_sub(reach)..b + reach {
+            if k < h {
+                self.sums_row(k, scratch);
+            }
+            if let Some(m) = k.checked_sub(RADIUS).filter(|m| maps.contains(m)) {
+                let value = self.map_row(m, grad.is_some(), scratch);
+                if rows.contains(&m) {
+                    values[m - a] = value;
+                }
+            }
+            if let Some((k_grad, out)) = grad.as_mut()
+                && let Some(g) = k.checked_sub(2 * RADIUS).filter(|g| rows.contains(g))
+            {
+                let row = 3 * self.w;
+                let out = &mut out[(g - a) * row..(g - a + 1) * row];
+                self.gradient_row(g, *k_grad, out, scratch);
+            }
+        }
+    }
+
+    /// Horizontal window sums of x, y, x², y², xy of row `r` over its `sums` span, into the
+    /// rings.
+    fn sums_row(&self, r: usize, scratch: &mut BandScratch) {
+        let (w, avx2, taps) = (self.w, self.avx2, self.taps);
+        let row = 3 * w;
+        let out = self.spans.sums[r];
+        if out.is_empty() {
+            return;
+        }
+        let (xr, yr) = (
+            &self.x[r * row..(r + 1) * row],
+            &self.y[r * row..(r + 1) * row],
+        );
+        // The products are only needed where the sums read them.
+        let need = out.widen(RADIUS, w);
+        let (pxx, rest) = scratch.products.split_at_mut(row);
+        let (pyy, pxy) = rest.split_at_mut(row);
+        let cols = 3 * need.lo..3 * need.hi;
+        let dst = [
+            &mut pxx[cols.clone()],
+            &mut pyy[cols.clone()],
+            &mut pxy[cols.clone()],
+        ];
+        square_products(&xr[cols.clone()], &yr[cols], dst, avx2);
+        let slot = (r % TAPS) * row..(r % TAPS + 1) * row;
+        let [ox, oy, oxx, oyy, oxy] = scratch.sums.each_mut().map(|s| &mut s[slot.clone()]);
+        let whole = Span { lo: 0, hi: w };
+        horizontal(xr, whole, ox, out, taps, avx2);
+        horizontal(yr, whole, oy, out, taps, avx2);
+        horizontal(pxx, need, oxx, out, taps, avx2);
+        horizontal(pyy, need, oyy, out, taps, avx2);
+        horizontal(pxy, need, oxy, out, taps, avx2);
+    }
+
+    /// The SSIM map of row `r` over its `map` span, returned as the row's sum (every pixel
+    /// outside the span has SSIM exactly 1); with `want_grad`, also the horizontal sums of its
+    /// partials, into the rings. Per SSIM = A1·A2 / (B1·B2) with A1 = 2μxμy + C1,
+    /// A2 = 2σxy + C2, B1 = μx² + μy² + C1, B2 = σx² + σy² + C2, σx² = E[x²] − μx²,
+    /// σxy = E[xy] − μxμy. The adjoint of a zero-padded "same" convolution with a symmetric
+    /// kernel is the same convolution, so each partial is blurred back onto the pixels of x.
+    fn map_row(&self, r: usize, want_grad: bool, scratch: &mut BandScratch) -> f64 {
+        let (w, avx2, taps) = (self.w, self.avx2, self.taps);
+        let row = 3 * w;
+        let span = self.spans.map[r];
+        let s = (3 * (w - span.len())) as f64;
+        if span.is_empty() {
+            return s;
+        }
+        let cols = 3 * span.lo..3 * span.hi;
+        let mut v: [&mut [f32]; 5] = {
+            let (a, rest) = scratch.means.split_at_mut(row);
+            let (b, rest) = rest.split_at_mut(row);
+            let (c, rest) = rest.split_at_mut(row);
+            let (d, e) = rest.split_at_mut(row);
+            [a, b, c, d, e]
+        };
+        for (q, out) in v.iter_mut().enumerate() {
+            let rows = RowSums {
+                src: &scratch.sums[q],
+                slots: TAPS,
+                h: self.h,
+                row,
+                filled: &self.spans.sums,
+            };
+            vertical(rows, r, span, &mut out[cols.clone()], taps, avx2);
+        }
+        let means = v.each_ref().map(|b| &b[cols.clone()]);
+        if !want_grad {
+            return s + map_row(means, None, avx2);
+        }
+        let (d_mu, rest) = scratch.partials.split_at_mut(row);
+        let (d_xx, d_xy) = rest.split_at_mut(row);
+        let grads = [
+            &mut d_mu[cols.clone()],
+            &mut d_xx[cols.clone()],
+            &mut d_xy[cols.clone()],
+        ];
+        let value = s + map_row(means, Some(grads), avx2);
+        // The partials are valid over the map's span only; the blur reads nothing outside it.
+        let out = self.spans.partial_sums[r];
+        let slot = (r % TAPS) * row..(r % TAPS + 1) * row;
+        let [o_mu, o_xx, o_xy] = scratch
+            .partial_sums
+            .each_mut()
+            .map(|s| &mut s[slot.clone()]);
+        horizontal(d_mu, span, o_mu, out, taps, avx2);
+        horizontal(d_xx, span, o_xx, out, taps, avx2);
+        horizontal(d_xy, span, o_xy, out, taps, avx2);
+        value
+    }
+
+    /// Adds `k` times the gradient of row `r` into `out` (that row of the gradient image), from
+    /// its partials' window sums: the vertical pass over the rings of their horizontal sums.
+    fn gradient_row(&self, r: usize, k: f32, out: &mut [f32], scratch: &mut BandScratch) {
+        let (w, avx2, taps) = (self.w, self.avx2, self.taps);
+        let row = 3 * w;
+        let span = self.spans.grad[r];
+        if span.is_empty() {
+            return;
+        }
+        let cols = 3 * span.lo..3 * span.hi;
+        let (a, rest) = scratch.blurred.split_at_mut(row);
+        let (b, c) = rest.split_at_mut(row);
+        let mut v = [a, b, c];
+        for (q, buf) in v.iter_mut().enumerate() {
+            let rows = RowSums {
+                src: &scratch.partial_sums[q],
+                slots: TAPS,
+                h: self.h,
+                row,
+                filled: &self.spans.partial_sums,
+            };
+            vertical(rows, r, span, &mut buf[cols.clone()], taps, avx2);
+        }
+        let partials = v.each_ref().map(|b| &b[cols.clone()]);
+        let (xr, yr) = (
+            &self.x[r * row..(r + 1) * row],
+            &self.y[r * row..(r + 1) * row],
+        );
+        let images = [&xr[cols.clone()], &yr[cols.clone()]];
+        add_gradient_row(&mut out[cols], images, partials, k, avx2);
     }
 }
 
@@ -700,11 +878,13 @@ impl TapRow<'_> {
     }
 }
 
-/// An image's horizontal window sums, read by the vertical pass: `h` rows of `row` floats, each
-/// written only over its span in `filled` (zero elsewhere).
+/// Horizontal window sums of an image's `h` rows, read by the vertical pass: row `rr` is held
+/// in slot `rr % slots` of `src` (`row` floats a slot: the whole image when `slots` is `h`, a
+/// ring of the last rows when it is [`TAPS`]), valid only over its span in `filled`.
 #[derive(Clone, Copy)]
 struct RowSums<'a> {
     src: &'a [f32],
+    slots: usize,
     h: usize,
     row: usize,
     filled: &'a [Span],
@@ -742,6 +922,7 @@ fn vertical_avx2(sums: RowSums<'_>, r: usize, out: Span, dst: &mut [f32], taps: 
 fn vertical_impl(sums: RowSums<'_>, r: usize, out: Span, dst: &mut [f32], taps: &[f32; TAPS]) {
     let RowSums {
         src,
+        slots,
         h,
         row,
         filled,
@@ -752,7 +933,7 @@ fn vertical_impl(sums: RowSums<'_>, r: usize, out: Span, dst: &mut [f32], taps: 
             Some(rr) => (rr, out.intersect(filled[rr])),
             None => (0, Span::EMPTY),
         };
-        let first = rr * row + 3 * out.lo;
+        let first = (rr % slots) * row + 3 * out.lo;
         TapRow {
             src,
             shift: first as isize,
@@ -904,6 +1085,7 @@ mod tests {
             let mut all = Vec::new();
             let rows = RowSums {
                 src: &across,
+                slots: h,
                 h,
                 row,
                 filled: &filled,
@@ -979,6 +1161,7 @@ mod tests {
                 let mut dst = vec![f32::NAN; 3 * out.len()];
                 let rows = RowSums {
                     src: &x,
+                    slots: h,
                     h,
                     row,
                     filled: &filled,
@@ -1001,6 +1184,101 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The bands change where the work is done, never a value: the SSIM and its gradient are
+    /// the same bits for one band, bands of one row each (every row worked out by up to 21
+    /// bands), random cuts and the planned bands, on an image with a differing region that
+    /// starts and ends mid-image and a band boundary inside it. Also the value alone (its
+    /// bands reach only R rows out).
+    #[test]
+    fn bands_give_the_same_bits_however_the_rows_are_cut() {
+        let (w, h) = (41, 67);
+        let (mut x, y) = random_pair(w, h, 21);
+        // Rows 0..9 and 50.. equal in both images: empty spans at both ends.
+        for r in (0..9).chain(50..h) {
+            let row = 3 * w * r..3 * w * (r + 1);
+            x[row.clone()].copy_from_slice(&y[row]);
+        }
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(22);
+        let mut cuts: Vec<Vec<Range<usize>>> = vec![
+            vec![0..h],
+            (0..h).map(|r| r..r + 1).collect(),
+            vec![0..20, 20..21, 21..h],
+        ];
+        for _ in 0..4 {
+            let mut ends: Vec<usize> = (0..5).map(|_| rng.random_range(1..h)).collect();
+            ends.sort_unstable();
+            ends.dedup();
+            let mut start = 0;
+            let mut bands: Vec<Range<usize>> = ends
+                .iter()
+                .map(|&e| {
+                    let band = start..e;
+                    start = e;
+                    band
+                })
+                .collect();
+            bands.push(start..h);
+            cuts.push(bands);
+        }
+        let mut s = Ssim::new(w as u32, h as u32);
+        s.find_spans(&x, &y);
+        cuts.push(plan_bands(&s.spans.map, 3, 4));
+        let run = |s: &mut Ssim, bands: &[Range<usize>]| {
+            let mut grad = vec![0.25_f32; 3 * w * h];
+            let value = s.evaluate_in_bands(&x, &y, Some((-0.5, &mut grad)), bands);
+            let alone = s.evaluate_in_bands(&x, &y, None, bands);
+            assert_eq!(value.to_bits(), alone.to_bits(), "{bands:?}");
+            (
+                value.to_bits(),
+                grad.iter().map(|g| g.to_bits()).collect::<Vec<_>>(),
+            )
+        };
+        let whole = run(&mut s, &cuts[0]);
+        assert!(whole.1.iter().any(|&g| g != 0.25_f32.to_bits()));
+        for bands in &cuts[1..] {
+            assert_eq!(run(&mut s, bands), whole, "{bands:?}");
+        }
+        // The public call, planning its own bands, agrees as well.
+        let mut grad = vec![0.25_f32; 3 * w * h];
+        let value = Ssim::new(w as u32, h as u32).evaluate(&x, &y, Some((-0.5, &mut grad)));
+        assert_eq!(value.to_bits(), whole.0);
+        checked_against_reference(value, &x, &y, w, h);
+    }
+
+    /// Bands hold at least the rows asked for (but the image's), cover the rows in order and
+    /// share the work about evenly.
+    #[test]
+    fn planned_bands_cover_the_rows_with_even_work() {
+        let h = 1000;
+        let map: Vec<Span> = (0..h)
+            .map(|r| {
+                if (300..700).contains(&r) {
+                    Span {
+                        lo: 10,
+                        hi: 10 + r % 50 + 1,
+                    }
+                } else {
+                    Span::EMPTY
+                }
+            })
+            .collect();
+        for (bands, min_rows) in [(1, 64), (6, 64), (6, 10), (50, 64), (3, 2000)] {
+            let plan = plan_bands(&map, bands, min_rows);
+            assert_eq!(plan.first().map(|b| b.start), Some(0));
+            assert_eq!(plan.last().map(|b| b.end), Some(h));
+            assert!(plan.windows(2).all(|p| p[0].end == p[1].start));
+            assert!(plan.iter().all(|b| b.len() >= min_rows.min(h)), "{plan:?}");
+            assert!(plan.len() <= bands.max(1), "{plan:?}");
+            if bands == 6 && min_rows == 10 {
+                assert_eq!(plan.len(), 6, "{plan:?}");
+                let work = |b: &Range<usize>| map[b.clone()].iter().map(|s| s.len()).sum::<usize>();
+                let total: usize = plan.iter().map(work).sum();
+                assert!(plan.iter().all(|b| work(b) <= total / 6 + 60), "{plan:?}");
+            }
+        }
+        assert_eq!(plan_bands(&[], 4, 64), vec![0..0]);
     }
 
     #[test]
