@@ -416,6 +416,33 @@ impl Pass<'_> {
         }
     }
 
+    /// The vertical window sums of row `r` over `span` from each of `rings` (rings of
+    /// [`TAPS`] rows, valid over `filled`), into the matching row of `dst` (`N` rows of 3·W
+    /// floats); returns each one's values over the span.
+    fn vertical_rings<'d, const N: usize>(
+        &self,
+        rings: &[Vec<f32>; N],
+        filled: &[Span],
+        r: usize,
+        span: Span,
+        dst: &'d mut [f32],
+    ) -> [&'d [f32]; N] {
+        let row = 3 * self.w;
+        let cols = 3 * span.lo..3 * span.hi;
+        for (ring, out) in rings.iter().zip(dst.chunks_exact_mut(row)) {
+            let rows = RowSums {
+                src: ring,
+                slots: TAPS,
+                h: self.h,
+                row,
+                filled,
+            };
+            vertical(rows, r, span, &mut out[cols.clone()], self.taps, self.avx2);
+        }
+        let dst = &*dst;
+        std::array::from_fn(|q| &dst[q * row + cols.start..q * row + cols.end])
+    }
+
     /// Horizontal window sums of x, y, x², y², xy of row `r` over its `sums` span, into the
     /// rings.
     fn sums_row(&self, r: usize, scratch: &mut BandScratch) {
@@ -465,24 +492,8 @@ impl Pass<'_> {
             return s;
         }
         let cols = 3 * span.lo..3 * span.hi;
-        let mut v: [&mut [f32]; 5] = {
-            let (a, rest) = scratch.means.split_at_mut(row);
-            let (b, rest) = rest.split_at_mut(row);
-            let (c, rest) = rest.split_at_mut(row);
-            let (d, e) = rest.split_at_mut(row);
-            [a, b, c, d, e]
-        };
-        for (q, out) in v.iter_mut().enumerate() {
-            let rows = RowSums {
-                src: &scratch.sums[q],
-                slots: TAPS,
-                h: self.h,
-                row,
-                filled: &self.spans.sums,
-            };
-            vertical(rows, r, span, &mut out[cols.clone()], taps, avx2);
-        }
-        let means = v.each_ref().map(|b| &b[cols.clone()]);
+        let means =
+            self.vertical_rings(&scratch.sums, &self.spans.sums, r, span, &mut scratch.means);
         if !want_grad {
             return s + map_row(means, None, avx2);
         }
@@ -510,33 +521,25 @@ impl Pass<'_> {
     /// Adds `k` times the gradient of row `r` into `out` (that row of the gradient image), from
     /// its partials' window sums: the vertical pass over the rings of their horizontal sums.
     fn gradient_row(&self, r: usize, k: f32, out: &mut [f32], scratch: &mut BandScratch) {
-        let (w, avx2, taps) = (self.w, self.avx2, self.taps);
-        let row = 3 * w;
+        let row = 3 * self.w;
         let span = self.spans.grad[r];
         if span.is_empty() {
             return;
         }
         let cols = 3 * span.lo..3 * span.hi;
-        let (a, rest) = scratch.blurred.split_at_mut(row);
-        let (b, c) = rest.split_at_mut(row);
-        let mut v = [a, b, c];
-        for (q, buf) in v.iter_mut().enumerate() {
-            let rows = RowSums {
-                src: &scratch.partial_sums[q],
-                slots: TAPS,
-                h: self.h,
-                row,
-                filled: &self.spans.partial_sums,
-            };
-            vertical(rows, r, span, &mut buf[cols.clone()], taps, avx2);
-        }
-        let partials = v.each_ref().map(|b| &b[cols.clone()]);
+        let partials = self.vertical_rings(
+            &scratch.partial_sums,
+            &self.spans.partial_sums,
+            r,
+            span,
+            &mut scratch.blurred,
+        );
         let (xr, yr) = (
             &self.x[r * row..(r + 1) * row],
             &self.y[r * row..(r + 1) * row],
         );
         let images = [&xr[cols.clone()], &yr[cols.clone()]];
-        add_gradient_row(&mut out[cols], images, partials, k, avx2);
+        add_gradient_row(&mut out[cols], images, partials, k, self.avx2);
     }
 }
 
