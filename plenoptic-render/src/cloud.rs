@@ -1,7 +1,7 @@
 //! Point clouds drawn as the PccAppRenderer draws them: voxel cubes (or discs), z-buffered,
 //! coloured towards the viewer.
 
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Mutex, PoisonError};
 
 use camera_model::Camera;
@@ -13,7 +13,7 @@ use crate::camera::ViewCamera;
 use crate::cpu::has_avx2;
 use crate::pixels::{render_supersampled, resolve};
 use crate::shading::{Shader, ShadingColours};
-use crate::zbuffer::ZBuffer;
+use crate::zbuffer::{ZBand, ZBuffer};
 use crate::{Error, PointShape, ViewImage, ViewOptions};
 
 /// Points per parallel work item of the visibility pass.
@@ -52,9 +52,10 @@ pub(crate) struct PreparedCloud<'a> {
     /// frame listed in random order spent half its drawing time waiting for positions from memory
     /// (docs/benchmarks/views.md).
     positions: Vec<Vec3>,
-    /// The centre of each run of [`RUN`] consecutive positions (a small patch of surface, the
-    /// order being Morton's): the cube pass draws the runs nearest first.
-    run_centres: Vec<Vec3>,
+    /// The box of each run of [`RUN`] consecutive positions (a small patch of surface, the
+    /// order being Morton's): the cube pass draws the runs nearest first, each in the bands of
+    /// rows its box reaches.
+    runs: Vec<RunBox>,
     opts: ViewOptions,
     /// Per-view buffers of views already drawn, for the next views to reuse.
     buffers: ViewBuffersPool,
@@ -124,14 +125,14 @@ impl<'a> PreparedCloud<'a> {
             .par_iter()
             .map(|&i| cloud.positions[i as usize])
             .collect();
-        let run_centres = run_centres(&positions);
+        let runs = run_boxes(&positions);
         let colours = ShadingColours::new(cloud, &order);
         Ok(Self {
             cloud,
             capture: cloud.camera_positions(),
             colours,
             positions,
-            run_centres,
+            runs,
             opts: opts.for_cloud(cloud),
             buffers: ViewBuffersPool::default(),
         })
@@ -156,7 +157,7 @@ impl<'a> PreparedCloud<'a> {
         match opts.point_shape {
             PointShape::Cube => draw_cubes(
                 &self.positions,
-                &self.run_centres,
+                &self.runs,
                 &view,
                 0.5 * opts.point_size,
                 zbuf,
@@ -240,15 +241,25 @@ fn disc_radius(point_size: f32) -> f32 {
 /// Points in a run that the cube pass orders as one (by the run's centre).
 const RUN: usize = 256;
 
-/// Runs a thread of the cube pass takes at a time.
-const RUNS_TAKEN: usize = 4;
-
 /// Cubes the cube pass moves into camera space and bounds on the screen at once (one AVX2
 /// vector of f32).
 const CUBE_LANES: usize = 8;
 
-/// The centres of the runs of [`RUN`] consecutive `positions` (the middle of each run's box).
-fn run_centres(positions: &[Vec3]) -> Vec<Vec3> {
+/// The box of the points of one run of [`RUN`] consecutive positions.
+#[derive(Clone, Copy, Debug)]
+struct RunBox {
+    lo: Vec3,
+    hi: Vec3,
+}
+
+impl RunBox {
+    fn centre(self) -> Vec3 {
+        0.5 * (self.lo + self.hi)
+    }
+}
+
+/// The boxes of the runs of [`RUN`] consecutive `positions`.
+fn run_boxes(positions: &[Vec3]) -> Vec<RunBox> {
     positions
         .par_chunks(RUN)
         .map(|run| {
@@ -256,67 +267,90 @@ fn run_centres(positions: &[Vec3]) -> Vec<Vec3> {
                 (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
                 |(lo, hi), &p| (lo.min(p), hi.max(p)),
             );
-            0.5 * (lo + hi)
+            RunBox { lo, hi }
         })
         .collect()
 }
 
+/// Bands of rows the cube pass cuts a view's z-buffer into: each band is drawn by one thread
+/// alone, with plain stores ([`ZBand`]), the bands of a view in parallel.
+const BANDS: usize = 4;
+
 /// Visibility pass for cubes of half-side `h` centred on `positions` (whose runs of [`RUN`]
-/// have the centres `runs`): each pixel whose centre ray hits a cube records the entry depth
+/// have the boxes `runs`): each pixel whose centre ray hits a cube records the entry depth
 /// (camera z) of the nearest hit and the cube's index.
-fn draw_cubes(positions: &[Vec3], runs: &[Vec3], view: &ViewCamera, h: f32, zbuf: &ZBuffer) {
+fn draw_cubes(positions: &[Vec3], runs: &[RunBox], view: &ViewCamera, h: f32, zbuf: &mut ZBuffer) {
     draw_cubes_using(positions, runs, view, h, zbuf, has_avx2());
 }
 
 /// [`draw_cubes`] with the AVX2 instantiation or without it.
 ///
-/// The runs are drawn nearest first, handed out in that order to the threads that draw the
-/// view, so by the time a run on the far side of the object comes, the near side usually covers
-/// its cubes' rectangles and most of them are skipped ([`ZBuffer::all_nearer`]). The z-buffer
-/// ends the same in any order: it keeps the least (depth, rank) key of each pixel.
+/// The z-buffer is cut into [`BANDS`] bands of rows, drawn in parallel, each by one thread. A
+/// band draws the runs whose box reaches its rows, nearest first, so by the time a run on the
+/// far side of the object comes, the near side usually covers its cubes' rectangles and most of
+/// them are skipped ([`ZBand::all_nearer`]). The z-buffer ends the same in any order and for any
+/// bands: it keeps the least (depth, rank) key of each pixel.
 fn draw_cubes_using(
     positions: &[Vec3],
-    runs: &[Vec3],
+    runs: &[RunBox],
     view: &ViewCamera,
     h: f32,
-    zbuf: &ZBuffer,
+    zbuf: &mut ZBuffer,
     avx2: bool,
 ) {
     let r = view.rotation;
-    // Camera-space half-extents of a world-axis-aligned cube: |R|·(h, h, h).
-    let extent = Vec3::new(
-        h * (r.x_axis.x.abs() + r.y_axis.x.abs() + r.z_axis.x.abs()),
-        h * (r.x_axis.y.abs() + r.y_axis.y.abs() + r.z_axis.y.abs()),
-        h * (r.x_axis.z.abs() + r.y_axis.z.abs() + r.z_axis.z.abs()),
-    );
+    // Camera-space half-extents of a world-axis-aligned box of half-sides `half`: |R|·half.
+    let extent_of = |half: Vec3| {
+        Vec3::new(
+            r.x_axis.x.abs() * half.x + r.y_axis.x.abs() * half.y + r.z_axis.x.abs() * half.z,
+            r.x_axis.y.abs() * half.x + r.y_axis.y.abs() * half.y + r.z_axis.y.abs() * half.z,
+            r.x_axis.z.abs() * half.x + r.y_axis.z.abs() * half.y + r.z_axis.z.abs() * half.z,
+        )
+    };
     let cubes = Cubes {
         view,
         h,
-        extent,
-        zbuf,
+        extent: Vec3::new(
+            h * (r.x_axis.x.abs() + r.y_axis.x.abs() + r.z_axis.x.abs()),
+            h * (r.x_axis.y.abs() + r.y_axis.y.abs() + r.z_axis.y.abs()),
+            h * (r.x_axis.z.abs() + r.y_axis.z.abs() + r.z_axis.z.abs()),
+        ),
     };
-    let depth = |c: Vec3| (view.rotation * c + view.translation).z;
-    let mut order: Vec<(f32, u32)> = runs
+    // Each run nearest first, with the rows its cubes can reach: those of its box (the points'
+    // box grown by the cube's half-side) in camera space, grown again by a margin far above the
+    // rounding of the cubes' own boxes, so that it holds each cube's rectangle; every row when
+    // the box reaches behind the camera (its cubes are then bounded one by one), none when it
+    // is off the image.
+    let all_rows = (0, view.height);
+    let mut order: Vec<(f32, u32, (u32, u32))> = runs
         .iter()
         .enumerate()
-        .map(|(run, &c)| (depth(c), run as u32))
+        .map(|(run, b)| {
+            let centre = view.rotation * b.centre() + view.translation;
+            let half = extent_of(0.5 * (b.hi - b.lo) + Vec3::splat(h));
+            let margin = half * 1e-4 + Vec3::splat(1e-4 * (h + centre.abs().max_element()));
+            let (lo, hi) = (centre - half - margin, centre + half + margin);
+            let rows = if lo.z > 0.0 {
+                view.pixel_range(lo, hi)
+                    .map_or((1, 0), |(_, _, y0, y1)| (y0, y1 + 1))
+            } else {
+                all_rows
+            };
+            (centre.z, run as u32, rows)
+        })
         .collect();
     order.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-    // Each thread takes the nearest runs not yet taken, a few at a time (rayon's halving of a
-    // range would start the second thread half-way back).
-    let next = AtomicUsize::new(0);
-    (0..rayon::current_num_threads())
+    let rows_per_band = (view.height as usize).div_ceil(BANDS);
+    zbuf.bands_mut(rows_per_band)
         .into_par_iter()
-        .for_each(|_| {
-            loop {
-                let k = next.fetch_add(RUNS_TAKEN, Ordering::Relaxed);
-                if k >= order.len() {
-                    break;
-                }
-                for &(_, run) in &order[k..(k + RUNS_TAKEN).min(order.len())] {
+        .for_each(|mut band| {
+            let rows = band.rows();
+            let (b0, b1) = (rows.start as u32, rows.end as u32);
+            for &(_, run, (y0, y1)) in &order {
+                if y0.max(b0) < y1.min(b1) {
                     let first = run as usize * RUN;
                     let points = &positions[first..(first + RUN).min(positions.len())];
-                    cubes.draw(points, first, avx2);
+                    cubes.draw(points, first, &mut band, avx2);
                 }
             }
         });
@@ -335,37 +369,38 @@ struct Cubes<'a> {
     h: f32,
     /// Camera-space half-extents of the cube's bounding box.
     extent: Vec3,
-    zbuf: &'a ZBuffer,
 }
 
 impl Cubes<'_> {
-    /// Draws the cubes centred on `points`, the first of rank `first`: the AVX2 instantiation
-    /// where the CPU has it (rounding and division become single instructions instead of
-    /// library calls), else the portable one; the same operations in the same order, so the
-    /// same bits either way.
-    fn draw(&self, points: &[Vec3], first: usize, avx2: bool) {
+    /// Draws the parts in `band` of the cubes centred on `points`, the first of rank `first`:
+    /// the AVX2 instantiation where the CPU has it (rounding and division become single
+    /// instructions instead of library calls), else the portable one; the same operations in
+    /// the same order, so the same bits either way.
+    fn draw(&self, points: &[Vec3], first: usize, band: &mut ZBand<'_>, avx2: bool) {
         #[cfg(target_arch = "x86_64")]
         if avx2 {
             // SAFETY: `avx2` is only true when `has_avx2()` is, so the CPU has AVX2.
             #[allow(unsafe_code)]
-            return unsafe { self.draw_avx2(points, first) };
+            return unsafe { self.draw_avx2(points, first, band) };
         }
         let _ = avx2;
-        self.draw_portable(points, first);
+        self.draw_portable(points, first, band);
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    fn draw_avx2(&self, points: &[Vec3], first: usize) {
-        self.draw_portable(points, first);
+    fn draw_avx2(&self, points: &[Vec3], first: usize, band: &mut ZBand<'_>) {
+        self.draw_portable(points, first, band);
     }
 
     /// The cubes are moved into camera space and bounded on the screen [`CUBE_LANES`] at a
     /// time (bounding 3 million cubes a view one at a time, four divisions each, took a fifth
-    /// of the pass), then drawn one by one.
+    /// of the pass), then drawn one by one, each over the rows of its rectangle in the band.
     #[inline(always)]
-    fn draw_portable(&self, points: &[Vec3], first: usize) {
+    fn draw_portable(&self, points: &[Vec3], first: usize, band: &mut ZBand<'_>) {
         let extent = self.extent;
+        let rows = band.rows();
+        let (b0, b1) = (rows.start as u32, rows.end as u32 - 1);
         for (g, group) in points.chunks(CUBE_LANES).enumerate() {
             // A short last group repeats its first point in the spare lanes.
             let lanes: [Vec3; CUBE_LANES] =
@@ -375,47 +410,54 @@ impl Cubes<'_> {
             let hi = std::array::from_fn(|axis| centres[axis].map(|c| c + extent[axis]));
             let ranges = self.view.pixel_ranges(lo, hi);
             for (l, &p) in group.iter().enumerate() {
-                if let Some(range) = ranges[l] {
-                    let rank = (first + g * CUBE_LANES + l) as u32;
-                    self.draw_cube(p, lo[2][l], range, rank);
+                if let Some((x0, x1, y0, y1)) = ranges[l] {
+                    let (y0, y1) = (y0.max(b0), y1.min(b1));
+                    if y0 <= y1 {
+                        let rank = (first + g * CUBE_LANES + l) as u32;
+                        self.draw_cube(p, lo[2][l], (x0, x1, y0, y1), rank, band);
+                    }
                 }
             }
         }
     }
 
-    /// Draws the cube centred on `p` whose camera-space box starts at depth `near` and whose
-    /// pixel rectangle is `(x0, x1, y0, y1)`.
+    /// Draws the cube centred on `p` whose camera-space box starts at depth `near` over the
+    /// pixel rectangle `(x0, x1, y0, y1)` (its rows inside `band`).
     #[inline(always)]
-    fn draw_cube(&self, p: Vec3, near: f32, (x0, x1, y0, y1): (u32, u32, u32, u32), rank: u32) {
+    fn draw_cube(
+        &self,
+        p: Vec3,
+        near: f32,
+        (x0, x1, y0, y1): (u32, u32, u32, u32),
+        rank: u32,
+        band: &mut ZBand<'_>,
+    ) {
         let view = self.view;
         let bound = near * DEPTH_BOUND_SLACK;
         // A cube behind everything its rectangle already holds cannot win a pixel: skip
         // its slab tests (the z-buffer ends the same whatever the order of the cubes).
-        if self.zbuf.all_nearer(
+        if band.all_nearer(
             bound,
             (x0 as usize, x1 as usize),
             (y0 as usize, y1 as usize),
         ) {
             return;
         }
-        // Slab test in world axes, relative to the camera centre for precision.
+        // Slab test in world axes, relative to the camera centre for precision; every pixel of
+        // the rectangle is tested and the nearer key kept without a branch (testing first
+        // whether a pixel already holds something nearer was a branch mispredicted as often
+        // as not).
         let rel = p - view.center;
         let (lo, hi) = (rel - self.h, rel + self.h);
         for y in y0..=y1 {
             for x in x0..=x1 {
-                // Nor can it win a pixel that holds something nearer than its box.
-                if self.zbuf.nearer(x, y, bound) {
-                    continue;
-                }
                 let d = view.world_ray(x, y);
                 let inv = d.recip();
                 let t0 = lo * inv;
                 let t1 = hi * inv;
                 let near = t0.min(t1).max_element();
                 let far = t0.max(t1).min_element();
-                if near <= far && near > 0.0 {
-                    self.zbuf.insert(x, y, near, rank);
-                }
+                band.keep_nearer(x, y as usize, near <= far && near > 0.0, near, rank);
             }
         }
     }
@@ -584,8 +626,8 @@ mod tests {
         ] {
             let cam = camera(eye, DVec3::new(2.0, 1.0, -12.0), 96, 96, 25.0);
             let view = ViewCamera::new(&cam).unwrap();
-            let zbuf = ZBuffer::new(view.width as usize, view.height as usize);
-            draw_cubes(&pts, &run_centres(&pts), &view, h, &zbuf);
+            let mut zbuf = ZBuffer::new(view.width as usize, view.height as usize);
+            draw_cubes(&pts, &run_boxes(&pts), &view, h, &mut zbuf);
             let expected = brute_force_z_buffer(&pts, &view, h);
             let mut covered = 0;
             for (pixel, want) in expected.iter().enumerate() {
@@ -614,10 +656,11 @@ mod tests {
             let cam = camera(eye, DVec3::new(0.3, -0.2, 0.1), w, w, 40.0);
             let view = ViewCamera::new(&cam).unwrap();
             let (width, height) = (view.width as usize, view.height as usize);
-            let (portable, vector) = (ZBuffer::new(width, height), ZBuffer::new(width, height));
-            let runs = run_centres(&pts);
-            draw_cubes_using(&pts, &runs, &view, h, &portable, false);
-            draw_cubes_using(&pts, &runs, &view, h, &vector, has_avx2());
+            let mut portable = ZBuffer::new(width, height);
+            let mut vector = ZBuffer::new(width, height);
+            let runs = run_boxes(&pts);
+            draw_cubes_using(&pts, &runs, &view, h, &mut portable, false);
+            draw_cubes_using(&pts, &runs, &view, h, &mut vector, has_avx2());
             let mut covered = 0;
             for pixel in 0..view.pixels() {
                 let (x, y) = (pixel % width, pixel / width);
