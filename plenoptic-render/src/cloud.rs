@@ -272,9 +272,11 @@ fn run_boxes(positions: &[Vec3]) -> Vec<RunBox> {
         .collect()
 }
 
-/// Bands of rows the cube pass cuts a view's z-buffer into: each band is drawn by one thread
-/// alone, with plain stores ([`ZBand`]), the bands of a view in parallel.
-const BANDS: usize = 4;
+/// Fewest bands of rows the cube pass cuts a view's z-buffer into (more on a machine with more
+/// threads, one a thread): each band is drawn by one thread alone, with plain stores
+/// ([`ZBand`]), the bands of a view in parallel. A run whose box straddles bands is projected
+/// in each, so fewer, taller bands repeat less.
+const MIN_BANDS: usize = 4;
 
 /// Visibility pass for cubes of half-side `h` centred on `positions` (whose runs of [`RUN`]
 /// have the boxes `runs`): each pixel whose centre ray hits a cube records the entry depth
@@ -285,7 +287,8 @@ fn draw_cubes(positions: &[Vec3], runs: &[RunBox], view: &ViewCamera, h: f32, zb
 
 /// [`draw_cubes`] with the AVX2 instantiation or without it.
 ///
-/// The z-buffer is cut into [`BANDS`] bands of rows, drawn in parallel, each by one thread. A
+/// The z-buffer is cut into bands of rows ([`MIN_BANDS`] or more), drawn in parallel, each by
+/// one thread. A
 /// band draws the runs whose box reaches its rows, nearest first, so by the time a run on the
 /// far side of the object comes, the near side usually covers its cubes' rectangles and most of
 /// them are skipped ([`ZBand::all_nearer`]). The z-buffer ends the same in any order and for any
@@ -340,7 +343,8 @@ fn draw_cubes_using(
         })
         .collect();
     order.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-    let rows_per_band = (view.height as usize).div_ceil(BANDS);
+    let bands = MIN_BANDS.max(rayon::current_num_threads());
+    let rows_per_band = (view.height as usize).div_ceil(bands);
     zbuf.bands_mut(rows_per_band)
         .into_par_iter()
         .for_each(|mut band| {
@@ -641,6 +645,33 @@ mod tests {
                 "the spheres cover {covered} pixels only from {eye}"
             );
         }
+    }
+
+    /// The bands follow the thread count (four, or one a thread): one, three and eight threads
+    /// write the same z-buffer, spans included, from a view whose image is cut by the bands
+    /// through the sphere.
+    #[test]
+    fn cube_pass_is_the_same_on_any_thread_count() {
+        let pts = voxel_sphere(20.0);
+        let runs = run_boxes(&pts);
+        let cam = camera(DVec3::new(60.0, -40.0, 90.0), DVec3::ZERO, 157, 149, 35.0);
+        let view = ViewCamera::new(&cam).unwrap();
+        let (w, h) = (view.width as usize, view.height as usize);
+        let draw = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let mut zbuf = ZBuffer::new(w, h);
+            pool.install(|| draw_cubes(&pts, &runs, &view, 0.5, &mut zbuf));
+            let cells: Vec<_> = (0..w * h).map(|p| zbuf.get(p % w, p / w)).collect();
+            let spans: Vec<_> = (0..h).map(|y| zbuf.row_span(y)).collect();
+            (cells, spans)
+        };
+        let one = draw(1);
+        assert!(one.0.iter().filter(|c| c.is_some()).count() > 2000);
+        assert_eq!(draw(3), one);
+        assert_eq!(draw(8), one);
     }
 
     #[test]

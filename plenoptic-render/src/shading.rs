@@ -87,15 +87,23 @@ impl ShadingColours {
         let store = match (main, per_camera) {
             (Some(main), Some(per_camera)) => {
                 let mut bytes = vec![0u8; order.len() * stride];
+                let camera_bytes = |i: usize| &per_camera[3 * cameras * i..3 * cameras * (i + 1)];
                 bytes
-                    .par_chunks_mut(stride)
-                    .zip(order.par_iter())
-                    .with_min_len(CHUNK)
-                    .for_each(|(out, &i)| {
-                        let i = i as usize;
-                        let (head, tail) = out.split_at_mut(3);
-                        head.copy_from_slice(&main[3 * i..3 * i + 3]);
-                        tail.copy_from_slice(&per_camera[3 * cameras * i..3 * cameras * (i + 1)]);
+                    .par_chunks_mut(stride * CHUNK)
+                    .zip(order.par_chunks(CHUNK))
+                    .for_each(|(out, ranks)| {
+                        for (k, (out, &i)) in out.chunks_exact_mut(stride).zip(ranks).enumerate() {
+                            // A synthetic frame's file order is random, so each point's levels
+                            // are a cache miss of their own: ask for those of a later point.
+                            if let Some(&ahead) = ranks.get(k + PREFETCH_AHEAD) {
+                                prefetch(camera_bytes(ahead as usize));
+                                prefetch(&main[3 * ahead as usize..3 * ahead as usize + 3]);
+                            }
+                            let i = i as usize;
+                            let (head, tail) = out.split_at_mut(3);
+                            head.copy_from_slice(&main[3 * i..3 * i + 3]);
+                            tail.copy_from_slice(camera_bytes(i));
+                        }
                     });
                 Store::Levels(bytes)
             }

@@ -123,13 +123,13 @@ struct Spans {
 /// Reusable buffers for SSIM at one image size: no allocation per evaluation once warm.
 ///
 /// The passes run band by band: each band of rows streams its horizontal window sums, its map
-/// rows and their partials' horizontal sums through rings of [`TAPS`] rows, so that what the
-/// vertical passes read was written a few rows earlier and is still in cache (whole-image
-/// buffers of the eight quantities, 100 MB at 1024², were written out and read back from
-/// memory, and the vertical pass waited on each newly read row). A band also works out the rows
-/// just outside it that its own rows' windows reach, which its neighbours work out too: the
-/// same operations on the same values, so every value, and the result, is the same bit for bit
-/// whatever the bands.
+/// rows and their partials' horizontal sums through rings of 11 rows (the window's height), so
+/// that what the vertical passes read was written a few rows earlier and is still in cache
+/// (whole-image buffers of the eight quantities, 100 MB at 1024², were written out and read
+/// back from memory, and the vertical pass waited on each newly read row). A band also works
+/// out the rows just outside it that its own rows' windows reach, which its neighbours work out
+/// too: the same operations on the same values, so every value, and the result, is the same
+/// bit for bit whatever the bands.
 #[derive(Debug)]
 pub struct Ssim {
     width: usize,
