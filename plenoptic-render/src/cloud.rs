@@ -288,11 +288,10 @@ fn draw_cubes(positions: &[Vec3], runs: &[RunBox], view: &ViewCamera, h: f32, zb
 /// [`draw_cubes`] with the AVX2 instantiation or without it.
 ///
 /// The z-buffer is cut into bands of rows ([`MIN_BANDS`] or more), drawn in parallel, each by
-/// one thread. A
-/// band draws the runs whose box reaches its rows, nearest first, so by the time a run on the
-/// far side of the object comes, the near side usually covers its cubes' rectangles and most of
-/// them are skipped ([`ZBand::all_nearer`]). The z-buffer ends the same in any order and for any
-/// bands: it keeps the least (depth, rank) key of each pixel.
+/// one thread. A band draws the runs whose box reaches its rows, nearest first, so by the time
+/// a run on the far side of the object comes, the near side usually covers its cubes'
+/// rectangles and most of them are skipped ([`ZBand::all_nearer`]). The z-buffer ends the same
+/// in any order and for any bands: it keeps the least (depth, rank) key of each pixel.
 fn draw_cubes_using(
     positions: &[Vec3],
     runs: &[RunBox],
