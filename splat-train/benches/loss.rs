@@ -8,6 +8,7 @@
 use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};
+use splat_train::Photometric;
 use splat_train::loss::Loss;
 
 /// A reference and a render of `size`² pixels: the same background, a disc of texture that the
@@ -48,7 +49,7 @@ fn loss(c: &mut Criterion) {
     let (reference, render) = images(size);
     let mut loss = Loss::new(size as u32, size as u32);
     c.bench_function("loss_l1_dssim_1024", |b| {
-        b.iter(|| black_box(loss.evaluate(black_box(&render), &reference, 0.2)));
+        b.iter(|| black_box(loss.evaluate(black_box(&render), &reference, Photometric::L1, 0.2)));
     });
 }
 

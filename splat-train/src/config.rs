@@ -121,6 +121,20 @@ impl Warmup {
     }
 }
 
+/// The photometric term of the training loss, (1 − λ)·term + λ·D-SSIM.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Photometric {
+    /// Mean absolute error (3DGS paper, Eq. 7): every pixel pulls with the same strength.
+    #[default]
+    L1,
+    /// Root mean squared error √(mean (r − g)²), the measure PSNR is a logarithm of: a pixel
+    /// pulls in proportion to its error, so the few large errors (silhouettes composited on
+    /// a random background) weigh more than under L1. Its gradient, (r − g)/(n·RMSE), has
+    /// about the L1's mean size, so λ keeps its meaning.
+    L2,
+}
+
 /// Background colour composited behind the splats.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub enum Background {
@@ -143,6 +157,9 @@ pub struct TrainConfig {
     pub adam: AdamParams,
     /// Weight λ of the D-SSIM term (Inria 0.2).
     pub ssim_weight: f32,
+    /// The photometric term beside it (L1 where a checkpoint of an older build names none).
+    #[serde(default)]
+    pub photometric: Photometric,
     /// Highest SH degree trained; `None` = the model's degree.
     pub sh_degree: Option<u32>,
     /// One more SH band every this many iterations (Inria 1000); 0 = all bands from the start.
@@ -173,6 +190,7 @@ impl Default for TrainConfig {
             lr: LearningRates::default(),
             adam: AdamParams::default(),
             ssim_weight: 0.2,
+            photometric: Photometric::L1,
             sh_degree: None,
             sh_degree_interval: 1000,
             frozen: Frozen::default(),

@@ -57,7 +57,9 @@ pub use budget::{
     BudgetConfig, BudgetPlan, BudgetRound, BudgetSearch, GENTLER_COST_SHARE, HeldoutPsnr,
     RoundError, RoundSeconds, SCORE_POINTS, SkippedRound,
 };
-pub use config::{Background, DensifyConfig, Frozen, LearningRates, TrainConfig, Warmup};
+pub use config::{
+    Background, DensifyConfig, Frozen, LearningRates, Photometric, TrainConfig, Warmup,
+};
 pub use dataset::{Dataset, DatasetError, read_dataset};
 pub use error::Error;
 pub use eval::{

@@ -1,7 +1,9 @@
-//! The photometric training loss (1 − λ)·L1 + λ·(1 − SSIM) (3DGS paper Eq. 7) and its gradient.
+//! The photometric training loss (1 − λ)·L1 + λ·(1 − SSIM) (3DGS paper Eq. 7), or with the
+//! root mean squared error in place of L1 ([`Photometric`]), and its gradient.
 
 use rayon::prelude::*;
 
+use crate::config::Photometric;
 use crate::ssim::Ssim;
 
 /// Value of one evaluation of the loss, with its parts.
@@ -13,11 +15,12 @@ pub struct LossValue {
     pub l1: f64,
     /// Mean SSIM over all pixels and channels.
     pub ssim: f64,
-    /// Mean squared error (for PSNR, not part of the objective).
+    /// Mean squared error (for PSNR; its root is the objective's photometric term under
+    /// [`Photometric::L2`]).
     pub mse: f64,
 }
 
-/// Lanes of the L1 pass's partial sums.
+/// Lanes of the photometric passes' partial sums.
 const LANES: usize = 8;
 
 /// The L1 pass over one chunk: writes ∂L1/∂render (±`k`, 0 where equal) into `d` and returns
@@ -44,6 +47,35 @@ fn l1_chunk_avx2(d: &mut [f32], r: &[f32], g: &[f32], k: f32) -> (f64, f64) {
 /// the end: one running sum was a chain of dependent f64 additions, one value at a time.
 #[inline(always)]
 fn l1_chunk_impl(d: &mut [f32], r: &[f32], g: &[f32], k: f32) -> (f64, f64) {
+    error_sums(d, r, g, |e| {
+        // Branch-free sign: k, −k or 0 (also for NaN, as the comparisons fail).
+        (if e > 0.0 { k } else { 0.0 }) - if e < 0.0 { k } else { 0.0 }
+    })
+}
+
+/// The squared-error pass over one chunk: writes the error r − g into `d` (scaled into the
+/// RMSE's gradient once the whole image's sum is known) and returns the sums of
+/// [`l1_chunk`]. The AVX2 instantiation where the CPU has it.
+fn error_chunk(d: &mut [f32], r: &[f32], g: &[f32], avx2: bool) -> (f64, f64) {
+    #[cfg(target_arch = "x86_64")]
+    if avx2 {
+        // SAFETY: `avx2` is only true when `has_avx2()` is, so the CPU supports the enabled features.
+        #[allow(unsafe_code)]
+        return unsafe { error_chunk_avx2(d, r, g) };
+    }
+    let _ = avx2;
+    error_sums(d, r, g, |e| e)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn error_chunk_avx2(d: &mut [f32], r: &[f32], g: &[f32]) -> (f64, f64) {
+    error_sums(d, r, g, |e| e)
+}
+
+/// Σ|r − g| and Σ(r − g)² over one chunk in f64, writing `grad(r − g)` into `d`.
+#[inline(always)]
+fn error_sums(d: &mut [f32], r: &[f32], g: &[f32], grad: impl Fn(f32) -> f32) -> (f64, f64) {
     let n = d.len().min(r.len()).min(g.len());
     let (mut a, mut s) = ([0.0_f64; LANES], [0.0_f64; LANES]);
     let whole = n - n % LANES;
@@ -51,8 +83,7 @@ fn l1_chunk_impl(d: &mut [f32], r: &[f32], g: &[f32], k: f32) -> (f64, f64) {
         let e = r - g;
         *a += f64::from(e.abs());
         *s += f64::from(e * e);
-        // Branch-free sign: k, −k or 0 (also for NaN, as the comparisons fail).
-        *d = if e > 0.0 { k } else { 0.0 } - if e < 0.0 { k } else { 0.0 };
+        *d = grad(e);
     };
     for ((d, r), g) in d[..whole]
         .chunks_exact_mut(LANES)
@@ -68,6 +99,9 @@ fn l1_chunk_impl(d: &mut [f32], r: &[f32], g: &[f32], k: f32) -> (f64, f64) {
     }
     (a.iter().sum(), s.iter().sum())
 }
+
+/// Values per parallel task of the photometric pass.
+const CHUNK: usize = 4096;
 
 /// Reusable buffers for the loss at one image size.
 #[derive(Debug)]
@@ -100,35 +134,63 @@ impl Loss {
         self.ssim.height()
     }
 
-    /// Evaluates the loss of `render` against `image` with D-SSIM weight `lambda` and leaves
-    /// ∂loss/∂render in [`Loss::d_rgb`].
+    /// Evaluates the loss of `render` against `image`, (1 − `lambda`)·`photometric` +
+    /// `lambda`·D-SSIM, and leaves ∂loss/∂render in [`Loss::d_rgb`].
     ///
     /// # Panics
     /// If the image sizes do not match the buffers (a caller bug).
-    pub fn evaluate(&mut self, render: &[f32], image: &[f32], lambda: f32) -> LossValue {
+    pub fn evaluate(
+        &mut self,
+        render: &[f32],
+        image: &[f32],
+        photometric: Photometric,
+        lambda: f32,
+    ) -> LossValue {
         let n = render.len();
         let k = (1.0 - lambda) / n as f32;
-        // L1 part: d|r − g|/dr = sign(r − g), 0 at equality (PyTorch's subgradient).
         // Partial sums per chunk, added in order so the value does not depend on scheduling.
         let avx2 = splat_core::has_avx2();
-        self.d_rgb
-            .par_chunks_mut(4096)
-            .zip(render.par_chunks(4096).zip(image.par_chunks(4096)))
-            .map(|(d, (r, g))| l1_chunk(d, r, g, k, avx2))
-            .collect_into_vec(&mut self.partials);
-        let (l1, mse) = self
+        let chunks = self
+            .d_rgb
+            .par_chunks_mut(CHUNK)
+            .zip(render.par_chunks(CHUNK).zip(image.par_chunks(CHUNK)));
+        match photometric {
+            // d|r − g|/dr = sign(r − g), 0 at equality (PyTorch's subgradient).
+            Photometric::L1 => chunks
+                .map(|(d, (r, g))| l1_chunk(d, r, g, k, avx2))
+                .collect_into_vec(&mut self.partials),
+            Photometric::L2 => chunks
+                .map(|(d, (r, g))| error_chunk(d, r, g, avx2))
+                .collect_into_vec(&mut self.partials),
+        }
+        let (abs_sum, sq_sum) = self
             .partials
             .iter()
             .fold((0.0, 0.0), |a, p| (a.0 + p.0, a.1 + p.1));
+        let (l1, mse) = (abs_sum / n as f64, sq_sum / n as f64);
+        let term = match photometric {
+            Photometric::L1 => l1,
+            Photometric::L2 => {
+                // d√(mean e²)/dr = e / (n·RMSE); at RMSE 0 every error is 0 and so is the
+                // gradient (the subgradient 0 of the norm at its minimum).
+                let rmse = mse.sqrt();
+                let scale = if rmse > 0.0 { k / rmse as f32 } else { 0.0 };
+                self.d_rgb.par_chunks_mut(CHUNK).for_each(|d| {
+                    for v in d {
+                        *v *= scale;
+                    }
+                });
+                rmse
+            }
+        };
         let ssim = self
             .ssim
             .evaluate(render, image, Some((-lambda, &mut self.d_rgb)));
-        let l1 = l1 / n as f64;
         LossValue {
-            total: f64::from(1.0 - lambda) * l1 + f64::from(lambda) * (1.0 - ssim),
+            total: f64::from(1.0 - lambda) * term + f64::from(lambda) * (1.0 - ssim),
             l1,
             ssim,
-            mse: mse / n as f64,
+            mse,
         }
     }
 
@@ -186,7 +248,7 @@ mod tests {
             .map(|&v| v + 0.2 * (rng.random::<f32>() - 0.5))
             .collect();
         let mut loss = Loss::new(w, h);
-        let v = loss.evaluate(&render, &image, 0.2);
+        let v = loss.evaluate(&render, &image, Photometric::L1, 0.2);
         let grad = loss.d_rgb().to_vec();
         let l1: f64 = render
             .iter()
@@ -202,13 +264,61 @@ mod tests {
             }
             let mut p = render.clone();
             p[i] += eps;
-            let fp = loss.evaluate(&p, &image, 0.2).total;
+            let fp = loss.evaluate(&p, &image, Photometric::L1, 0.2).total;
             p[i] -= 2.0 * eps;
-            let fm = loss.evaluate(&p, &image, 0.2).total;
+            let fm = loss.evaluate(&p, &image, Photometric::L1, 0.2).total;
             let fd = (fp - fm) / f64::from(2.0 * eps);
             let err = (fd - f64::from(grad[i])).abs() * n as f64;
             assert!(err < 0.05, "pixel {i}: fd {fd} analytic {}", grad[i]);
         }
+    }
+
+    /// The root-mean-squared term: its value against an f64 sum, its gradient (with the
+    /// D-SSIM's) against central differences at every pixel (no kink away from zero error).
+    #[test]
+    fn squared_error_gradient_matches_finite_differences() {
+        let (w, h) = (16u32, 11u32);
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(21);
+        let n = 3 * (w * h) as usize;
+        let image: Vec<f32> = (0..n).map(|_| rng.random::<f32>()).collect();
+        let render: Vec<f32> = image
+            .iter()
+            .map(|&v| v + 0.2 * (rng.random::<f32>() - 0.5))
+            .collect();
+        let mut loss = Loss::new(w, h);
+        let lambda = 0.2;
+        let v = loss.evaluate(&render, &image, Photometric::L2, lambda);
+        let grad = loss.d_rgb().to_vec();
+        let mse: f64 = render
+            .iter()
+            .zip(&image)
+            .map(|(a, b)| f64::from((a - b) * (a - b)))
+            .sum::<f64>()
+            / n as f64;
+        assert!((v.mse - mse).abs() < 1e-12 * mse, "{} against {mse}", v.mse);
+        let want = (1.0 - f64::from(lambda)) * mse.sqrt() + f64::from(lambda) * (1.0 - v.ssim);
+        assert!((v.total - want).abs() < 1e-9, "{} against {want}", v.total);
+        let eps = 1e-3f32;
+        for i in 0..n {
+            let mut p = render.clone();
+            p[i] += eps;
+            let fp = loss.evaluate(&p, &image, Photometric::L2, lambda).total;
+            p[i] -= 2.0 * eps;
+            let fm = loss.evaluate(&p, &image, Photometric::L2, lambda).total;
+            let fd = (fp - fm) / f64::from(2.0 * eps);
+            let err = (fd - f64::from(grad[i])).abs() * n as f64;
+            assert!(err < 0.02, "pixel {i}: fd {fd} analytic {}", grad[i]);
+        }
+    }
+
+    /// Where the render is the image, the squared term's gradient is 0, not 0/0.
+    #[test]
+    fn squared_error_of_a_perfect_render_has_no_gradient() {
+        let image: Vec<f32> = (0..3 * 8 * 8).map(|i| (i % 7) as f32 / 7.0).collect();
+        let mut loss = Loss::new(8, 8);
+        let v = loss.evaluate(&image, &image, Photometric::L2, 0.0);
+        assert_eq!(v.total, 0.0);
+        assert!(loss.d_rgb().iter().all(|&d| d == 0.0));
     }
 
     #[test]

@@ -614,7 +614,12 @@ impl Trainer {
         let t0 = Instant::now();
         let out = self.rasterizer.forward(&self.state.splats, &cam, &opts);
         let t1 = Instant::now();
-        let value = loss.evaluate(&out.rgb, target_img, self.config.ssim_weight);
+        let value = loss.evaluate(
+            &out.rgb,
+            target_img,
+            self.config.photometric,
+            self.config.ssim_weight,
+        );
         let mut total = value.total;
         let use_alpha = self.config.alpha_loss_weight > 0.0 && view.mask.is_some();
         if let (true, Some(mask)) = (use_alpha, &view.mask) {

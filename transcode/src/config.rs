@@ -86,6 +86,11 @@ pub struct TrainingConfig {
     pub seed: u64,
     /// Weight λ of D-SSIM in the loss (Inria: 0.2).
     pub ssim_weight: f32,
+    /// The loss's photometric term beside D-SSIM: `"l1"` (Inria's mean absolute error) or
+    /// `"l2"` (the root mean squared error, which weighs large errors more: on the demo it
+    /// buys white backgrounds 0.4 dB at equal black, on the spider frame it costs black 0.6 dB;
+    /// docs/benchmarks/fidelity.md §13).
+    pub photometric: splat_train::Photometric,
     /// Weight of the L1 loss of rendered alpha against the reference masks.
     pub alpha_loss: f32,
     /// Train (and evaluate, and flag in the SPZ) with the antialiased opacity compensation of
@@ -125,6 +130,7 @@ impl Default for TrainingConfig {
             time_budget_s: None,
             seed: t.seed,
             ssim_weight: t.ssim_weight,
+            photometric: t.photometric,
             alpha_loss: 0.1,
             antialiased: false,
             warmup_factor: 2,
@@ -256,6 +262,7 @@ impl Config {
             seed: t.seed,
             lr: t.lr,
             ssim_weight: t.ssim_weight,
+            photometric: t.photometric,
             sh_degree: Some(sh_degree),
             // Surface init fits every band to the input's colours: switching the higher ones
             // off for the first steps would train the DC to stand in for them, and switch them
