@@ -11,8 +11,8 @@ use serde::Serialize;
 use splat_core::Splats;
 use splat_train::schedule::next_stop;
 use splat_train::{
-    Background, Dataset, DensifyConfig, HistoryEntry, TrainConfig, TrainReport, Trainer, View,
-    Warmup, evaluate, read_dataset,
+    Background, Dataset, DensifyConfig, HistoryEntry, Photometric, TrainConfig, TrainReport,
+    Trainer, View, Warmup, evaluate, read_dataset,
 };
 
 use atomic_output::write_atomic;
@@ -35,6 +35,15 @@ pub enum BackgroundArg {
     White,
     /// A random colour every step (useful with masks).
     Random,
+}
+
+/// The loss's photometric term beside D-SSIM (`splat_train::Photometric`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum PhotometricArg {
+    /// Mean absolute error (Inria's).
+    L1,
+    /// Root mean squared error: large errors weigh more (docs/pipeline.md).
+    L2,
 }
 
 /// Arguments of `transcode train`.
@@ -94,6 +103,9 @@ pub struct Args {
     /// Background colour.
     #[arg(long, value_enum, default_value_t = BackgroundArg::Black)]
     pub background: BackgroundArg,
+    /// The loss's photometric term beside D-SSIM.
+    #[arg(long, value_enum, default_value_t = PhotometricArg::L1)]
+    pub photometric: PhotometricArg,
     /// Seed of the run.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -384,9 +396,17 @@ struct Settings {
     sh_degree: u32,
     downscale: String,
     background: String,
+    /// Runs started before the setting existed trained with L1.
+    #[serde(default = "l1_name")]
+    photometric: String,
     seed: u64,
     warmup_factor: u32,
     warmup_steps: u32,
+}
+
+/// The name [`Settings`] gives the L1 term.
+fn l1_name() -> String {
+    format!("{:?}", PhotometricArg::L1)
 }
 
 impl Settings {
@@ -408,6 +428,7 @@ impl Settings {
             sh_degree: args.sh_degree,
             downscale: args.downscale.to_string(),
             background: format!("{:?}", args.background),
+            photometric: format!("{:?}", args.photometric),
             seed: args.seed,
             warmup_factor: args.warmup_factor,
             warmup_steps: args.warmup_steps,
@@ -450,6 +471,10 @@ fn train_config(args: &Args) -> TrainConfig {
             BackgroundArg::Black => Background::Fixed([0.0; 3]),
             BackgroundArg::White => Background::Fixed([1.0; 3]),
             BackgroundArg::Random => Background::Random,
+        },
+        photometric: match args.photometric {
+            PhotometricArg::L1 => Photometric::L1,
+            PhotometricArg::L2 => Photometric::L2,
         },
         time_budget: args.time_budget.map(Duration::from_secs_f64),
         history_every: 10,
@@ -590,4 +615,51 @@ fn summary(
         );
     }
     println!("wrote {} and {}", ply.display(), history.display());
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+
+    use super::*;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: Args,
+    }
+
+    fn args(extra: &[&str]) -> Args {
+        let argv = ["train", "data", "--out", "out"]
+            .into_iter()
+            .chain(extra.iter().copied());
+        match Cli::try_parse_from(argv) {
+            Ok(cli) => cli.args,
+            Err(e) => panic!("{e}"),
+        }
+    }
+
+    /// A run started before `--photometric` existed saved no such setting: it resumes as the
+    /// L1 run it was, and an L2 run is told apart from it by that setting alone.
+    #[test]
+    fn settings_saved_without_the_photometric_term_resume_as_l1() {
+        let now = Settings::of(&args(&[]));
+        let mut saved = serde_json::to_value(&now).expect("settings serialise");
+        let Some(fields) = saved.as_object_mut() else {
+            panic!("settings serialise as an object")
+        };
+        assert!(fields.remove("photometric").is_some());
+        let saved: Settings = serde_json::from_value(saved).expect("old settings read");
+        assert_eq!(saved, now);
+        let l2 = Settings::of(&args(&["--photometric", "l2"]));
+        assert_eq!(
+            saved.differences(&l2),
+            vec!["photometric: \"L1\" → \"L2\"".to_string()]
+        );
+        assert_eq!(train_config(&args(&[])).photometric, Photometric::L1);
+        assert_eq!(
+            train_config(&args(&["--photometric", "l2"])).photometric,
+            Photometric::L2
+        );
+    }
 }
