@@ -61,15 +61,18 @@ pub(crate) struct PreparedCloud<'a> {
     buffers: ViewBuffersPool,
 }
 
-/// What drawing one view needs besides its image: the z-buffer, the visible flags and the
-/// visible points' colours by rank. At 1024² supersampled 3× and 3M points that is 75 + 3 +
-/// 38 MB; allocated afresh for each of a frame's 44 views, the pages' first touch (the kernel
-/// zeroing them, one fault a page) and the z-buffer's serial fill cost about a twentieth of the
-/// views' time.
+/// What drawing one view needs besides its image: the z-buffer, the visible flags, the
+/// visible points' colours by rank, and the visible ranks with their shaded colours in rank
+/// order. At 1024² supersampled 3× and 3M points that is 75 + 3 + 38 MB, and 4 + 12 MB for a
+/// view that sees a million points; allocated afresh for each of a frame's 44 views, the pages'
+/// first touch (the kernel zeroing them, one fault a page) and the z-buffer's serial fill cost
+/// about a twentieth of the views' time.
 struct ViewBuffers {
     zbuf: ZBuffer,
     visible: Vec<AtomicBool>,
     colours: Vec<[f32; 3]>,
+    ranks: Vec<u32>,
+    shaded: Vec<[f32; 3]>,
 }
 
 /// Buffers of a finished view, kept for the next view to start. At most one set waits: a
@@ -83,7 +86,8 @@ struct ViewBuffersPool(Mutex<Option<Box<ViewBuffers>>>);
 impl ViewBuffersPool {
     /// A set for a view of `width` × `height` sub-pixels and `points` points: the z-buffer empty
     /// and no point visible. The colours are left as the last view wrote them: a view reads the
-    /// colour of a rank only after it has shaded that rank.
+    /// colour of a rank only after it has shaded that rank; the ranks and shaded colours are
+    /// refilled by each view.
     fn take(&self, width: usize, height: usize, points: usize) -> Box<ViewBuffers> {
         let reused = self.0.lock().unwrap_or_else(PoisonError::into_inner).take();
         match reused {
@@ -102,6 +106,8 @@ impl ViewBuffersPool {
                 zbuf: ZBuffer::new(width, height),
                 visible: (0..points).map(|_| AtomicBool::new(false)).collect(),
                 colours: vec![[0.0; 3]; points],
+                ranks: Vec::new(),
+                shaded: Vec::new(),
             }),
         }
     }
@@ -153,6 +159,8 @@ impl<'a> PreparedCloud<'a> {
             zbuf,
             visible,
             colours,
+            ranks,
+            shaded,
         } = &mut *buffers;
         match opts.point_shape {
             PointShape::Cube => draw_cubes(
@@ -176,13 +184,15 @@ impl<'a> PreparedCloud<'a> {
             }
         });
         // The visible points' ranks, increasing: their colours are read forwards.
-        let ranks: Vec<u32> = visible
-            .par_iter()
-            .with_min_len(CHUNK)
-            .enumerate()
-            .filter(|(_, v)| v.load(Ordering::Relaxed))
-            .map(|(rank, _)| rank as u32)
-            .collect();
+        ranks.clear();
+        ranks.par_extend(
+            visible
+                .par_iter()
+                .with_min_len(CHUNK)
+                .enumerate()
+                .filter(|(_, v)| v.load(Ordering::Relaxed))
+                .map(|(rank, _)| rank as u32),
+        );
         let shader = Shader {
             positions: &self.positions,
             colours: &self.colours,
@@ -191,12 +201,12 @@ impl<'a> PreparedCloud<'a> {
             exponent: opts.exponent,
         };
         let avx2 = has_avx2();
-        let mut shaded = vec![[0.0f32; 3]; ranks.len()];
+        shaded.resize(ranks.len(), [0.0; 3]);
         shaded
             .par_chunks_mut(CHUNK)
             .zip(ranks.par_chunks(CHUNK))
             .for_each(|(out, ranks)| shader.shade(ranks, out, avx2));
-        for (&rank, colour) in ranks.iter().zip(shaded) {
+        for (&rank, &colour) in ranks.iter().zip(shaded.iter()) {
             colours[rank as usize] = colour;
         }
         // Every rank the z-buffer holds is visible, so shaded this view: no stale colour of an
