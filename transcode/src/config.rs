@@ -88,8 +88,8 @@ pub struct TrainingConfig {
     pub ssim_weight: f32,
     /// The loss's photometric term beside D-SSIM: `"l1"` (Inria's mean absolute error) or
     /// `"l2"` (the root mean squared error, which weighs large errors more: on the demo it
-    /// buys white backgrounds 0.4 dB at equal black, on the spider frame it costs black 0.6 dB;
-    /// docs/benchmarks/fidelity.md §13).
+    /// buys white backgrounds 0.4 dB at about equal black, on the spider frame it costs black
+    /// 0.3–0.5 dB; docs/benchmarks/fidelity.md §13).
     pub photometric: splat_train::Photometric,
     /// Weight of the L1 loss of rendered alpha against the reference masks.
     pub alpha_loss: f32,
