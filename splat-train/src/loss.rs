@@ -237,37 +237,55 @@ mod tests {
     use super::*;
     use rand::{RngExt, SeedableRng};
 
-    #[test]
-    fn gradient_matches_finite_differences() {
-        let (w, h) = (16u32, 11u32);
-        let mut rng = rand_pcg::Pcg64::seed_from_u64(9);
-        let n = 3 * (w * h) as usize;
-        let image: Vec<f32> = (0..n).map(|_| rng.random::<f32>()).collect();
-        let render: Vec<f32> = image
+    /// A 16 × 11 reference and a render within ±0.1 of it, from `seed`.
+    fn image_and_render(seed: u64) -> (Vec<f32>, Vec<f32>) {
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
+        let image: Vec<f32> = (0..3 * 16 * 11).map(|_| rng.random::<f32>()).collect();
+        let render = image
             .iter()
             .map(|&v| v + 0.2 * (rng.random::<f32>() - 0.5))
             .collect();
-        let mut loss = Loss::new(w, h);
+        (image, render)
+    }
+
+    /// The loss's central difference in value `i` of the render, over 2·`eps`.
+    fn central_difference(
+        loss: &mut Loss,
+        render: &[f32],
+        image: &[f32],
+        photometric: Photometric,
+        i: usize,
+        eps: f32,
+    ) -> f64 {
+        let mut p = render.to_vec();
+        p[i] += eps;
+        let fp = loss.evaluate(&p, image, photometric, 0.2).total;
+        p[i] -= 2.0 * eps;
+        let fm = loss.evaluate(&p, image, photometric, 0.2).total;
+        (fp - fm) / f64::from(2.0 * eps)
+    }
+
+    /// The mean of `f(r − g)` over the values, in f64.
+    fn mean_of(render: &[f32], image: &[f32], f: impl Fn(f32) -> f64) -> f64 {
+        let sum: f64 = render.iter().zip(image).map(|(a, b)| f(a - b)).sum();
+        sum / render.len() as f64
+    }
+
+    #[test]
+    fn gradient_matches_finite_differences() {
+        let (image, render) = image_and_render(9);
+        let n = image.len();
+        let mut loss = Loss::new(16, 11);
         let v = loss.evaluate(&render, &image, Photometric::L1, 0.2);
         let grad = loss.d_rgb().to_vec();
-        let l1: f64 = render
-            .iter()
-            .zip(&image)
-            .map(|(a, b)| f64::from((a - b).abs()))
-            .sum::<f64>()
-            / n as f64;
+        let l1 = mean_of(&render, &image, |e| f64::from(e.abs()));
         assert!((v.l1 - l1).abs() < 1e-9);
         let eps = 5e-3f32;
         for i in (0..n).step_by(13) {
             if (render[i] - image[i]).abs() < 2.0 * eps {
                 continue; // the L1 kink lies inside the difference interval
             }
-            let mut p = render.clone();
-            p[i] += eps;
-            let fp = loss.evaluate(&p, &image, Photometric::L1, 0.2).total;
-            p[i] -= 2.0 * eps;
-            let fm = loss.evaluate(&p, &image, Photometric::L1, 0.2).total;
-            let fd = (fp - fm) / f64::from(2.0 * eps);
+            let fd = central_difference(&mut loss, &render, &image, Photometric::L1, i, eps);
             let err = (fd - f64::from(grad[i])).abs() * n as f64;
             assert!(err < 0.05, "pixel {i}: fd {fd} analytic {}", grad[i]);
         }
@@ -277,37 +295,19 @@ mod tests {
     /// D-SSIM's) against central differences at every pixel (no kink away from zero error).
     #[test]
     fn squared_error_gradient_matches_finite_differences() {
-        let (w, h) = (16u32, 11u32);
-        let mut rng = rand_pcg::Pcg64::seed_from_u64(21);
-        let n = 3 * (w * h) as usize;
-        let image: Vec<f32> = (0..n).map(|_| rng.random::<f32>()).collect();
-        let render: Vec<f32> = image
-            .iter()
-            .map(|&v| v + 0.2 * (rng.random::<f32>() - 0.5))
-            .collect();
-        let mut loss = Loss::new(w, h);
-        let lambda = 0.2;
-        let v = loss.evaluate(&render, &image, Photometric::L2, lambda);
+        let (image, render) = image_and_render(21);
+        let n = image.len();
+        let mut loss = Loss::new(16, 11);
+        let v = loss.evaluate(&render, &image, Photometric::L2, 0.2);
         let grad = loss.d_rgb().to_vec();
-        let mse: f64 = render
-            .iter()
-            .zip(&image)
-            .map(|(a, b)| f64::from((a - b) * (a - b)))
-            .sum::<f64>()
-            / n as f64;
+        let mse = mean_of(&render, &image, |e| f64::from(e * e));
         assert!((v.mse - mse).abs() < 1e-12 * mse, "{} against {mse}", v.mse);
-        let want = (1.0 - f64::from(lambda)) * mse.sqrt() + f64::from(lambda) * (1.0 - v.ssim);
+        let want = 0.8 * mse.sqrt() + 0.2 * (1.0 - v.ssim);
         assert!((v.total - want).abs() < 1e-9, "{} against {want}", v.total);
-        let eps = 1e-3f32;
-        for i in 0..n {
-            let mut p = render.clone();
-            p[i] += eps;
-            let fp = loss.evaluate(&p, &image, Photometric::L2, lambda).total;
-            p[i] -= 2.0 * eps;
-            let fm = loss.evaluate(&p, &image, Photometric::L2, lambda).total;
-            let fd = (fp - fm) / f64::from(2.0 * eps);
-            let err = (fd - f64::from(grad[i])).abs() * n as f64;
-            assert!(err < 0.02, "pixel {i}: fd {fd} analytic {}", grad[i]);
+        for (i, &g) in grad.iter().enumerate() {
+            let fd = central_difference(&mut loss, &render, &image, Photometric::L2, i, 1e-3);
+            let err = (fd - f64::from(g)).abs() * n as f64;
+            assert!(err < 0.02, "pixel {i}: fd {fd} analytic {g}");
         }
     }
 
