@@ -467,13 +467,14 @@ pub(crate) fn tile_major_index(x: usize, y: usize, tiles_x: u32) -> usize {
 
 /// Whether AVX2 instantiations of hot loops can run on this CPU (detected at run time, so the
 /// binary still runs on any x86-64; always false elsewhere): the tile loops here, and the
-/// trainer's Adam update.
+/// trainer's Adam update. The tile loops also count lanes with POPCNT, which every AVX2 CPU
+/// has; both are checked.
 #[inline]
 #[must_use]
 pub fn has_avx2() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
-        std::arch::is_x86_feature_detected!("avx2")
+        std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("popcnt")
     }
     #[cfg(not(target_arch = "x86_64"))]
     {
@@ -625,13 +626,13 @@ fn composite_tile<S: WeightSink>(
         return unsafe { composite_tile_avx2(list, proj, ext, o, sink) };
     }
     let _ = avx2;
-    composite_tile_impl(list, proj, ext, o, sink)
+    composite_tile_impl::<S, false>(list, proj, ext, o, sink)
 }
 
 /// [`composite_tile_impl`] compiled with AVX2 so LLVM turns each 8-lane half-row into one
 /// 256-bit vector op per step.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
+#[target_feature(enable = "avx2,popcnt")]
 fn composite_tile_avx2<S: WeightSink>(
     list: &[u32],
     proj: &[Projected],
@@ -639,7 +640,7 @@ fn composite_tile_avx2<S: WeightSink>(
     o: TileOut<'_>,
     sink: &mut S,
 ) -> (u64, u64) {
-    composite_tile_impl(list, proj, ext, o, sink)
+    composite_tile_impl::<S, true>(list, proj, ext, o, sink)
 }
 
 /// Composites one tile front to back (Inria `renderCUDA`), splat by splat over the 8-pixel
@@ -648,7 +649,7 @@ fn composite_tile_avx2<S: WeightSink>(
 /// a mask and no branches, so it maps onto one SIMD vector. Returns the (pixel, splat)
 /// evaluations and contributions.
 #[inline(always)]
-fn composite_tile_impl<S: WeightSink>(
+fn composite_tile_impl<S: WeightSink, const AVX2: bool>(
     list: &[u32],
     proj: &[Projected],
     ext: (i32, i32, i32, i32),
@@ -666,22 +667,20 @@ fn composite_tile_impl<S: WeightSink>(
     // Pixels outside the image start as done, so only real pixels are counted; a half-row
     // whose 8 pixels are all done (T spent, or outside the image) is skipped by every later
     // splat, through one bit each in `done_rows`.
-    let mut done = [true; TILE_PIXELS];
+    // (0 or 1 in 32-bit lanes like the colours', so the masks need no packing to bytes.)
+    let mut done = [1_u32; TILE_PIXELS];
     for ly in 0..th as usize {
-        done[ly * ts..ly * ts + tw as usize].fill(false);
+        done[ly * ts..ly * ts + tw as usize].fill(0);
     }
     let mut done_count = [0_u32; HALF_ROWS];
     let mut done_rows = 0_u32;
     for (hr, n) in done_count.iter_mut().enumerate() {
-        *n = done[hr * LANES..(hr + 1) * LANES]
-            .iter()
-            .map(|&x| u32::from(x))
-            .sum();
+        *n = done[hr * LANES..(hr + 1) * LANES].iter().sum();
         if *n == LANES as u32 {
             done_rows |= 1 << hr;
         }
     }
-    let (mut evaluations, mut contributions) = (0_u64, 0_u64);
+    let (mut evaluations, mut contributions) = (0.0_f64, 0_u64);
     let opaque_one = std::hint::black_box(1.0_f32);
     let opaque_zero = std::hint::black_box(0_u32);
     let mut falloff = Falloff::new();
@@ -692,7 +691,7 @@ fn composite_tile_impl<S: WeightSink>(
             prefetch::record(proj, ahead as usize);
         }
         let p = &proj[sid as usize];
-        let spans = RowSpans::new(p, x0, y0, tw, th);
+        let spans = RowSpans::solve::<AVX2>(p, x0, y0, tw, th);
         let tag = k as u32 + 1;
         evaluations += falloff.compute(p, &spans, spans.mask & !done_rows, x0);
         let mut blended = 0;
@@ -700,7 +699,7 @@ fn composite_tile_impl<S: WeightSink>(
             let hr = usize::from(hr);
             let base = hr * LANES;
             // Fixed-size views: one bounds check per half-row, none per lane.
-            let donel: &mut [bool; LANES] = lanes_mut(&mut done, base);
+            let donel: &mut [u32; LANES] = lanes_mut(&mut done, base);
             let tl: &mut [f32; LANES] = lanes_mut(&mut t, base);
             let rl: &mut [f32; LANES] = lanes_mut(&mut cr, base);
             let gl: &mut [f32; LANES] = lanes_mut(&mut cg, base);
@@ -716,7 +715,7 @@ fn composite_tile_impl<S: WeightSink>(
                 let ti = tl[l];
                 let one_m = 1.0 - alpha;
                 let next_t = ti * one_m;
-                let valid = !donel[l] & (alpha >= MIN_ALPHA);
+                let valid = (donel[l] == 0) & (alpha >= MIN_ALPHA);
                 let finish = valid & (next_t < MIN_TRANSMITTANCE);
                 let add = valid & !finish;
                 let w = if add { alpha * ti } else { 0.0 };
@@ -731,7 +730,7 @@ fn composite_tile_impl<S: WeightSink>(
                 // splat's loads cannot forward from them).
                 tl[l] = ti * if add { one_m } else { opaque_one };
                 ll[l] = ll[l].max(if add { tag } else { opaque_zero });
-                donel[l] |= finish;
+                donel[l] |= u32::from(finish);
                 finished += u32::from(finish);
                 contributed += u32::from(add);
             }
@@ -754,7 +753,7 @@ fn composite_tile_impl<S: WeightSink>(
     for (i, px) in o.rgb.iter_mut().enumerate() {
         *px = [cr[i], cg[i], cb[i]];
     }
-    (evaluations, contributions)
+    (evaluations as u64, contributions)
 }
 
 /// How many list entries ahead the tile loops prefetch the projected record: a tile's list is

@@ -22,7 +22,7 @@ use crate::project::{
     ChainView, ProjectedGrad, ProjectedGradLanes, ViewConsts, colour_grad8, project_backward8,
 };
 use crate::rasterize::{DEPTH_MIN_ALPHA, PREFETCH_AHEAD, lanes_mut, tile_extent, tile_major_index};
-use crate::tiles::{Falloff, HALF_ROWS, LANES, RowSpans, TILE_PIXELS, TILE_SIZE};
+use crate::tiles::{Falloff, HALF_ROWS, LANES, RowSpans, TILE_PIXELS, TILE_SIZE, half_row_x};
 use crate::{Rasterizer, RenderCamera, RenderOptions, SplatGrads, SplatGradsMut, Splats, sh};
 
 /// Splats per task of the chain phase.
@@ -330,12 +330,12 @@ impl Rasterizer {
             return unsafe { self.backward_tile_avx2(tile, entries, cam, pg, out) };
         }
         let _ = avx2;
-        self.backward_tile_impl(tile, entries, cam, pg, out);
+        self.backward_tile_impl::<false>(tile, entries, cam, pg, out);
     }
 
     /// [`Self::backward_tile_impl`] compiled with AVX2 so LLVM vectorises the 8-lane half-rows.
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
+    #[target_feature(enable = "avx2,popcnt")]
     fn backward_tile_avx2(
         &self,
         tile: usize,
@@ -344,14 +344,14 @@ impl Rasterizer {
         pg: &PixelGrads<'_>,
         out: &mut [ProjectedGrad],
     ) {
-        self.backward_tile_impl(tile, entries, cam, pg, out);
+        self.backward_tile_impl::<true>(tile, entries, cam, pg, out);
     }
 
     /// The tile walk: per splat, its falloff over the half-rows it reaches (see
     /// `tiles::Falloff`), then the gradients, all 8 lanes of a half-row under the span as a mask.
     /// Per-pixel state is kept as one array per component so each lane view is a plain vector.
     #[inline(always)]
-    fn backward_tile_impl(
+    fn backward_tile_impl<const AVX2: bool>(
         &self,
         tile: usize,
         Entries { list, live }: Entries<'_>,
@@ -420,6 +420,10 @@ impl Rasterizer {
         let mut joined = 0;
         let mut active = 0_u32;
         let mut falloff = Falloff::new();
+        // A 1 the compiler cannot see, so `T·1` stays a multiply and a plain store.
+        let opaque_one = std::hint::black_box(1.0_f32);
+        let mut weight = [[0.0_f32; LANES]; HALF_ROWS];
+        let mut moment = [[0.0_f32; LANES]; HALF_ROWS];
         let [g_r, g_g, g_b] = &mut g_rgb;
         for kk in (0..max_last as usize).rev() {
             if let Some(ahead) = kk.checked_sub(PREFETCH_AHEAD) {
@@ -428,6 +432,9 @@ impl Rasterizer {
             let p = &self.proj[list[kk] as usize];
             let [a, b, c] = p.conic;
             let kk32 = kk as u32;
+            // The signed compare of the tags below is one AVX2 instruction, the unsigned one
+            // three; tags are list positions, far below 2³¹.
+            let kk_signed = kk32.cast_signed();
             while joined < HALF_ROWS && joins[joined].0 > kk32 {
                 active |= 1 << joins[joined].1;
                 joined += 1;
@@ -451,19 +458,24 @@ impl Rasterizer {
             let mut s_uy = [0.0_f32; LANES];
             let mut s_uyy = [0.0_f32; LANES];
             let mut s_uxy = [0.0_f32; LANES];
-            let spans = RowSpans::new(p, x0, y0, tw, th);
+            let spans = RowSpans::solve::<AVX2>(p, x0, y0, tw, th);
             falloff.compute(p, &spans, spans.mask & active, x0);
             if falloff.n == 0 {
                 out[kk] = ProjectedGrad::default();
                 continue;
             }
-            for (&hr, gs) in falloff.hr.iter().zip(&falloff.gauss).take(falloff.n) {
-                let hr = usize::from(hr);
-                let ly = hr / 2;
-                let first = ((hr % 2) * LANES) as f32;
-                let dy = spans.dy[ly];
-                let xb = p.xy[0] - (x0 as f32 + first);
-                let base = hr * LANES;
+            // First each half-row's running state and, per lane, the weight w (0 where the
+            // splat was not composited) and u = G·∂L/∂α, into `weight` and `moment`; then the
+            // sums over them. In one loop the ten sums, the state and the splat's constants
+            // did not fit the 16 vector registers, and a fifth of the loop was spills.
+            for ((&hr, gs), (wl_out, ul_out)) in falloff
+                .hr
+                .iter()
+                .zip(&falloff.gauss)
+                .zip(weight.iter_mut().zip(moment.iter_mut()))
+                .take(falloff.n)
+            {
+                let base = usize::from(hr) * LANES;
                 let lastl: &[u32; LANES] = lanes_mut(&mut last, base);
                 let tl: &mut [f32; LANES] = lanes_mut(&mut t_cur, base);
                 let al: &mut [f32; LANES] = lanes_mut(&mut acc_dot, base);
@@ -473,44 +485,56 @@ impl Rasterizer {
                 let gdl: &[f32; LANES] = lanes_mut(&mut g_d, base);
                 let kl: &[f32; LANES] = lanes_mut(&mut k_bg, base);
                 for l in 0..LANES {
-                    let dx = xb - l as f32;
                     // G is 0 outside the span, so alpha fails the 1/255 test there.
                     let gauss = gs[l];
                     let raw = p.opacity * gauss;
                     let alpha = raw.min(MAX_ALPHA);
-                    let valid = (kk32 < lastl[l]) & (alpha >= MIN_ALPHA);
+                    let valid = (kk_signed < lastl[l].cast_signed()) & (alpha >= MIN_ALPHA);
                     let one_m = 1.0 - alpha;
                     let inv = 1.0 / one_m;
                     let t_i = tl[l] * inv;
                     let w = alpha * t_i;
-                    let gr = [grl[l], ggl[l], gbl[l]];
-                    let gdp = gdl[l];
                     // ∂L/∂α = Tᵢ·((cᵢ − C_behind)·g) − T_N·(bg·g − ∂L/∂A)/(1 − αᵢ), the
                     // colour including depth; C_behind·g is the accumulated dot product.
-                    let cg = p.color[0] * gr[0]
-                        + p.color[1] * gr[1]
-                        + p.color[2] * gr[2]
-                        + p.depth * gdp;
+                    let cg = p.color[0] * grl[l]
+                        + p.color[1] * ggl[l]
+                        + p.color[2] * gbl[l]
+                        + p.depth * gdl[l];
                     let behind = al[l];
                     let d_alpha = t_i * (cg - behind) + kl[l] * inv;
-                    let wv = if valid { w } else { 0.0 };
-                    s_col[0][l] += wv * gr[0];
-                    s_col[1][l] += wv * gr[1];
-                    s_col[2][l] += wv * gr[2];
-                    s_dep[l] += wv * gdp;
+                    wl_out[l] = if valid { w } else { 0.0 };
                     // Stores of every lane, written as arithmetic (α of 0, T times 1) rather
                     // than `if valid { new } else { old }`, which LLVM turns into masked stores
                     // that the next splat's loads cannot forward from.
                     let av = if valid { alpha } else { 0.0 };
                     al[l] = av * cg + (1.0 - av) * behind;
-                    tl[l] *= if valid { inv } else { 1.0 };
+                    tl[l] *= if valid { inv } else { opaque_one };
                     // Where o·G is clamped at 0.99, alpha does not depend on o or G.
                     let da = if valid & (raw < MAX_ALPHA) {
                         d_alpha
                     } else {
                         0.0
                     };
-                    let u = gauss * da;
+                    ul_out[l] = gauss * da;
+                }
+            }
+            for ((&hr, wl), ul) in falloff.hr.iter().zip(&weight).zip(&moment).take(falloff.n) {
+                let hr = usize::from(hr);
+                let dy = spans.dy[hr / 2];
+                let xb = p.xy[0] - (x0 as f32 + half_row_x(hr));
+                let base = hr * LANES;
+                let grl: &[f32; LANES] = lanes_mut(g_r, base);
+                let ggl: &[f32; LANES] = lanes_mut(g_g, base);
+                let gbl: &[f32; LANES] = lanes_mut(g_b, base);
+                let gdl: &[f32; LANES] = lanes_mut(&mut g_d, base);
+                for l in 0..LANES {
+                    let dx = xb - l as f32;
+                    let wv = wl[l];
+                    s_col[0][l] += wv * grl[l];
+                    s_col[1][l] += wv * ggl[l];
+                    s_col[2][l] += wv * gbl[l];
+                    s_dep[l] += wv * gdl[l];
+                    let u = ul[l];
                     let ux = u * dx;
                     let uy = u * dy;
                     s_u[l] += u;
