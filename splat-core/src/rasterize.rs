@@ -680,7 +680,7 @@ fn composite_tile_impl<S: WeightSink, const AVX2: bool>(
             done_rows |= 1 << hr;
         }
     }
-    let (mut evaluations, mut contributions) = (0.0_f64, 0_u64);
+    let (mut evaluations, mut contributions) = (0_u64, 0_u64);
     let opaque_one = std::hint::black_box(1.0_f32);
     let opaque_zero = std::hint::black_box(0_u32);
     let mut falloff = Falloff::new();
@@ -753,7 +753,7 @@ fn composite_tile_impl<S: WeightSink, const AVX2: bool>(
     for (i, px) in o.rgb.iter_mut().enumerate() {
         *px = [cr[i], cg[i], cb[i]];
     }
-    (evaluations as u64, contributions)
+    (evaluations, contributions)
 }
 
 /// How many list entries ahead the tile loops prefetch the projected record: a tile's list is
