@@ -723,9 +723,6 @@ mod tests {
         }
     }
 
-    /// Overlapping splats of many sizes (sub-pixel to several tiles) and opacities, some
-    /// reaching the partial tiles at the right and bottom edges of a 70×45 image, and a loss
-    /// gradient for its pixels.
     /// The transposed lane sums must be the lane-by-lane sums bit for bit: random magnitudes
     /// that round differently in another order, signed zeros, infinities.
     #[cfg(target_arch = "x86_64")]
@@ -820,6 +817,9 @@ mod tests {
         assert!(past.is_err(), "a range past the splats must be refused");
     }
 
+    /// Overlapping splats of many sizes (sub-pixel to several tiles) and opacities, some
+    /// reaching the partial tiles at the right and bottom edges of a 70×45 image, and a loss
+    /// gradient for its pixels.
     fn scene(seed: u64) -> (Splats, RenderCamera, Vec<f32>) {
         let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
         let n = 400;
