@@ -22,7 +22,7 @@ use crate::project::{
     ChainView, ProjectedGrad, ProjectedGradLanes, ViewConsts, colour_grad8, project_backward8,
 };
 use crate::rasterize::{DEPTH_MIN_ALPHA, PREFETCH_AHEAD, lanes_mut, tile_extent, tile_major_index};
-use crate::tiles::{Falloff, HALF_ROWS, LANES, RowSpans, TILE_PIXELS, TILE_SIZE, half_row_x};
+use crate::tiles::{Falloff, HALF_ROWS, LANES, RowSpans, TILE_PIXELS, TILE_SIZE, half_row_dx};
 use crate::{Rasterizer, RenderCamera, RenderOptions, SplatGrads, SplatGradsMut, Splats, sh};
 
 /// Splats per task of the chain phase.
@@ -521,7 +521,7 @@ impl Rasterizer {
             for ((&hr, wl), ul) in falloff.hr.iter().zip(&weight).zip(&moment).take(falloff.n) {
                 let hr = usize::from(hr);
                 let dy = spans.dy[hr / 2];
-                let xb = p.xy[0] - (x0 as f32 + half_row_x(hr));
+                let xb = half_row_dx(p.xy[0], x0, hr);
                 let base = hr * LANES;
                 let grl: &[f32; LANES] = lanes_mut(g_r, base);
                 let ggl: &[f32; LANES] = lanes_mut(g_g, base);

@@ -586,7 +586,7 @@ impl Falloff {
             // The span in lane coordinates of this half-row.
             let (lo, hi) = (spans.lo[ly] - first, spans.hi[ly] - first);
             let dy = spans.dy[ly];
-            let xb = p.xy[0] - (x0 as f32 + first);
+            let xb = half_row_dx(p.xy[0], x0, hr);
             let g = &mut self.gauss[self.n];
             let mut inside = 0_u32;
             for (l, g) in g.iter_mut().enumerate() {
@@ -612,6 +612,13 @@ impl Falloff {
 #[inline(always)]
 pub(crate) fn half_row_x(hr: usize) -> f32 {
     ((hr & 1) as i32 * LANES as i32) as f32
+}
+
+/// Splat centre `centre_x` minus the first pixel of half-row `hr` in the tile whose first
+/// column is `x0`: lane `l`'s dx is this minus `l`, in the falloff and the backward's moments.
+#[inline(always)]
+pub(crate) fn half_row_dx(centre_x: f32, x0: i32, hr: usize) -> f32 {
+    centre_x - (x0 as f32 + half_row_x(hr))
 }
 
 /// The exponent of the Gaussian at offset (dx, dy) = centre − pixel for the conic (a, b, c):
