@@ -5,7 +5,8 @@
 //! A round is an experiment with a control. From the same trained state the model is trained
 //! [`BudgetPlan::trial`] steps twice: once whole (the control) and once with the lower-scoring
 //! share of its splats removed. Both branches are scored on the held-out views at the same steps
-//! (under a time budget: the same training times), [`SCORE_POINTS`] times over the trial's
+//! (where a time budget binds the schedule: the same training times), [`SCORE_POINTS`] times
+//! over the trial's
 //! last quarter, so the round measures what the pruning costs and not what the extra steps
 //! gained, above the step-to-step noise of a single score. The pruned
 //! branch is kept while the drops of the accepted rounds add up to no more than
@@ -258,9 +259,9 @@ pub struct BudgetRound {
     /// Held-out PSNR (dB, on black) of the whole model over the trial's last quarter (the mean
     /// of [`SCORE_POINTS`] scores).
     pub kept_psnr: f64,
-    /// Held-out PSNR (dB, on black) of the pruned model over the same steps or, under a time
-    /// budget, the same training times (`None`: the control ran out of time and the pruned
-    /// branch did not run).
+    /// Held-out PSNR (dB, on black) of the pruned model over the same steps or, where a time
+    /// budget binds the schedule, the same training times (`None`: the control ran out of time
+    /// and the pruned branch did not run).
     pub pruned_psnr: Option<f64>,
     /// [`BudgetRound::kept_psnr`] on white (`None` in rounds saved before it was measured).
     #[serde(default)]
@@ -272,8 +273,8 @@ pub struct BudgetRound {
     pub accepted: bool,
     /// Whether a branch was cut short by the time budget (the round then decides nothing).
     pub out_of_time: bool,
-    /// Steps the pruned branch trained: `BudgetPlan::trial`, or more under a time budget, where
-    /// both branches train for the same time.
+    /// Steps the pruned branch trained: `BudgetPlan::trial`, or more where a time budget binds
+    /// the schedule and both branches train for the same time.
     #[serde(default)]
     pub steps_pruned: u32,
     /// The cost ([`BudgetRound::drop_db`]) at the end of the first trial, when the round was
@@ -637,9 +638,10 @@ impl BudgetSearch {
             .prune(&keep)
             .map_err(|e| fail(format!("pruning: {e}")))?;
         round.seconds.planning += count_since(trainer, merging);
-        // The pruned branch, scored at the same steps, or under a time budget at the same
-        // training times: there the branches get equal time, and the smaller model's faster
-        // steps are part of what the prune buys.
+        // The pruned branch, scored at the same steps, or where a time budget binds the
+        // schedule at the same training times: there the branches get equal time, and the
+        // smaller model's faster steps are part of what the prune buys (more of the schedule's
+        // steps fit).
         let pruned = run_branch(
             trainer,
             iteration,
@@ -734,8 +736,12 @@ struct Branch {
 
 /// Trains the trainer's branch over the trial of `trial` steps from step `start`, scoring it at
 /// the trial's scoring points. A control (`match_times` `None`) trains the trial's steps; a
-/// merged branch matches the control's scoring points: under a time budget it trains until each
-/// of the control's training times (equal time), otherwise to the same steps.
+/// merged branch matches the control's scoring points: where a time budget binds the schedule
+/// ([`Trainer::budget_binds`]) it trains until each of the control's training times (equal
+/// time), otherwise to the same steps. A budget that does not bind leaves the run every
+/// configured step, so there the smaller model's faster steps buy it nothing at the end, and
+/// matching times would score it on steps it never gets and make the round's outcome depend on
+/// the machine's speed at that moment.
 fn run_branch<E>(
     trainer: &mut Trainer,
     start: u32,
@@ -746,7 +752,7 @@ fn run_branch<E>(
 ) -> Result<Branch, E> {
     let clock = |trainer: &Trainer| trainer.report(false).elapsed_s;
     let before = clock(trainer);
-    let equal_time = match_times.is_some() && trainer.config().time_budget.is_some();
+    let equal_time = match_times.is_some() && trainer.budget_binds();
     let mut branch = Branch {
         scores: Scores::default(),
         times: Vec::new(),

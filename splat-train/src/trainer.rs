@@ -512,6 +512,14 @@ impl Trainer {
         }
     }
 
+    /// Whether the time budget, not the iteration count, ends the run's schedule: under a
+    /// budget, its [`Pace`] expects fewer steps to fit than are configured. Where it does not,
+    /// the run trains every configured step whatever its speed.
+    #[must_use]
+    pub fn budget_binds(&self) -> bool {
+        self.horizon() < self.config.iterations
+    }
+
     /// Starts the run's speed estimate from `pace` (step times timed on a probe before the run)
     /// instead of from its own first steps; the run's steps then take over as they come.
     pub fn start_pace(&mut self, pace: Pace) {

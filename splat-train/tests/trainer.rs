@@ -859,6 +859,54 @@ fn a_time_budget_pays_for_the_budget_rounds_scoring() {
     assert_eq!(t.active_sh_degree(), 1, "every SH band was reached");
 }
 
+/// A time budget that does not bind (every configured step fits, with room) leaves the run all
+/// its steps, so a round's merged branch trains the control's steps, not its wall time: the
+/// rounds and the model come out bit for bit as without a budget, whatever the machine's speed
+/// (at equal time the merged branch's faster steps would buy it a number of steps that moves
+/// with the timings). A budget that binds says so.
+#[test]
+fn a_budget_that_does_not_bind_judges_rounds_at_equal_steps() {
+    let (init, train, held) = budget_scene();
+    let run = |time_budget: Option<std::time::Duration>| {
+        let mut cfg = base_config(80);
+        cfg.time_budget = time_budget;
+        let mut t = Trainer::new(init.clone(), train.clone(), cfg).unwrap();
+        let (mut search, bcfg) = three_rounds(0.0);
+        while t.iteration() < 80 {
+            while search.due(t.iteration()) {
+                run_round_scored(&mut search, &mut t, &bcfg, &held);
+            }
+            t.run_until(t.iteration() + 1, |_| {});
+            assert!(!t.budget_binds(), "at step {}", t.iteration());
+        }
+        (search.rounds, t.splats().clone())
+    };
+    let (plain, plain_model) = run(None);
+    let (roomy, roomy_model) = run(Some(std::time::Duration::from_secs(100_000)));
+    assert_eq!(plain.len(), 3);
+    assert!(plain.iter().all(|r| r.accepted && r.candidate < r.splats));
+    assert_eq!(roomy.len(), plain.len());
+    for (a, b) in plain.iter().zip(&roomy) {
+        assert_eq!(
+            (b.iteration, b.splats, b.candidate),
+            (a.iteration, a.splats, a.candidate)
+        );
+        assert_eq!((a.steps_pruned, b.steps_pruned), (10, 10));
+        assert_eq!(b.kept_psnr.to_bits(), a.kept_psnr.to_bits());
+        assert_eq!(
+            b.pruned_psnr.map(f64::to_bits),
+            a.pruned_psnr.map(f64::to_bits)
+        );
+        assert_eq!(b.accepted, a.accepted);
+    }
+    assert_eq!(roomy_model, plain_model);
+    // Ten million steps configured, 1.5 s to run them in: the budget binds once the run has a
+    // pace to estimate from.
+    let mut t = Trainer::new(init, train, budgeted_config(BUDGET_S)).unwrap();
+    t.run_until(5, |_| {});
+    assert!(t.budget_binds());
+}
+
 /// Under a time budget a round is not started when the trainer's horizon has no room for both
 /// of its branches: it could only run out of time. The search ends there and training goes on,
 /// the run's schedule complete.

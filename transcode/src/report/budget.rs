@@ -40,7 +40,8 @@ pub(super) fn section(h: &mut String, runs: &[RunReport], names: &[String]) {
         "<h2>Splat budget: held-out PSNR against splats and size</h2>\n<p>Each round trains \
          the model two ways from the same step: whole (the control) and with its cheapest cells \
          merged, and scores both on the held-out views on black and on white at the same four \
-         steps over the last quarter of the trial (the same times under a time budget), taking \
+         steps over the last quarter of the trial (the same times where a time budget binds the \
+         schedule), taking \
          the means; a round costs what the worse background lost. A pruned branch is kept while \
          the rounds' costs add up to no more than the tolerance \
          (<code>budget.tolerance_db</code>, <code>--budget-tolerance</code>). A round refused at \
