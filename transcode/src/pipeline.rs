@@ -1622,9 +1622,7 @@ fn train_to_end(
         probe.take(trainer, r.elapsed_s, last)?;
         if last {
             // A time budget that laid the schedule over fewer steps than configured stopped it.
-            let cut = trainer.config().time_budget.is_some()
-                && r.iterations < trainer.config().iterations;
-            break trainer.report(r.stopped_by_budget || cut);
+            break trainer.report(r.stopped_by_budget || trainer.budget_binds());
         }
         if saved_at.elapsed() >= saving.every {
             let t = Instant::now();
