@@ -6,8 +6,8 @@
 //! [`BudgetPlan::trial`] steps twice: once whole (the control) and once with the lower-scoring
 //! share of its splats removed. Both branches are scored on the held-out views at the same steps
 //! (where a time budget binds the schedule: the same training times), [`SCORE_POINTS`] times
-//! over the trial's last quarter, so the round measures what the pruning costs and not what the extra steps
-//! gained, above the step-to-step noise of a single score. The pruned
+//! over the trial's last quarter, so the round measures what the pruning costs and not what
+//! the extra steps gained, above the step-to-step noise of a single score. The pruned
 //! branch is kept while the drops of the accepted rounds add up to no more than
 //! [`BudgetConfig::tolerance_db`]; a round that would exceed it is undone (training goes on from
 //! the control) and the next round tries to remove half as many splats

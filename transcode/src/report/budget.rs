@@ -41,7 +41,8 @@ pub(super) fn section(h: &mut String, runs: &[RunReport], names: &[String]) {
          the model two ways from the same step: whole (the control) and with its cheapest cells \
          merged, and scores both on the held-out views on black and on white at the same four \
          steps over the last quarter of the trial (the same times where a time budget binds the \
-         schedule), taking the means; a round costs what the worse background lost. A pruned branch is kept while \
+         schedule), taking the means; a round costs what the worse background lost. A pruned \
+         branch is kept while \
          the rounds' costs add up to no more than the tolerance \
          (<code>budget.tolerance_db</code>, <code>--budget-tolerance</code>). A round refused at \
          up to <code>budget.second_look_within</code> times what is left is looked at again \
