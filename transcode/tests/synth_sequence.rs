@@ -82,3 +82,46 @@ fn a_sequence_is_written_frame_by_frame_with_one_rig() {
         "{err}"
     );
 }
+
+#[test]
+fn a_single_frame_makes_its_folder_and_a_file_in_its_way_is_named() {
+    let tmp = tempfile::tempdir().unwrap();
+    let synth = |out: &std::path::Path| {
+        Command::new(BIN)
+            .args([
+                "synth",
+                "--mesh",
+                &spider(),
+                "--points",
+                "3000",
+                "--grid",
+                "40",
+            ])
+            .arg("--out")
+            .arg(out)
+            .output()
+            .unwrap()
+    };
+    // A folder that does not exist yet is made, as `run --out` makes its own.
+    let nested = tmp.path().join("a").join("b").join("frame.ply");
+    let run = synth(&nested);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let cloud = plenoptic_io::read_cloud(&nested).unwrap();
+    assert_eq!(cloud.num_cameras, 13);
+    assert!(!cloud.is_empty());
+    // A plain file where the folder should be is refused, naming it, and nothing is written.
+    let blocker = tmp.path().join("blocker");
+    std::fs::write(&blocker, b"not a folder").unwrap();
+    let bad = synth(&blocker.join("frame.ply"));
+    assert!(!bad.status.success());
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(
+        err.contains("cannot create the folder") && err.contains("blocker"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read(&blocker).unwrap(), b"not a folder");
+}

@@ -76,6 +76,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         spinner.finish_and_clear();
         return sequence(&args, &mesh, &config);
     }
+    // The folder the frame goes into is made now, so that a path that cannot be written fails
+    // before the sampling and shading rather than after them.
+    if let Some(parent) = args.out.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent)
+            .with_context(|| format!("cannot create the folder {}", parent.display()))?;
+    }
     spinner.set_message(format!(
         "sampling {} points and shading them for {} cameras",
         args.points, args.cameras
