@@ -163,13 +163,15 @@ impl<'a> PreparedCloud<'a> {
             shaded,
         } = &mut *buffers;
         match opts.point_shape {
-            PointShape::Cube => draw_cubes(
-                &self.positions,
-                &self.runs,
-                &view,
-                0.5 * opts.point_size,
-                zbuf,
-            ),
+            PointShape::Cube => {
+                _ = draw_cubes(
+                    &self.positions,
+                    &self.runs,
+                    &view,
+                    0.5 * opts.point_size,
+                    zbuf,
+                )
+            }
             PointShape::Disc => {
                 draw_discs(&self.positions, &view, disc_radius(opts.point_size), zbuf)
             }
@@ -248,8 +250,24 @@ fn disc_radius(point_size: f32) -> f32 {
     std::f32::consts::LN_2.sqrt() * point_size
 }
 
-/// Points in a run that the cube pass orders as one (by the run's centre).
-const RUN: usize = 256;
+/// Points in a run that the cube pass orders, and tests for occlusion, as one (by the run's
+/// centre and box).
+const RUN: usize = 64;
+
+/// Where a run's cubes can reach on the screen of one view.
+#[derive(Clone, Copy, Debug)]
+enum RunReach {
+    /// Off the image.
+    Nowhere,
+    /// Its box reaches behind the camera: its cubes are bounded one by one, on every row.
+    Everywhere,
+    /// Within the pixel rectangle `(x0, x1, y0, y1)`, at depths from `bound` on (the near side
+    /// of its camera-space box, lowered as [`DEPTH_BOUND_SLACK`] says).
+    Rectangle {
+        rect: (u32, u32, u32, u32),
+        bound: f32,
+    },
+}
 
 /// Cubes the cube pass moves into camera space and bounds on the screen at once (one AVX2
 /// vector of f32).
@@ -290,9 +308,16 @@ const MIN_BANDS: usize = 4;
 
 /// Visibility pass for cubes of half-side `h` centred on `positions` (whose runs of [`RUN`]
 /// have the boxes `runs`): each pixel whose centre ray hits a cube records the entry depth
-/// (camera z) of the nearest hit and the cube's index.
-fn draw_cubes(positions: &[Vec3], runs: &[RunBox], view: &ViewCamera, h: f32, zbuf: &mut ZBuffer) {
-    draw_cubes_using(positions, runs, view, h, zbuf, has_avx2());
+/// (camera z) of the nearest hit and the cube's index. Returns how many times a band skipped a
+/// whole run as hidden.
+fn draw_cubes(
+    positions: &[Vec3],
+    runs: &[RunBox],
+    view: &ViewCamera,
+    h: f32,
+    zbuf: &mut ZBuffer,
+) -> usize {
+    draw_cubes_using(positions, runs, view, h, zbuf, has_avx2())
 }
 
 /// [`draw_cubes`] with the AVX2 instantiation or without it.
@@ -300,8 +325,10 @@ fn draw_cubes(positions: &[Vec3], runs: &[RunBox], view: &ViewCamera, h: f32, zb
 /// The z-buffer is cut into bands of rows ([`MIN_BANDS`] or more), drawn in parallel, each by
 /// one thread. A band draws the runs whose box reaches its rows, nearest first, so by the time
 /// a run on the far side of the object comes, the near side usually covers its cubes'
-/// rectangles and most of them are skipped ([`ZBand::all_nearer`]). The z-buffer ends the same
-/// in any order and for any bands: it keeps the least (depth, rank) key of each pixel.
+/// rectangles and most of them are skipped ([`ZBand::all_nearer`]): the whole run at once when
+/// its own rectangle is covered nearer than its box (about three runs in ten of a paper-scale
+/// frame's view, run and band pairs counted), else cube by cube. The z-buffer ends the same in
+/// any order and for any bands: it keeps the least (depth, rank) key of each pixel.
 fn draw_cubes_using(
     positions: &[Vec3],
     runs: &[RunBox],
@@ -309,7 +336,7 @@ fn draw_cubes_using(
     h: f32,
     zbuf: &mut ZBuffer,
     avx2: bool,
-) {
+) -> usize {
     let r = view.rotation;
     // Camera-space half-extents of a world-axis-aligned box of half-sides `half`: |R|·half.
     let extent_of = |half: Vec3| {
@@ -328,13 +355,12 @@ fn draw_cubes_using(
             h * (r.x_axis.z.abs() + r.y_axis.z.abs() + r.z_axis.z.abs()),
         ),
     };
-    // Each run nearest first, with the rows its cubes can reach: those of its box (the points'
-    // box grown by the cube's half-side) in camera space, grown again by a margin far above the
-    // rounding of the cubes' own boxes, so that it holds each cube's rectangle; every row when
-    // the box reaches behind the camera (its cubes are then bounded one by one), none when it
-    // is off the image.
-    let all_rows = (0, view.height);
-    let mut order: Vec<(f32, u32, (u32, u32))> = runs
+    // Each run nearest first, with the rectangle its cubes can reach: that of its box (the
+    // points' box grown by the cube's half-side) in camera space, grown again by a margin far
+    // above the rounding of the cubes' own boxes, so that it holds each cube's rectangle and
+    // its near side is no farther than any cube's; everywhere when the box reaches behind the
+    // camera (its cubes are then bounded one by one), nowhere when it is off the image.
+    let mut order: Vec<(f32, u32, RunReach)> = runs
         .iter()
         .enumerate()
         .map(|(run, b)| {
@@ -342,13 +368,16 @@ fn draw_cubes_using(
             let half = extent_of(0.5 * (b.hi - b.lo) + Vec3::splat(h));
             let margin = half * 1e-4 + Vec3::splat(1e-4 * (h + centre.abs().max_element()));
             let (lo, hi) = (centre - half - margin, centre + half + margin);
-            let rows = if lo.z > 0.0 {
+            let reach = if lo.z > 0.0 {
                 view.pixel_range(lo, hi)
-                    .map_or((1, 0), |(_, _, y0, y1)| (y0, y1 + 1))
+                    .map_or(RunReach::Nowhere, |rect| RunReach::Rectangle {
+                        rect,
+                        bound: lo.z * DEPTH_BOUND_SLACK,
+                    })
             } else {
-                all_rows
+                RunReach::Everywhere
             };
-            (centre.z, run as u32, rows)
+            (centre.z, run as u32, reach)
         })
         .collect();
     order.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
@@ -356,17 +385,41 @@ fn draw_cubes_using(
     let rows_per_band = (view.height as usize).div_ceil(bands);
     zbuf.bands_mut(rows_per_band)
         .into_par_iter()
-        .for_each(|mut band| {
+        .map(|mut band| {
             let rows = band.rows();
             let (b0, b1) = (rows.start as u32, rows.end as u32);
-            for &(_, run, (y0, y1)) in &order {
-                if y0.max(b0) < y1.min(b1) {
+            let mut hidden_runs = 0;
+            for &(_, run, reach) in &order {
+                let hidden = match reach {
+                    RunReach::Nowhere => true,
+                    RunReach::Everywhere => false,
+                    RunReach::Rectangle {
+                        rect: (x0, x1, y0, y1),
+                        bound,
+                    } => {
+                        let (y0, y1) = (y0.max(b0), y1.min(b1 - 1));
+                        // Outside the band, or behind everything its rectangle already holds
+                        // there: none of its cubes could win a pixel of the band.
+                        y0 > y1 || {
+                            let behind = band.all_nearer(
+                                bound,
+                                (x0 as usize, x1 as usize),
+                                (y0 as usize, y1 as usize),
+                            );
+                            hidden_runs += usize::from(behind);
+                            behind
+                        }
+                    }
+                };
+                if !hidden {
                     let first = run as usize * RUN;
                     let points = &positions[first..(first + RUN).min(positions.len())];
                     cubes.draw(points, first, &mut band, avx2);
                 }
             }
-        });
+            hidden_runs
+        })
+        .sum()
 }
 
 /// A cube's entry depth along a pixel ray is at least the near side of its camera-space box;
@@ -623,7 +676,7 @@ mod tests {
     #[test]
     fn skipped_cubes_could_not_have_won_a_pixel() {
         // Two voxel spheres, one behind the other and both with far sides, drawn nearest run
-        // first with the cubes behind what the z-buffer holds skipped: every pixel keeps what
+        // first with the runs and cubes behind what the z-buffer holds skipped: every pixel keeps what
         // testing every cube against every pixel gives. Cubes of one and of two voxels, from
         // views in front, oblique and from behind.
         let mut pts = voxel_sphere(9.0);
@@ -632,15 +685,26 @@ mod tests {
                 .iter()
                 .map(|p| *p + Vec3::new(6.0, 3.0, -30.0)),
         );
-        for (eye, h) in [
-            (DVec3::new(0.0, 0.0, 90.0), 0.5),
-            (DVec3::new(50.0, 30.0, 60.0), 1.0),
-            (DVec3::new(-20.0, 10.0, -110.0), 0.5),
+        // In Morton order, as the renderer draws a cloud, so that runs are patches of surface.
+        let pts: Vec<Vec3> = plenoptic_io::morton_order(&pts)
+            .iter()
+            .map(|&i| pts[i as usize])
+            .collect();
+        // From in front and from behind the near side hides much of the far side.
+        for (eye, h, far_side_hidden) in [
+            (DVec3::new(0.0, 0.0, 90.0), 0.5, true),
+            (DVec3::new(50.0, 30.0, 60.0), 1.0, false),
+            (DVec3::new(-20.0, 10.0, -110.0), 0.5, true),
         ] {
             let cam = camera(eye, DVec3::new(2.0, 1.0, -12.0), 96, 96, 25.0);
             let view = ViewCamera::new(&cam).unwrap();
             let mut zbuf = ZBuffer::new(view.width as usize, view.height as usize);
-            draw_cubes(&pts, &run_boxes(&pts), &view, h, &mut zbuf);
+            let hidden_runs = draw_cubes(&pts, &run_boxes(&pts), &view, h, &mut zbuf);
+            // Runs of the far side are skipped whole, not cube by cube.
+            assert!(
+                hidden_runs > 0 || !far_side_hidden,
+                "no run skipped whole from {eye}"
+            );
             let expected = brute_force_z_buffer(&pts, &view, h);
             let mut covered = 0;
             for (pixel, want) in expected.iter().enumerate() {
