@@ -676,9 +676,9 @@ mod tests {
     #[test]
     fn skipped_cubes_could_not_have_won_a_pixel() {
         // Two voxel spheres, one behind the other and both with far sides, drawn nearest run
-        // first with the runs and cubes behind what the z-buffer holds skipped: every pixel keeps what
-        // testing every cube against every pixel gives. Cubes of one and of two voxels, from
-        // views in front, oblique and from behind.
+        // first with the runs and cubes behind what the z-buffer holds skipped: every pixel
+        // keeps what testing every cube against every pixel gives. Cubes of one and of two
+        // voxels, from views in front, oblique and from behind.
         let mut pts = voxel_sphere(9.0);
         pts.extend(
             voxel_sphere(7.0)
