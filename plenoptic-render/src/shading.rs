@@ -1,17 +1,19 @@
 //! The shading of a view's visible points: each point's colour towards the viewer
-//! ([`interpolate_lanes`]), read from a copy of the cloud's colours in the order the cube pass
+//! ([`interpolate_lanes_by`]), read from a copy of the cloud's colours in the order the cube pass
 //! draws the points (Morton's), compact where the colours are 8-bit levels.
 
 use glam::Vec3;
 use plenoptic_io::PlenopticCloud;
 use plenoptic_io::ply::uchar_color;
-use plenoptic_io::view_color::interpolate_lanes;
+use plenoptic_io::view_color::interpolate_lanes_by;
+#[cfg(target_arch = "x86_64")]
+use plenoptic_io::view_color::interpolate8_avx2;
 use rayon::prelude::*;
 
 use crate::cpu::prefetch;
 
 /// Points [`Shader::shade`] colours at once (one AVX2 vector of f32).
-const SHADE_LANES: usize = 8;
+const SHADE_LANES: usize = plenoptic_io::view_color::AVX2_LANES;
 
 /// How many points ahead [`Shader::shade`] asks for the colours it will read.
 const PREFETCH_AHEAD: usize = 32;
@@ -146,26 +148,48 @@ impl ShadingColours {
         }
     }
 
-    /// Writes the colours of rank `rank` into `out` (`1 + cameras` long): the main colour,
-    /// then each camera's.
+    /// Writes the colours of rank `rank` into lane `lane` of `main` and `per_camera` (one entry
+    /// a capture camera, each channel's lanes together).
     #[inline(always)]
-    fn read(&self, rank: usize, out: &mut [[f32; 3]]) {
+    fn read_lane<const N: usize>(
+        &self,
+        rank: usize,
+        lane: usize,
+        main: &mut [f32; 3],
+        per_camera: &mut [[[f32; N]; 3]],
+    ) {
         let stride = self.cameras + 1;
         match &self.store {
             Store::Levels(bytes) => {
                 let levels = &self.levels;
                 let bytes = &bytes[rank * stride * 3..(rank + 1) * stride * 3];
-                for (o, b) in out.iter_mut().zip(bytes.chunks_exact(3)) {
-                    *o = [
-                        levels[b[0] as usize],
-                        levels[b[1] as usize],
-                        levels[b[2] as usize],
-                    ];
+                *main = [0, 1, 2].map(|c| levels[bytes[c] as usize]);
+                for (camera, b) in per_camera.iter_mut().zip(bytes[3..].chunks_exact(3)) {
+                    for c in 0..3 {
+                        camera[c][lane] = levels[b[c] as usize];
+                    }
                 }
             }
             Store::Floats(floats) => {
-                out.copy_from_slice(&floats[rank * stride..(rank + 1) * stride])
+                let floats = &floats[rank * stride..(rank + 1) * stride];
+                *main = floats[0];
+                for (camera, f) in per_camera.iter_mut().zip(&floats[1..]) {
+                    for c in 0..3 {
+                        camera[c][lane] = f[c];
+                    }
+                }
             }
+        }
+    }
+
+    /// Writes the colours of rank `rank` into `out` (`1 + cameras` long): the main colour,
+    /// then each camera's.
+    #[cfg(test)]
+    fn read(&self, rank: usize, out: &mut [[f32; 3]]) {
+        let mut per_camera = vec![[[0.0f32; 1]; 3]; self.cameras];
+        self.read_lane(rank, 0, &mut out[0], &mut per_camera);
+        for (o, camera) in out[1..].iter_mut().zip(&per_camera) {
+            *o = camera.map(|[v]| v);
         }
     }
 }
@@ -183,8 +207,8 @@ pub(crate) struct Shader<'a> {
 
 impl Shader<'_> {
     /// Colours the points of ranks `ranks` (increasing) into `out`, [`SHADE_LANES`] at a time:
-    /// the AVX2 instantiation where the CPU has it, else the portable one (the same
-    /// operations either way, so the same bits).
+    /// the AVX2 kernel where the CPU has it, else the portable form (the same operations
+    /// either way, so the same bits; `shading_colours_each_point_as_the_interpolation_does`).
     pub(crate) fn shade(&self, ranks: &[u32], out: &mut [[f32; 3]], avx2: bool) {
         #[cfg(target_arch = "x86_64")]
         if avx2 {
@@ -196,17 +220,56 @@ impl Shader<'_> {
         self.shade_portable(ranks, out);
     }
 
+    /// The AVX2 interpolation ([`interpolate8_avx2`]) over the lanes.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     fn shade_avx2(&self, ranks: &[u32], out: &mut [[f32; 3]]) {
-        self.shade_portable(ranks, out);
+        self.shade_in_groups(ranks, out, |points, cameras, per_camera, main| {
+            interpolate8_avx2(
+                points,
+                self.viewer,
+                cameras,
+                per_camera,
+                main,
+                self.exponent,
+            )
+        });
     }
 
-    #[inline(always)]
     fn shade_portable(&self, ranks: &[u32], out: &mut [[f32; 3]]) {
-        let stride = self.colours.cameras + 1;
-        // The lanes' colours as f32, lane after lane (main colour first).
-        let mut lanes = vec![[0.0f32; 3]; SHADE_LANES * stride];
+        self.shade_in_groups(ranks, out, |points, cameras, per_camera, main| {
+            interpolate_lanes_by(
+                *points,
+                [self.viewer; SHADE_LANES],
+                cameras,
+                [cameras.len(); SHADE_LANES],
+                |k, l| [0, 1, 2].map(|c| per_camera[k][c][l]),
+                *main,
+                self.exponent,
+            )
+        });
+    }
+
+    /// Reads the colours of [`SHADE_LANES`] points at a time and colours them with
+    /// `interpolate(points, capture cameras, per-camera colours, main colours)`.
+    #[inline(always)]
+    fn shade_in_groups(
+        &self,
+        ranks: &[u32],
+        out: &mut [[f32; 3]],
+        interpolate: impl Fn(
+            &[Vec3; SHADE_LANES],
+            &[Vec3],
+            &[[[f32; SHADE_LANES]; 3]],
+            &[[f32; 3]; SHADE_LANES],
+        ) -> [[f32; 3]; SHADE_LANES],
+    ) {
+        // Every point has a colour for each of these cameras.
+        let cameras = &self.capture[..self.colours.cameras.min(self.capture.len())];
+        // The lanes' colours as f32: each camera's, channel by channel, lane after lane, so
+        // that the interpolation loads a camera's colours of all the lanes as vectors.
+        let mut per_camera = vec![[[0.0f32; SHADE_LANES]; 3]; self.colours.cameras];
+        let mut main = [[0.0f32; 3]; SHADE_LANES];
         for (g, (group, out)) in ranks
             .chunks(SHADE_LANES)
             .zip(out.chunks_mut(SHADE_LANES))
@@ -221,18 +284,11 @@ impl Shader<'_> {
             }
             // A short last group repeats its first point in the spare lanes.
             let rank = |l: usize| *group.get(l).unwrap_or(&group[0]) as usize;
-            for (l, lane) in lanes.chunks_exact_mut(stride).enumerate() {
-                self.colours.read(rank(l), lane);
+            for (l, main) in main.iter_mut().enumerate() {
+                self.colours.read_lane(rank(l), l, main, &mut per_camera);
             }
-            let lane = |l: usize| &lanes[l * stride..(l + 1) * stride];
-            let colours = interpolate_lanes(
-                std::array::from_fn::<_, SHADE_LANES, _>(|l| self.positions[rank(l)]),
-                [self.viewer; SHADE_LANES],
-                self.capture,
-                std::array::from_fn(|l| &lane(l)[1..]),
-                std::array::from_fn(|l| lane(l)[0]),
-                self.exponent,
-            );
+            let points = std::array::from_fn(|l| self.positions[rank(l)]);
+            let colours = interpolate(&points, cameras, &per_camera, &main);
             out.copy_from_slice(&colours[..out.len()]);
         }
     }
@@ -289,6 +345,72 @@ mod tests {
                     want.map(|c| c.map(f32::to_bits)),
                     "rank {rank}"
                 );
+            }
+        }
+    }
+
+    /// Both instantiations of the shading colour every point as the one-lane interpolation
+    /// does, bit for bit: 8-bit levels and floats, 13 cameras, a short last group.
+    #[test]
+    fn shading_colours_each_point_as_the_interpolation_does() {
+        let cameras = 13;
+        let n = 37;
+        let capture: Vec<Vec3> = (0..cameras)
+            .map(|i| {
+                let a = i as f32 * 0.48;
+                Vec3::new(a.cos() * 3000.0, (i % 3) as f32 * 400.0, a.sin() * 3000.0)
+            })
+            .collect();
+        let level = |i: usize| uchar_color((i * 97 % 256) as u8);
+        let mut camera_colors: Vec<[f32; 3]> = (0..n * cameras)
+            .map(|i| [level(i), level(i + 1), level(3 * i)])
+            .collect();
+        let positions: Vec<Vec3> = (0..n)
+            .map(|i| Vec3::new(i as f32 * 17.0, (i * i) as f32 % 300.0, 50.0 - i as f32))
+            .collect();
+        for compact in [true, false] {
+            if !compact {
+                camera_colors[5][1] = 0.123_456_7;
+            }
+            let cloud = PlenopticCloud {
+                positions: positions.clone(),
+                colors: (0..n).map(|i| [level(5 * i), level(2), level(i)]).collect(),
+                num_cameras: cameras,
+                camera_colors: camera_colors.clone(),
+                ..Default::default()
+            };
+            // Ranks in a drawing order other than the file's.
+            let order: Vec<u32> = (0..n as u32).rev().collect();
+            let colours = ShadingColours::new(&cloud, &order);
+            assert_eq!(colours.is_compact(), compact);
+            let by_rank: Vec<Vec3> = order.iter().map(|&i| positions[i as usize]).collect();
+            let shader = Shader {
+                positions: &by_rank,
+                colours: &colours,
+                capture: &capture,
+                viewer: Vec3::new(100.0, 2500.0, -800.0),
+                exponent: 10,
+            };
+            let ranks: Vec<u32> = (0..n as u32).filter(|r| r % 5 != 2).collect();
+            for avx2 in [false, crate::cpu::has_avx2()] {
+                let mut out = vec![[0.0f32; 3]; ranks.len()];
+                shader.shade(&ranks, &mut out, avx2);
+                for (&rank, got) in ranks.iter().zip(&out) {
+                    let i = order[rank as usize] as usize;
+                    let want = plenoptic_io::view_color::interpolate(
+                        positions[i],
+                        shader.viewer,
+                        &capture,
+                        cloud.camera_colors_of(i),
+                        cloud.colors[i],
+                        10,
+                    );
+                    assert_eq!(
+                        got.map(f32::to_bits),
+                        want.map(f32::to_bits),
+                        "rank {rank}, avx2 {avx2}, compact {compact}"
+                    );
+                }
             }
         }
     }
