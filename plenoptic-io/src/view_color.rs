@@ -164,8 +164,8 @@ fn cosines<const N: usize>(
 /// Points [`interpolate8_avx2`] colours at once.
 pub const AVX2_LANES: usize = 8;
 
-/// [`interpolate_lanes_by`] of eight points seen from one viewer, each with a colour for every
-/// camera (`per_camera[k][c][l]`: camera `k`'s channel `c` of lane `l`), in AVX2: lane by lane
+/// [`interpolate_lanes_by`] of eight points, point `l` seen from `viewers[l]` (many points from
+/// one viewer, or one point from many), each with a colour for every camera (`per_camera[k][c][l]`: camera `k`'s channel `c` of lane `l`), in AVX2: lane by lane
 /// the same IEEE operations in the same order (no fused multiply-adds), so the same bits
 /// (tested against the portable form). Written with intrinsics because LLVM compiled the
 /// portable form's lanes four wide, with the zero-direction selects and the powers lane by
@@ -182,7 +182,7 @@ pub const AVX2_LANES: usize = 8;
 #[must_use]
 pub fn interpolate8_avx2(
     points: &[Vec3; AVX2_LANES],
-    viewer: Vec3,
+    viewers: &[Vec3; AVX2_LANES],
     cameras: &[Vec3],
     per_camera: &[[[f32; AVX2_LANES]; 3]],
     main: &[[f32; 3]; AVX2_LANES],
@@ -232,9 +232,9 @@ pub fn interpolate8_avx2(
     let pz = load(points.map(|p| p.z));
     let (vx, vy, vz) = {
         let (dx, dy, dz) = (
-            _mm256_sub_ps(_mm256_set1_ps(viewer.x), px),
-            _mm256_sub_ps(_mm256_set1_ps(viewer.y), py),
-            _mm256_sub_ps(_mm256_set1_ps(viewer.z), pz),
+            _mm256_sub_ps(load(viewers.map(|v| v.x)), px),
+            _mm256_sub_ps(load(viewers.map(|v| v.y)), py),
+            _mm256_sub_ps(load(viewers.map(|v| v.z)), pz),
         );
         let (rcp, ok) = recip_length_or_zero(dx, dy, dz);
         (
@@ -508,7 +508,8 @@ mod tests {
     }
 
     /// The AVX2 kernel against the one-lane form, bit for bit: points spread over a frame's
-    /// extent and far beyond it, on a capture camera, on the viewer and facing no camera, 13
+    /// extent and far beyond it, on a capture camera, on the viewer and facing no camera, a
+    /// lane with a viewer of its own, 13
     /// cameras near and far (one on the viewer), and exponents from -3 to 24 (0 and odd ones
     /// included).
     #[cfg(target_arch = "x86_64")]
@@ -551,14 +552,16 @@ mod tests {
                 .collect();
             let main: [[f32; 3]; AVX2_LANES] = std::array::from_fn(|_| [next(), next(), next()]);
             let exponent = round % 28 - 3;
+            let mut viewers = [viewer; AVX2_LANES];
+            viewers[6] = Vec3::new(next(), next(), next()) * 9000.0 - Vec3::splat(4500.0);
             // SAFETY: the CPU has AVX2 (checked above).
             #[allow(unsafe_code)]
             let lanes = unsafe {
-                interpolate8_avx2(&points, viewer, &cameras, &per_camera, &main, exponent)
+                interpolate8_avx2(&points, &viewers, &cameras, &per_camera, &main, exponent)
             };
             for l in 0..AVX2_LANES {
                 let own: Vec<[f32; 3]> = colours.iter().map(|c| c[l]).collect();
-                let alone = interpolate(points[l], viewer, &cameras, &own, main[l], exponent);
+                let alone = interpolate(points[l], viewers[l], &cameras, &own, main[l], exponent);
                 assert_eq!(
                     lanes[l].map(f32::to_bits),
                     alone.map(f32::to_bits),

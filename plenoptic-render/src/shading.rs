@@ -227,7 +227,7 @@ impl Shader<'_> {
         self.shade_in_groups(ranks, out, |points, cameras, per_camera, main| {
             interpolate8_avx2(
                 points,
-                self.viewer,
+                &[self.viewer; SHADE_LANES],
                 cameras,
                 per_camera,
                 main,

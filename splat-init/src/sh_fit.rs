@@ -1,6 +1,8 @@
 //! The closed-form SH fit of plenoptic colours and the choice of SH degree.
 
 use glam::Vec3;
+#[cfg(target_arch = "x86_64")]
+use plenoptic_io::view_color::interpolate8_avx2;
 use rayon::prelude::*;
 
 use crate::config::{InitConfig, ShDegree};
@@ -176,11 +178,11 @@ struct SeenColour<'a> {
 }
 
 /// Directions [`SeenColour::along`] colours at once (one AVX2 vector of f32).
-const LANES: usize = 8;
+const LANES: usize = plenoptic_io::view_color::AVX2_LANES;
 
 impl SeenColour<'_> {
     /// The colour seen along each of `dirs` (from a viewer at point − d) into `out`,
-    /// [`LANES`] directions at a time: the AVX2 instantiation where the CPU has it, else the
+    /// [`LANES`] directions at a time: the AVX2 kernel where the CPU has it, else the
     /// portable one (the same operations, so the same bits as one call of
     /// [`plenoptic_io::view_color::interpolate`] a direction).
     fn along(&self, dirs: &[Vec3], out: &mut [[f32; 3]], avx2: bool) {
@@ -194,10 +196,30 @@ impl SeenColour<'_> {
         self.along_portable(dirs, out);
     }
 
+    /// [`SeenColour::along`] with the AVX2 kernel ([`interpolate8_avx2`]): the point in every
+    /// lane, a direction a lane.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     fn along_avx2(&self, dirs: &[Vec3], out: &mut [[f32; 3]]) {
-        self.along_portable(dirs, out);
+        let cameras = &self.cameras[..self.colors.len().min(self.cameras.len())];
+        // The point's colour for each camera in every lane, channel by channel.
+        let per_camera: Vec<[[f32; LANES]; 3]> = self.colors[..cameras.len()]
+            .iter()
+            .map(|c| c.map(|v| [v; LANES]))
+            .collect();
+        for (group, out) in dirs.chunks(LANES).zip(out.chunks_mut(LANES)) {
+            // A short last group repeats its first direction in the spare lanes.
+            let dir = |l: usize| *group.get(l).unwrap_or(&group[0]);
+            let seen = interpolate8_avx2(
+                &[self.point; LANES],
+                &std::array::from_fn(|l| self.point - dir(l)),
+                cameras,
+                &per_camera,
+                &[self.main; LANES],
+                self.exponent,
+            );
+            out.copy_from_slice(&seen[..out.len()]);
+        }
     }
 
     #[inline(always)]
