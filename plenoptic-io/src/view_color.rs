@@ -49,30 +49,16 @@ pub fn interpolate_lanes<const N: usize>(
     exponent: i32,
 ) -> [[f32; 3]; N] {
     let pairs = colors.map(|c| c.len().min(cameras.len()));
-    // Every lane with a colour for every camera (a plenoptic frame's points all have): the
-    // lanes' colours sliced to the cameras once, so that reading them needs no bounds check.
-    if pairs.iter().all(|&n| n == cameras.len()) {
-        let colors: [&[[f32; 3]]; N] = std::array::from_fn(|l| &colors[l][..cameras.len()]);
-        interpolate_lanes_by(
-            points,
-            viewers,
-            cameras,
-            pairs,
-            |k, l| colors[l][k],
-            main,
-            exponent,
-        )
-    } else {
-        interpolate_lanes_by(
-            points,
-            viewers,
-            cameras,
-            pairs,
-            |k, l| colors[l][k],
-            main,
-            exponent,
-        )
-    }
+    let colors: [&[[f32; 3]]; N] = std::array::from_fn(|l| &colors[l][..pairs[l]]);
+    interpolate_lanes_by(
+        points,
+        viewers,
+        cameras,
+        pairs,
+        |k, l| colors[l][k],
+        main,
+        exponent,
+    )
 }
 
 /// [`interpolate_lanes`] with lane `l`'s colour for camera `k` read as `color(k, l)`, for
