@@ -151,9 +151,10 @@ fn cosines<const N: usize>(
 pub const AVX2_LANES: usize = 8;
 
 /// [`interpolate_lanes_by`] of eight points, point `l` seen from `viewers[l]` (many points from
-/// one viewer, or one point from many), each with a colour for every camera (`per_camera[k][c][l]`: camera `k`'s channel `c` of lane `l`), in AVX2: lane by lane
-/// the same IEEE operations in the same order (no fused multiply-adds), so the same bits
-/// (tested against the portable form). Written with intrinsics because LLVM compiled the
+/// one viewer, or one point from many), each with a colour for every camera
+/// (`per_camera[k][c][l]`: camera `k`'s channel `c` of lane `l`), in AVX2: lane by lane the
+/// same IEEE operations in the same order (no fused multiply-adds), so the same bits (tested
+/// against the portable form). Written with intrinsics because LLVM compiled the
 /// portable form's lanes four wide, with the zero-direction selects and the powers lane by
 /// lane (a paper-scale frame's reference views spent a sixth of their time there).
 ///
@@ -495,9 +496,8 @@ mod tests {
 
     /// The AVX2 kernel against the one-lane form, bit for bit: points spread over a frame's
     /// extent and far beyond it, on a capture camera, on the viewer and facing no camera, a
-    /// lane with a viewer of its own, 13
-    /// cameras near and far (one on the viewer), and exponents from -3 to 24 (0 and odd ones
-    /// included).
+    /// lane with a viewer of its own, 13 cameras near and far (one on the viewer), and
+    /// exponents from -3 to 24 (0 and odd ones included).
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn avx2_kernel_colours_each_point_as_it_alone_is_coloured() {
