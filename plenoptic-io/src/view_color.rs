@@ -495,7 +495,7 @@ mod tests {
     }
 
     /// The AVX2 kernel against the one-lane form, bit for bit: points spread over a frame's
-    /// extent and far beyond it, on a capture camera, on the viewer and facing no camera, a
+    /// extent and far beyond it, on a capture camera, on the viewer and far below the rig, a
     /// lane with a viewer of its own, 13 cameras near and far (one on the viewer), and
     /// exponents from -3 to 24 (0 and odd ones included).
     #[cfg(target_arch = "x86_64")]
