@@ -515,18 +515,99 @@ impl Cubes<'_> {
         // as not).
         let rel = p - view.center;
         let (lo, hi) = (rel - self.h, rel + self.h);
-        for y in y0..=y1 {
-            for x in x0..=x1 {
-                let d = view.world_ray(x, y);
-                let inv = d.recip();
-                let t0 = lo * inv;
-                let t1 = hi * inv;
-                let near = t0.min(t1).max_element();
-                let far = t0.max(t1).min_element();
-                band.keep_nearer(x, y as usize, near <= far && near > 0.0, near, rank);
+        // The rectangle's cells row by row, [`SLAB_LANES`] at a time (a cube's rectangle holds
+        // about six, over two or three short rows): the rays and slab tests of a group in
+        // vector operations, then each cell's key kept on its own. A group starts `c` columns
+        // into row `y`; its lanes' cells follow from `c` and the width alone, so no lane is
+        // stored one by one and read back as a vector (which stalled each group).
+        let width = (x1 - x0 + 1) as usize;
+        let cells = width * (y1 - y0 + 1) as usize;
+        let (mut c, mut y) = (0, y0);
+        for start in (0..cells).step_by(SLAB_LANES) {
+            let n = (cells - start).min(SLAB_LANES);
+            let (dx, dy) = lane_cells(width, c);
+            let xs: [u32; SLAB_LANES] = std::array::from_fn(|l| x0 + dx[l]);
+            let ys: [u32; SLAB_LANES] = std::array::from_fn(|l| y + dy[l]);
+            let (near, far) = slab_lanes(view.world_rays(&xs, &ys), lo, hi);
+            for l in 0..n {
+                let hit = near[l] <= far[l] && near[l] > 0.0;
+                band.keep_nearer(xs[l], ys[l] as usize, hit, near[l], rank);
+            }
+            if start + SLAB_LANES < cells {
+                let next = c + SLAB_LANES;
+                (c, y) = (next % width, y + (next / width) as u32);
             }
         }
     }
+}
+
+/// Pixels of a cube's rectangle whose rays [`Cubes::draw_cube`] makes and slab-tests at once
+/// (one AVX2 vector of f32).
+const SLAB_LANES: usize = 8;
+
+/// Lane `l`'s cell, `(columns, rows)` on from the cell `c` columns into a row of a rectangle
+/// `width` cells wide: `((c + l) % width, (c + l) / width)`, from a table for the narrow
+/// rectangles whose group of lanes wraps more than once.
+#[inline(always)]
+fn lane_cells(width: usize, c: usize) -> ([u32; SLAB_LANES], [u32; SLAB_LANES]) {
+    if width < SLAB_LANES {
+        LANE_CELLS[width][c]
+    } else {
+        let w = width as u32;
+        let k: [u32; SLAB_LANES] = std::array::from_fn(|l| (c + l) as u32);
+        (
+            std::array::from_fn(|l| if k[l] >= w { k[l] - w } else { k[l] }),
+            std::array::from_fn(|l| u32::from(k[l] >= w)),
+        )
+    }
+}
+
+/// [`lane_cells`] of the rectangles narrower than [`SLAB_LANES`], by width and start column.
+static LANE_CELLS: [[([u32; SLAB_LANES], [u32; SLAB_LANES]); SLAB_LANES]; SLAB_LANES] = {
+    let mut table = [[([0; SLAB_LANES], [0; SLAB_LANES]); SLAB_LANES]; SLAB_LANES];
+    let mut width = 1;
+    while width < SLAB_LANES {
+        let mut c = 0;
+        while c < width {
+            let mut l = 0;
+            while l < SLAB_LANES {
+                table[width][c].0[l] = ((c + l) % width) as u32;
+                table[width][c].1[l] = ((c + l) / width) as u32;
+                l += 1;
+            }
+            c += 1;
+        }
+        width += 1;
+    }
+    table
+};
+
+/// Where the rays `d[axis][lane]` from the camera centre enter and leave the world-axis box
+/// [`lo`, `hi`] (relative to the centre), `(near, far)` per lane, the ray parameter being camera
+/// z; the box is hit where near ≤ far and near > 0. Written lane by lane for 8-wide vectors,
+/// with glam's `Vec3` arithmetic on each lane: `t0 = lo · d⁻¹`, `t1 = hi · d⁻¹`, near the
+/// largest of the axes' `min(t0, t1)`, far the least of their `max(t0, t1)`, minima and maxima
+/// as glam takes them (`a < b ? a : b`), so the same bits as the one-ray form.
+#[inline(always)]
+fn slab_lanes<const N: usize>(d: [[f32; N]; 3], lo: Vec3, hi: Vec3) -> ([f32; N], [f32; N]) {
+    let min = |a: f32, b: f32| if a < b { a } else { b };
+    let max = |a: f32, b: f32| if a > b { a } else { b };
+    let entry_exit = |axis: usize| -> ([f32; N], [f32; N]) {
+        let t0: [f32; N] = std::array::from_fn(|l| lo[axis] * (1.0 / d[axis][l]));
+        let t1: [f32; N] = std::array::from_fn(|l| hi[axis] * (1.0 / d[axis][l]));
+        (
+            std::array::from_fn(|l| min(t0[l], t1[l])),
+            std::array::from_fn(|l| max(t0[l], t1[l])),
+        )
+    };
+    let ([in_x, in_y, in_z], [out_x, out_y, out_z]) = {
+        let (x, y, z) = (entry_exit(0), entry_exit(1), entry_exit(2));
+        ([x.0, y.0, z.0], [x.1, y.1, z.1])
+    };
+    (
+        std::array::from_fn(|l| max(in_x[l], max(in_y[l], in_z[l]))),
+        std::array::from_fn(|l| min(out_x[l], min(out_y[l], out_z[l]))),
+    )
 }
 
 /// Visibility pass for view-aligned discs of radius `radius` at the point's depth, keyed by
@@ -671,6 +752,22 @@ mod tests {
                 best
             })
             .collect()
+    }
+
+    #[test]
+    fn lane_cells_walk_the_rectangle_row_by_row() {
+        for width in 1..=20 {
+            for c in 0..width {
+                let (dx, dy) = lane_cells(width, c);
+                for l in 0..SLAB_LANES {
+                    assert_eq!(
+                        (dx[l] as usize, dy[l] as usize),
+                        ((c + l) % width, (c + l) / width),
+                        "width {width}, start {c}, lane {l}"
+                    );
+                }
+            }
+        }
     }
 
     #[test]
