@@ -101,12 +101,20 @@ fn median_count(points: &[Vec3], lo: Vec3, extent: f32, radius: f32) -> usize {
     let cell = radius.max(extent / (1 << 20) as f32);
     let coord = |p: Vec3| ((p - lo) / cell).floor().as_uvec3();
     let key = |c: glam::UVec3| (u64::from(c.x) << 40) | (u64::from(c.y) << 20) | u64::from(c.z);
-    let mut sorted: Vec<(u64, u32)> = points
-        .par_iter()
+    // Each point beside its key, so a cell's points are read together (through their indices
+    // they were a cache miss each); a count does not depend on the order within a cell, so
+    // the key alone orders them.
+    let mut sorted: Vec<(u64, Vec3)> = points.par_iter().map(|&p| (key(coord(p)), p)).collect();
+    sorted.par_sort_unstable_by_key(|e| e.0);
+    // Where each occupied cell's points start, so that the searches run over the cells (tens
+    // of points each, their keys in cache) rather than over the points.
+    let cells: Vec<(u64, usize)> = sorted
+        .iter()
         .enumerate()
-        .map(|(i, &p)| (key(coord(p)), i as u32))
+        .filter(|&(i, e)| i == 0 || sorted[i - 1].0 != e.0)
+        .map(|(i, e)| (e.0, i))
         .collect();
-    sorted.par_sort_unstable();
+    let start_of = |cell: usize| cells.get(cell).map_or(sorted.len(), |c| c.1);
     let r2 = radius * radius;
     let stride = points.len().div_ceil(SPACING_SAMPLES).max(1);
     let mut counts: Vec<usize> = points
@@ -115,17 +123,22 @@ fn median_count(points: &[Vec3], lo: Vec3, extent: f32, radius: f32) -> usize {
         .map(|&p| {
             let c = coord(p).as_ivec3();
             let mut n = 0;
-            for d in 0..27 {
-                let q = c + glam::IVec3::new(d % 3 - 1, d / 3 % 3 - 1, d / 9 - 1);
-                if q.min_element() < 0 {
+            // The 27 cells around the sample's as 9 columns of three: the cells (x, y, z − 1),
+            // (x, y, z) and (x, y, z + 1) have consecutive keys, so one search finds each
+            // column (a search a cell through the 3 million points' keys, a cache miss at
+            // most steps, was half of a paper-scale frame's measurement).
+            for d in 0..9 {
+                let (x, y) = (c.x + d % 3 - 1, c.y + d / 3 - 1);
+                if x < 0 || y < 0 {
                     continue;
                 }
-                let k = key(q.as_uvec3());
-                let start = sorted.partition_point(|e| e.0 < k);
-                n += sorted[start..]
+                let cell_key = |z: i32| key(glam::IVec3::new(x, y, z).as_uvec3());
+                let (first, last) = (cell_key((c.z - 1).max(0)), cell_key(c.z + 1));
+                let from = cells.partition_point(|c| c.0 < first);
+                let to = from + cells[from..].partition_point(|c| c.0 <= last);
+                n += sorted[start_of(from)..start_of(to)]
                     .iter()
-                    .take_while(|e| e.0 == k)
-                    .filter(|e| points[e.1 as usize].distance_squared(p) <= r2)
+                    .filter(|e| e.1.distance_squared(p) <= r2)
                     .take(COUNT_CAP)
                     .count();
                 // Past the cap the count only says "too many": stop, so a cloud of heaped
@@ -150,6 +163,51 @@ mod tests {
         (0..n * n)
             .map(|i| Vec3::new((i % n) as f32 * h, (i / n) as f32 * h, 0.0))
             .collect()
+    }
+
+    #[test]
+    fn median_count_counts_what_a_brute_force_counts() {
+        // A bumpy shell with heaped duplicates, some points near the box's low corner (cells
+        // at coordinate 0, whose neighbours below do not exist), at radii from below the
+        // spacing to past the count cap.
+        let mut pts: Vec<Vec3> = (0..6000)
+            .map(|i| {
+                let t = i as f32 * 0.618;
+                let r = 20.0 + 2.0 * (3.0 * t).sin();
+                Vec3::new(
+                    r * t.cos(),
+                    r * t.sin() * (0.3 * t).cos(),
+                    r * (0.3 * t).sin(),
+                )
+            })
+            .collect();
+        pts.extend(std::iter::repeat_n(Vec3::new(3.0, -2.0, 1.0), 1500));
+        let (lo, hi) = pts.iter().fold(
+            (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+            |(lo, hi), &p| (lo.min(p), hi.max(p)),
+        );
+        let extent = (hi - lo).max_element();
+        for radius in [0.3, 1.0, 2.5, 7.0, 40.0] {
+            let stride = pts.len().div_ceil(SPACING_SAMPLES).max(1);
+            let mut counts: Vec<usize> = pts
+                .iter()
+                .step_by(stride)
+                .map(|&p| {
+                    let n = pts
+                        .iter()
+                        .filter(|q| q.distance_squared(p) <= radius * radius)
+                        .count();
+                    n.min(COUNT_CAP)
+                })
+                .collect();
+            let mid = counts.len() / 2;
+            let want = *counts.select_nth_unstable(mid).1;
+            assert_eq!(
+                median_count(&pts, lo, extent, radius),
+                want,
+                "radius {radius}"
+            );
+        }
     }
 
     #[test]
