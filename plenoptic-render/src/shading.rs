@@ -28,7 +28,6 @@ fn levels() -> [f32; 256] {
 
 /// The 8-bit level of each of `values`, or `None` when one of them is not exactly a level.
 fn to_levels(values: &[f32]) -> Option<Vec<u8>> {
-    let levels = levels();
     let mut out = vec![0u8; values.len()];
     let exact = out
         .par_chunks_mut(LEVEL_CHUNK)
@@ -37,10 +36,16 @@ fn to_levels(values: &[f32]) -> Option<Vec<u8>> {
             // No early exit inside a chunk, so the loop vectorises.
             let mut exact = true;
             for (o, &v) in out.iter_mut().zip(values) {
-                // The nearest level, rounding half up (NaN and values below 0 give 0, which
-                // the comparison then refuses).
-                let k = (v * 255.0 + 0.5).clamp(0.0, 255.0) as u8;
-                exact &= levels[usize::from(k)].to_bits() == v.to_bits();
+                // The nearest level: v·255 clamped to [0, 255] (NaN to 0), rounded by adding
+                // 2²³, whose float holds the integer in its low mantissa bits (a float-to-int
+                // conversion saturates and stayed scalar, a few nanoseconds a value). A value
+                // that is a level rounds to it; any other fails the comparison, whatever it
+                // rounds to.
+                let x = v * 255.0;
+                let x = if x > 0.0 { x } else { 0.0 };
+                let x = if x < 255.0 { x } else { 255.0 };
+                let k = (x + 8_388_608.0).to_bits() as u8;
+                exact &= uchar_color(k).to_bits() == v.to_bits();
                 *o = k;
             }
             exact
@@ -346,6 +351,35 @@ mod tests {
                     "rank {rank}"
                 );
             }
+        }
+    }
+
+    #[test]
+    fn only_exact_levels_are_taken_as_levels() {
+        // Every level is its own index, in chunks of several work items.
+        let all: Vec<f32> = (0..3 * LEVEL_CHUNK + 17)
+            .map(|i| uchar_color((i * 31 % 256) as u8))
+            .collect();
+        let want: Vec<u8> = (0..all.len()).map(|i| (i * 31 % 256) as u8).collect();
+        assert_eq!(to_levels(&all), Some(want));
+        // One value off the levels anywhere refuses them all: next to a level, between two,
+        // outside [0, 1], negative zero, NaN of either sign, infinities.
+        let level = uchar_color(200);
+        for odd in [
+            f32::from_bits(level.to_bits() + 1),
+            f32::from_bits(level.to_bits() - 1),
+            (uchar_color(3) + uchar_color(4)) * 0.5,
+            1.0 + 1.0 / 255.0,
+            -1.0 / 255.0,
+            -0.0,
+            f32::NAN,
+            -f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+        ] {
+            let mut values = all.clone();
+            values[2 * LEVEL_CHUNK + 5] = odd;
+            assert_eq!(to_levels(&values), None, "{odd} ({:#x})", odd.to_bits());
         }
     }
 

@@ -35,6 +35,7 @@ fn with_bytes<R>(path: &Path, f: impl FnOnce(&[u8]) -> Result<R, Error>) -> Resu
 /// The colour in [0, 1] that a uchar colour property storing `level` reads as (`level / 255`,
 /// as every colour a reader here returns from an 8-bit property).
 #[must_use]
+#[inline]
 pub fn uchar_color(level: u8) -> f32 {
     schema::color_from_stored(f64::from(level), ScalarType::U8)
 }
