@@ -195,9 +195,11 @@ impl ViewCamera {
             // NaN fails the comparisons and is refused here too.
             inside[l] = lo_z > 0.0 && x0 <= x1 && y0 <= y1;
         }
+        // The bounds are whole numbers, inside the image where the box is inside it.
+        let whole = bounds.map(|b| b.map(crate::cpu::small_whole));
         std::array::from_fn(|l| {
             inside[l].then(|| {
-                let [x0, x1, y0, y1] = bounds.map(|b| b[l] as u32);
+                let [x0, x1, y0, y1] = whole.map(|b| b[l]);
                 (x0, x1, y0, y1)
             })
         })

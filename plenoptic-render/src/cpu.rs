@@ -1,5 +1,6 @@
-//! What the CPU running the renderer can do, detected at run time: the drawing, shading and
-//! filtering loops have AVX2 instantiations chosen by it, so one binary runs on any x86-64.
+//! What the CPU running the renderer can do, detected at run time (the drawing, shading and
+//! filtering loops have AVX2 instantiations chosen by it, so one binary runs on any x86-64),
+//! and the small idioms that keep those loops in vector lanes.
 
 /// Whether the AVX2 instantiations of the hot loops can run on this CPU (always false off
 /// x86-64).
@@ -43,4 +44,38 @@ pub(crate) fn prefetch<T>(bytes: &[T]) {
     }
     #[cfg(not(target_arch = "x86_64"))]
     let _ = bytes;
+}
+
+/// The whole number nearest to `v` for `v` in [0, 2²³] (round half to even), by adding 2²³: the
+/// sum's float holds it in its low mantissa bits. Outside that range (NaN included) the result
+/// is meaningless but harmless. Unlike `as u32`, which saturates and so stayed one lane at a
+/// time with its range checks, it is two vector operations, so loops over lanes of f32 that
+/// end in integers stay in vectors.
+#[inline(always)]
+pub(crate) fn small_whole(v: f32) -> u32 {
+    const TWO_23: f32 = 8_388_608.0;
+    (v + TWO_23).to_bits().wrapping_sub(TWO_23.to_bits())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn small_whole_is_the_nearest_whole_number() {
+        // Every whole number up to 2¹⁶ and a stride of them to 2²³, and values between: the
+        // rounding is the float addition's, half to even.
+        let wholes = (0..=1u32 << 16).chain((1u32 << 16..=1 << 23).step_by(997));
+        for n in wholes.chain([1 << 23]) {
+            let v = n as f32;
+            assert_eq!(small_whole(v), n, "{v}");
+            for frac in [0.25f32, 0.5, 0.75] {
+                let x = v + frac;
+                if x <= (1 << 23) as f32 && x.fract() != 0.0 {
+                    assert_eq!(small_whole(x), x.round_ties_even() as u32, "{x}");
+                }
+            }
+        }
+        assert_eq!(small_whole(-0.0), 0);
+    }
 }

@@ -10,7 +10,7 @@ use plenoptic_io::view_color::interpolate_lanes_by;
 use plenoptic_io::view_color::interpolate8_avx2;
 use rayon::prelude::*;
 
-use crate::cpu::prefetch;
+use crate::cpu::{prefetch, small_whole};
 
 /// Points [`Shader::shade`] colours at once (one AVX2 vector of f32).
 const SHADE_LANES: usize = plenoptic_io::view_color::AVX2_LANES;
@@ -36,15 +36,14 @@ fn to_levels(values: &[f32]) -> Option<Vec<u8>> {
             // No early exit inside a chunk, so the loop vectorises.
             let mut exact = true;
             for (o, &v) in out.iter_mut().zip(values) {
-                // The nearest level: v·255 clamped to [0, 255] (NaN to 0), rounded by adding
-                // 2²³, whose float holds the integer in its low mantissa bits (a float-to-int
-                // conversion saturates and stayed scalar, a few nanoseconds a value). A value
-                // that is a level rounds to it; any other fails the comparison, whatever it
-                // rounds to.
+                // The nearest level: v·255 clamped to [0, 255] (NaN to 0) and rounded in
+                // vector lanes (`as u8` saturates and stayed scalar, a few nanoseconds a
+                // value). A value that is a level rounds to it; any other fails the
+                // comparison, whatever it rounds to.
                 let x = v * 255.0;
                 let x = if x > 0.0 { x } else { 0.0 };
                 let x = if x < 255.0 { x } else { 255.0 };
-                let k = (x + 8_388_608.0).to_bits() as u8;
+                let k = small_whole(x) as u8;
                 exact &= uchar_color(k).to_bits() == v.to_bits();
                 *o = k;
             }
