@@ -593,8 +593,9 @@ fn slab_lanes<const N: usize>(d: [[f32; N]; 3], lo: Vec3, hi: Vec3) -> ([f32; N]
     let min = |a: f32, b: f32| if a < b { a } else { b };
     let max = |a: f32, b: f32| if a > b { a } else { b };
     let entry_exit = |axis: usize| -> ([f32; N], [f32; N]) {
-        let t0: [f32; N] = std::array::from_fn(|l| lo[axis] * (1.0 / d[axis][l]));
-        let t1: [f32; N] = std::array::from_fn(|l| hi[axis] * (1.0 / d[axis][l]));
+        let inv: [f32; N] = std::array::from_fn(|l| 1.0 / d[axis][l]);
+        let t0: [f32; N] = std::array::from_fn(|l| lo[axis] * inv[l]);
+        let t1: [f32; N] = std::array::from_fn(|l| hi[axis] * inv[l]);
         (
             std::array::from_fn(|l| min(t0[l], t1[l])),
             std::array::from_fn(|l| max(t0[l], t1[l])),
