@@ -75,21 +75,23 @@ struct ViewBuffers {
     shaded: Vec<[f32; 3]>,
 }
 
-/// Buffers of a finished view, kept for the next view to start. At most one set waits: a
-/// finished view's set goes to the next view while every other view in flight holds its own,
-/// so memory stays what the views in flight need plus one set (keeping every set that was once
-/// in flight held 0.9 GB more at the peak of a paper-scale run on 16 threads).
+/// Buffers of finished views, kept for the next views to start. As many sets wait as there are
+/// threads: on two threads two views are in flight, and when both finish together a pool of
+/// one dropped the second set, so the next pair allocated one afresh (5 sets for a frame's 44
+/// views instead of 2, and the kernel's page clearing and faults about a twelfth of the views'
+/// time). A cap rather than every set ever taken, because rayon's stealing can briefly put
+/// more views in flight than threads (keeping all of them held 0.9 GB more at the peak of a
+/// paper-scale run on 16 threads).
 #[derive(Default)]
-// Boxed: a set is moved in and out whole, and a prepared cloud stays small.
-struct ViewBuffersPool(Mutex<Option<Box<ViewBuffers>>>);
+struct ViewBuffersPool(Mutex<Vec<ViewBuffers>>);
 
 impl ViewBuffersPool {
     /// A set for a view of `width` × `height` sub-pixels and `points` points: the z-buffer empty
     /// and no point visible. The colours are left as the last view wrote them: a view reads the
     /// colour of a rank only after it has shaded that rank; the ranks and shaded colours are
     /// refilled by each view.
-    fn take(&self, width: usize, height: usize, points: usize) -> Box<ViewBuffers> {
-        let reused = self.0.lock().unwrap_or_else(PoisonError::into_inner).take();
+    fn take(&self, width: usize, height: usize, points: usize) -> ViewBuffers {
+        let reused = self.0.lock().unwrap_or_else(PoisonError::into_inner).pop();
         match reused {
             Some(mut b)
                 if (b.zbuf.width(), b.zbuf.height()) == (width, height)
@@ -102,22 +104,22 @@ impl ViewBuffersPool {
                     .for_each(|v| *v.get_mut() = false);
                 b
             }
-            _ => Box::new(ViewBuffers {
+            _ => ViewBuffers {
                 zbuf: ZBuffer::new(width, height),
                 visible: (0..points).map(|_| AtomicBool::new(false)).collect(),
                 colours: vec![[0.0; 3]; points],
                 ranks: Vec::new(),
                 shaded: Vec::new(),
-            }),
+            },
         }
     }
 
-    /// Returns a set for a later view, or frees it when one is already waiting.
-    fn give_back(&self, b: Box<ViewBuffers>) {
-        self.0
-            .lock()
-            .unwrap_or_else(PoisonError::into_inner)
-            .get_or_insert(b);
+    /// Returns a set for a later view, or frees it when a set per thread is already waiting.
+    fn give_back(&self, b: ViewBuffers) {
+        let mut waiting = self.0.lock().unwrap_or_else(PoisonError::into_inner);
+        if waiting.len() < rayon::current_num_threads() {
+            waiting.push(b);
+        }
     }
 }
 
@@ -161,7 +163,7 @@ impl<'a> PreparedCloud<'a> {
             colours,
             ranks,
             shaded,
-        } = &mut *buffers;
+        } = &mut buffers;
         match opts.point_shape {
             PointShape::Cube => {
                 _ = draw_cubes(
@@ -1009,6 +1011,55 @@ mod tests {
             assert!(alone.alpha.iter().filter(|&&a| a > 0.0).count() > 100);
             assert_eq!(in_turn, alone, "view from {eye}");
         }
+        // In parallel, several sets in flight and waiting at once, handed between views of
+        // either size in any order.
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(3)
+            .build()
+            .unwrap();
+        let cameras: Vec<_> = views
+            .iter()
+            .cycle()
+            .take(15)
+            .map(|&(eye, w)| camera(eye, DVec3::ZERO, w, w, 40.0))
+            .collect();
+        let alone: Vec<_> = cameras
+            .iter()
+            .map(|cam| render_cloud(&cloud, cam, &opts).unwrap())
+            .collect();
+        let in_parallel: Vec<_> = pool.install(|| {
+            cameras
+                .par_iter()
+                .map(|cam| prepared.render(cam).unwrap())
+                .collect()
+        });
+        assert_eq!(in_parallel, alone);
+    }
+
+    #[test]
+    fn finished_views_leave_a_set_of_buffers_per_thread_at_most() {
+        let pools = ViewBuffersPool::default();
+        let threads = rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .unwrap();
+        threads.install(|| {
+            let sets: Vec<_> = (0..3).map(|_| pools.take(8, 8, 10)).collect();
+            for set in sets {
+                pools.give_back(set);
+            }
+        });
+        assert_eq!(pools.0.lock().unwrap().len(), 2);
+        // A waiting set is handed out again, cleared, before a new one is made.
+        let mut set = pools.take(8, 8, 10);
+        assert_eq!(pools.0.lock().unwrap().len(), 1);
+        set.zbuf.insert(3, 3, 1.0, 7);
+        assert_eq!(set.zbuf.get(3, 3), Some((1.0, 7)));
+        *set.visible[4].get_mut() = true;
+        pools.give_back(set);
+        let again = pools.take(8, 8, 10);
+        assert_eq!(again.zbuf.get(3, 3), None);
+        assert!(!again.visible[4].load(Ordering::Relaxed));
     }
 
     #[test]
