@@ -1227,6 +1227,14 @@ mod tests {
                 }
                 assert_eq!(img, alone, "{shape:?} ×{supersample}");
                 assert!(img.alpha.iter().any(|&a| a > 0.0));
+                // Without depth: the same colour and coverage, bit for bit.
+                let no_depth = ViewOptions {
+                    depth: false,
+                    ..opts.clone()
+                };
+                let without = render_cloud(&a, &cam, &no_depth).unwrap();
+                assert!(without.depth.is_empty() && img.depth.iter().any(|&z| z > 0.0));
+                assert_eq!((without.rgb, without.alpha), (img.rgb, img.alpha));
             }
         }
     }

@@ -100,7 +100,12 @@ where
     };
 
     // A sparse cloud's point size and a cloud's drawing order are worked out once, not once a view.
-    let renderer = ModelRenderer::new(model, view)?;
+    // The depth maps need the views' depth whatever the caller keeps of them.
+    let view = ViewOptions {
+        depth: view.depth || opts.depth,
+        ..view.clone()
+    };
+    let renderer = ModelRenderer::new(model, &view)?;
     let names: Vec<String> = (0..cameras.len()).map(dataset_image_name).collect();
     // Per view: whether anything covers it, and what the caller keeps of it.
     let kept: Vec<(bool, T)> = cameras

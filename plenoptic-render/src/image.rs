@@ -11,7 +11,8 @@ pub struct ViewImage {
     pub rgb: Vec<f32>,
     /// Coverage in [0, 1] (W·H): 1 where the object is, fractional at edges when supersampled.
     pub alpha: Vec<f32>,
-    /// Camera-space z of the visible surface (W·H); 0 where nothing is seen.
+    /// Camera-space z of the visible surface (W·H); 0 where nothing is seen. Empty when the
+    /// view was rendered without depth ([`crate::ViewOptions::depth`]).
     pub depth: Vec<f32>,
 }
 
@@ -30,6 +31,9 @@ impl ViewImage {
     }
 
     /// Depth of pixel (x, y) (0 where nothing is seen).
+    ///
+    /// # Panics
+    /// When the view was rendered without depth ([`crate::ViewOptions::depth`]).
     #[must_use]
     pub fn depth_at(&self, x: u32, y: u32) -> f32 {
         self.depth[y as usize * self.width as usize + x as usize]

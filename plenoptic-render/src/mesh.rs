@@ -479,4 +479,37 @@ mod tests {
         let hit = ray.at((-1.0 - ray.origin.y) / ray.direction.y);
         assert!((f64::from(img.depth_at(20, 39)) - cam.depth(hit)).abs() < 1e-3);
     }
+
+    #[test]
+    fn views_without_depth_have_the_same_colour_and_coverage() {
+        let mesh = quad(Some(vec![
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0],
+            [1.0, 1.0, 0.0],
+        ]));
+        let cam = Camera::new(
+            Intrinsics::from_fov_y(24, 20, 40.0),
+            Pose::look_at(DVec3::new(1.0, 0.5, 4.0), DVec3::ZERO, DVec3::Y),
+        );
+        for supersample in [1, 3] {
+            let opts = ViewOptions {
+                supersample,
+                ..ViewOptions::default()
+            };
+            let with = render_mesh(&mesh, &cam, &opts).unwrap();
+            let without = render_mesh(
+                &mesh,
+                &cam,
+                &ViewOptions {
+                    depth: false,
+                    ..opts
+                },
+            )
+            .unwrap();
+            assert!(with.depth.iter().any(|&z| z > 0.0));
+            assert!(without.depth.is_empty());
+            assert_eq!((without.rgb, without.alpha), (with.rgb, with.alpha));
+        }
+    }
 }

@@ -50,7 +50,13 @@ where
 {
     let k = opts.supersample as usize;
     if k == 1 {
-        return shade_pixels(view, zbuf, opts.background, shade);
+        // One sample a pixel: the depth is written in the same loop as the colour, at no
+        // cost worth a second loop without it.
+        let mut image = shade_pixels(view, zbuf, opts.background, shade);
+        if !opts.depth {
+            image.depth = Vec::new();
+        }
+        return image;
     }
     let (bw, bh) = (view.width as usize, view.height as usize);
     let [r, g, b] = opts.background;
@@ -70,7 +76,11 @@ where
         height: (bh / k) as u32,
         rgb,
         alpha,
-        depth: own_pixel_depth(zbuf, k),
+        depth: if opts.depth {
+            own_pixel_depth(zbuf, k)
+        } else {
+            Vec::new()
+        },
     }
 }
 

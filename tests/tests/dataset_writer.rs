@@ -34,11 +34,15 @@ fn dataset_round_trips_through_colmap_io() {
         depth: true,
         ..DatasetOptions::default()
     };
+    // Views asked without depth still get it when the dataset writes depth maps.
     let images = write_dataset(
         dir.path(),
         &model,
         &cams,
-        &ViewOptions::default(),
+        &ViewOptions {
+            depth: false,
+            ..ViewOptions::default()
+        },
         &opts,
         &|| {
             count.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
@@ -68,6 +72,8 @@ fn dataset_round_trips_through_colmap_io() {
     }
     assert!(dir.path().join("masks/view_002.png").is_file());
     assert!(dir.path().join("depth/view_002.exr").is_file());
+    assert_eq!(images[2].depth.len(), 64 * 48);
+    assert!(images[2].depth.iter().any(|&z| z > 0.0));
     let ply = plenoptic_io::read_cloud(&dir.path().join("sparse/0/points3D.ply")).unwrap();
     assert_eq!(ply.positions, cloud.positions);
     assert!(ply.normals.is_some());

@@ -257,9 +257,13 @@ pub fn run_bench(
         opts.resolution
     ));
     let t = Instant::now();
-    let view_opts = cfg.renderer.for_model(&model);
-    // As the pipeline does: each view becomes the trainer's as soon as it is rendered, so a
-    // frame's full images are never all held at once (and their pages are reused).
+    let view_opts = plenoptic_render::ViewOptions {
+        depth: false,
+        ..cfg.renderer.for_model(&model)
+    };
+    // As the pipeline does: each view becomes the trainer's as soon as it is rendered (without
+    // depth, which it drops), so a frame's full images are never all held at once (and their
+    // pages are reused).
     let views: Arc<Vec<View>> =
         plenoptic_render::render_views_with(&model, &rig.train, &view_opts, |i, image| {
             training_view(i, format!("view_{i:03}"), rig.train[i], image)

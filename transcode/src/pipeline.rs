@@ -639,6 +639,8 @@ fn reference_views(
     });
     let mut opts = cfg.renderer.for_model(model);
     opts.background = [0.0; 3];
+    // The trainer keeps colour and coverage; the dataset writer asks for depth if it writes it.
+    opts.depth = false;
     if opts.point_size != cfg.renderer.point_size {
         observer(Event::Note(format!(
             "the cloud samples its surface more sparsely than one point per voxel: its points \
