@@ -419,6 +419,7 @@ fn draw_cubes_using(
                     cubes.draw(points, first, &mut band, avx2);
                 }
             }
+            band.tighten_spans();
             hidden_runs
         })
         .sum()
@@ -521,9 +522,12 @@ impl Cubes<'_> {
         // about six, over two or three short rows): the rays and slab tests of a group in
         // vector operations, then each cell's key kept on its own. A group starts `c` columns
         // into row `y`; its lanes' cells follow from `c` and the width alone, so no lane is
-        // stored one by one and read back as a vector (which stalled each group).
+        // stored one by one and read back as a vector (which stalled each group). The rows'
+        // spans are widened once for the whole rectangle, not lane by lane, and the band
+        // tightens them when it is drawn.
         let width = (x1 - x0 + 1) as usize;
         let cells = width * (y1 - y0 + 1) as usize;
+        band.widen_rows((x0, x1), (y0 as usize, y1 as usize));
         let (mut c, mut y) = (0, y0);
         for start in (0..cells).step_by(SLAB_LANES) {
             let n = (cells - start).min(SLAB_LANES);

@@ -186,18 +186,60 @@ impl ZBand<'_> {
     }
 
     /// Keeps (depth, id) at pixel (`x`, `y`) (a row inside the band) where `hit` and it is nearer
-    /// than what is there, and widens the row's span to `x` where `hit`; written as selects and
-    /// a minimum, without a branch. `depth` must be positive where `hit`.
+    /// than what is there; written as a select and a minimum, without a branch. `depth` must be
+    /// positive where `hit`. The row's span must already reach `x` ([`ZBand::widen_rows`]).
     #[inline(always)]
     pub fn keep_nearer(&mut self, x: u32, y: usize, hit: bool, depth: f32, id: u32) {
         let r = y - self.y0;
         let candidate = if hit { key(depth, id) } else { EMPTY };
         let cell = self.cells[r * self.width + x as usize].get_mut();
         *cell = (*cell).min(candidate);
-        let first = self.first[r].get_mut();
-        *first = (*first).min(if hit { x } else { u32::MAX });
-        let last = self.last[r].get_mut();
-        *last = (*last).max(if hit { x } else { 0 });
+    }
+
+    /// Widens the spans of rows `y0..=y1` (inside the band) to columns `x0..=x1`, before
+    /// [`ZBand::keep_nearer`] writes there: once for a primitive's rectangle rather than at each
+    /// of its cells, whose span updates were a chain of stores and loads of the same row's
+    /// bounds, lane after lane. The spans may then reach beyond the written cells, until
+    /// [`ZBand::tighten_spans`].
+    #[inline(always)]
+    pub fn widen_rows(&mut self, (x0, x1): (u32, u32), (y0, y1): (usize, usize)) {
+        let (r0, r1) = (y0 - self.y0, y1 - self.y0);
+        for (first, last) in self.first[r0..=r1].iter_mut().zip(&mut self.last[r0..=r1]) {
+            let first = first.get_mut();
+            *first = (*first).min(x0);
+            let last = last.get_mut();
+            *last = (*last).max(x1);
+        }
+    }
+
+    /// Shrinks each row's span to its written cells' extremes (none when it has none): the
+    /// spans as exact as if every write had widened them alone, whatever
+    /// [`ZBand::widen_rows`] covered.
+    pub fn tighten_spans(&mut self) {
+        let width = self.width;
+        for ((row, first), last) in self
+            .cells
+            .chunks_mut(width.max(1))
+            .zip(self.first.iter_mut())
+            .zip(self.last.iter_mut())
+        {
+            let (a, b) = (*first.get_mut() as usize, *last.get_mut() as usize);
+            if a > b {
+                continue;
+            }
+            let span = &mut row[a..=b];
+            match span.iter_mut().position(|c| *c.get_mut() != EMPTY) {
+                Some(lo) => {
+                    let hi = span.iter_mut().rposition(|c| *c.get_mut() != EMPTY);
+                    *first.get_mut() = (a + lo) as u32;
+                    *last.get_mut() = (a + hi.unwrap_or(lo)) as u32;
+                }
+                None => {
+                    *first.get_mut() = u32::MAX;
+                    *last.get_mut() = 0;
+                }
+            }
+        }
     }
 }
 
@@ -220,8 +262,9 @@ mod tests {
     }
 
     /// Bands cover the rows in order; keeping through a band is the same minimum as inserting
-    /// (nearest depth, ties to the lowest id, misses leave cells alone), the spans are the
-    /// written columns' extremes, and `all_nearer` answers as a look at every cell would.
+    /// (nearest depth, ties to the lowest id, misses leave cells alone), the spans widened over
+    /// rectangles and then tightened are the written columns' extremes, and `all_nearer`
+    /// answers as a look at every cell would.
     #[test]
     fn bands_keep_the_nearest_like_inserts_do() {
         let (w, h) = (37usize, 23usize);
@@ -256,8 +299,21 @@ mod tests {
             bands.iter().map(ZBand::rows).collect::<Vec<_>>(),
             vec![0..5, 5..10, 10..15, 15..20, 20..23]
         );
+        // Each write's row widened first over a rectangle around it, missed or not, as a
+        // primitive's rectangle is; the spans are tightened at the end.
         for &(x, y, hit, d, id) in &writes {
-            bands[y / 5].keep_nearer(x, y, hit, d, id);
+            let band = &mut bands[y / 5];
+            let rows = band.rows();
+            let (x0, x1) = (
+                x.saturating_sub(next() as u32 % 4),
+                (x + next() as u32 % 4).min(w as u32 - 1),
+            );
+            let (y0, y1) = (
+                y.saturating_sub(next() as usize % 3).max(rows.start),
+                (y + next() as usize % 3).min(rows.end - 1),
+            );
+            band.widen_rows((x0, x1), (y0, y1));
+            band.keep_nearer(x, y, hit, d, id);
         }
         for band in &mut bands {
             for _ in 0..200 {
@@ -271,6 +327,9 @@ mod tests {
                 });
                 assert_eq!(band.all_nearer(depth, (a.min(b), a.max(b)), (y0, y1)), want);
             }
+        }
+        for band in &mut bands {
+            band.tighten_spans();
         }
         drop(bands);
         for y in 0..h {
