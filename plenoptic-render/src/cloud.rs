@@ -1,7 +1,7 @@
 //! Point clouds drawn as the PccAppRenderer draws them: voxel cubes (or discs), z-buffered,
 //! coloured towards the viewer.
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Mutex, PoisonError};
 
 use camera_model::Camera;
@@ -76,14 +76,28 @@ struct ViewBuffers {
 }
 
 /// Buffers of finished views, kept for the next views to start. As many sets wait as there are
-/// threads: on two threads two views are in flight, and when both finish together a pool of
-/// one dropped the second set, so the next pair allocated one afresh (5 sets for a frame's 44
-/// views instead of 2, and the kernel's page clearing and faults about a twelfth of the views'
-/// time). A cap rather than every set ever taken, because rayon's stealing can briefly put
-/// more views in flight than threads (keeping all of them held 0.9 GB more at the peak of a
-/// paper-scale run on 16 threads).
-#[derive(Default)]
-struct ViewBuffersPool(Mutex<Vec<ViewBuffers>>);
+/// threads, and no more than views are still to start when the caller said how many
+/// ([`PreparedCloud::expect_views`]). On two threads two views are in flight, and when both
+/// finished together a pool of one dropped the second set, so the next pair allocated one
+/// afresh (5 sets for a frame's 44 views instead of 2; the kernel's page clearing and faults
+/// were about a twelfth of the views' time). Not every set ever taken: rayon's stealing can put
+/// more views in flight than threads for a moment, and sets kept while a frame's last views
+/// finish are never used again (keeping every set raised a 16-thread paper-scale run's peak from
+/// 3.29 to 4.19 GB, `4c0524b`).
+struct ViewBuffersPool {
+    waiting: Mutex<Vec<ViewBuffers>>,
+    /// Views still to start, or `usize::MAX` when the caller has not said.
+    to_come: AtomicUsize,
+}
+
+impl Default for ViewBuffersPool {
+    fn default() -> Self {
+        Self {
+            waiting: Mutex::default(),
+            to_come: AtomicUsize::new(usize::MAX),
+        }
+    }
+}
 
 impl ViewBuffersPool {
     /// A set for a view of `width` × `height` sub-pixels and `points` points: the z-buffer empty
@@ -91,7 +105,17 @@ impl ViewBuffersPool {
     /// colour of a rank only after it has shaded that rank; the ranks and shaded colours are
     /// refilled by each view.
     fn take(&self, width: usize, height: usize, points: usize) -> ViewBuffers {
-        let reused = self.0.lock().unwrap_or_else(PoisonError::into_inner).pop();
+        // One view fewer to come (unless the count is unknown or already spent).
+        let _ = self
+            .to_come
+            .fetch_update(Ordering::Relaxed, Ordering::Relaxed, |n| {
+                (n != usize::MAX && n > 0).then(|| n - 1)
+            });
+        let reused = self
+            .waiting
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .pop();
         match reused {
             Some(mut b)
                 if (b.zbuf.width(), b.zbuf.height()) == (width, height)
@@ -114,10 +138,12 @@ impl ViewBuffersPool {
         }
     }
 
-    /// Returns a set for a later view, or frees it when a set per thread is already waiting.
+    /// Returns a set for a later view, or frees it when as many sets are already waiting as
+    /// there are threads or views to come.
     fn give_back(&self, b: ViewBuffers) {
-        let mut waiting = self.0.lock().unwrap_or_else(PoisonError::into_inner);
-        if waiting.len() < rayon::current_num_threads() {
+        let keep = rayon::current_num_threads().min(self.to_come.load(Ordering::Relaxed));
+        let mut waiting = self.waiting.lock().unwrap_or_else(PoisonError::into_inner);
+        if waiting.len() < keep {
             waiting.push(b);
         }
     }
@@ -144,6 +170,12 @@ impl<'a> PreparedCloud<'a> {
             opts: opts.for_cloud(cloud),
             buffers: ViewBuffersPool::default(),
         })
+    }
+
+    /// Tells the cloud that `n` more views are to be drawn, so that it keeps no buffers for
+    /// views that will not come.
+    pub(crate) fn expect_views(&self, n: usize) {
+        self.buffers.to_come.store(n, Ordering::Relaxed);
     }
 
     /// The cloud seen from `camera`.
@@ -1053,10 +1085,10 @@ mod tests {
                 pools.give_back(set);
             }
         });
-        assert_eq!(pools.0.lock().unwrap().len(), 2);
+        assert_eq!(pools.waiting.lock().unwrap().len(), 2);
         // A waiting set is handed out again, cleared, before a new one is made.
         let mut set = pools.take(8, 8, 10);
-        assert_eq!(pools.0.lock().unwrap().len(), 1);
+        assert_eq!(pools.waiting.lock().unwrap().len(), 1);
         set.zbuf.insert(3, 3, 1.0, 7);
         assert_eq!(set.zbuf.get(3, 3), Some((1.0, 7)));
         *set.visible[4].get_mut() = true;
@@ -1064,6 +1096,33 @@ mod tests {
         let again = pools.take(8, 8, 10);
         assert_eq!(again.zbuf.get(3, 3), None);
         assert!(!again.visible[4].load(Ordering::Relaxed));
+    }
+
+    #[test]
+    fn no_buffers_wait_for_views_that_will_not_come() {
+        let pools = ViewBuffersPool::default();
+        pools.to_come.store(3, Ordering::Relaxed);
+        let threads = rayon::ThreadPoolBuilder::new()
+            .num_threads(4)
+            .build()
+            .unwrap();
+        threads.install(|| {
+            // Two of three views start; one more is to come, so one finished set waits.
+            let sets: Vec<_> = (0..2).map(|_| pools.take(8, 8, 10)).collect();
+            for set in sets {
+                pools.give_back(set);
+            }
+            assert_eq!(pools.waiting.lock().unwrap().len(), 1);
+            // The last view takes it; none is to come, so its set is freed.
+            let last = pools.take(8, 8, 10);
+            assert!(pools.waiting.lock().unwrap().is_empty());
+            pools.give_back(last);
+            assert!(pools.waiting.lock().unwrap().is_empty());
+            // More views than were announced still draw, keeping nothing.
+            let extra = pools.take(8, 8, 10);
+            pools.give_back(extra);
+            assert!(pools.waiting.lock().unwrap().is_empty());
+        });
     }
 
     #[test]

@@ -106,6 +106,7 @@ where
         ..view.clone()
     };
     let renderer = ModelRenderer::new(model, &view)?;
+    renderer.expect_views(cameras.len());
     let names: Vec<String> = (0..cameras.len()).map(dataset_image_name).collect();
     // Per view: whether anything covers it, and what the caller keeps of it.
     let kept: Vec<(bool, T)> = cameras

@@ -34,6 +34,15 @@ impl<'a> ModelRenderer<'a> {
         Ok(Self { prepared })
     }
 
+    /// Says that `n` more views are to be rendered, so that no buffers are kept for views that
+    /// will not come (the functions rendering a set of cameras say it; views rendered one at a
+    /// time keep a set a thread until the renderer is dropped).
+    pub(crate) fn expect_views(&self, n: usize) {
+        if let Prepared::Cloud(cloud) = &self.prepared {
+            cloud.expect_views(n);
+        }
+    }
+
     /// The model seen from `camera`.
     pub fn render(&self, camera: &Camera) -> Result<ViewImage, Error> {
         match &self.prepared {
@@ -64,6 +73,7 @@ where
     F: Fn(usize, ViewImage) -> Result<(), Error> + Sync + Send,
 {
     let renderer = ModelRenderer::new(model, opts)?;
+    renderer.expect_views(cameras.len());
     cameras
         .par_iter()
         .enumerate()
@@ -94,6 +104,7 @@ where
     F: Fn(usize, ViewImage) -> T + Sync + Send,
 {
     let renderer = ModelRenderer::new(model, opts)?;
+    renderer.expect_views(cameras.len());
     cameras
         .par_iter()
         .enumerate()
