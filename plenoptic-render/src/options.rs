@@ -53,7 +53,7 @@ pub struct ViewOptions {
     pub pixel_filter: PixelFilter,
     /// Whether views carry their depth ([`crate::ViewImage::depth`], empty otherwise). A caller
     /// that keeps only colour and coverage (a trainer's views) saves the depth's pass over the
-    /// sub-pixels and its image: about 3 % of a paper-scale frame's views. What a caller asks
+    /// sub-pixels and its image: about 2 % of a paper-scale frame's views. What a caller asks
     /// of the renderer rather than a setting of the references, so not read from or written to
     /// a configuration file.
     #[serde(skip, default = "with_depth")]

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::Context as _;
 use indicatif::{ProgressBar, ProgressStyle};
-use plenoptic_render::{self as views, BitDepth, DatasetOptions, PointShape};
+use plenoptic_render::{self as views, BitDepth, DatasetOptions, PointShape, ViewOptions};
 use transcode::config::Config;
 
 use super::config::{Overrides, require_file};
@@ -82,7 +82,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             chosen.point_size, view.point_size
         );
     }
-    let view = chosen;
+    // The images are written, not kept: depth only where `depth/` is (the writer asks for it).
+    let view = ViewOptions {
+        depth: false,
+        ..chosen
+    };
     let (center, radius) = views::bounding_sphere(&model)?;
     let cameras = views::fibonacci_rig(center, radius, &config.rig)?;
 
