@@ -685,6 +685,14 @@ fn draw_discs(positions: &[Vec3], view: &ViewCamera, radius: f32, zbuf: &ZBuffer
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A pool of `n` threads for the tests that compare thread counts or run views at once.
+    fn thread_pool(n: usize) -> rayon::ThreadPool {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build()
+            .unwrap()
+    }
     use camera_model::{Intrinsics, Pose};
     use glam::DVec3;
     use plenoptic_io::CaptureCamera;
@@ -867,10 +875,7 @@ mod tests {
         let view = ViewCamera::new(&cam).unwrap();
         let (w, h) = (view.width as usize, view.height as usize);
         let draw = |threads: usize| {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap();
+            let pool = thread_pool(threads);
             let mut zbuf = ZBuffer::new(w, h);
             pool.install(|| draw_cubes(&pts, &runs, &view, 0.5, &mut zbuf));
             let cells: Vec<_> = (0..w * h).map(|p| zbuf.get(p % w, p / w)).collect();
@@ -1049,10 +1054,7 @@ mod tests {
         }
         // In parallel, several sets in flight and waiting at once, handed between views of
         // either size in any order.
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(3)
-            .build()
-            .unwrap();
+        let pool = thread_pool(3);
         let cameras: Vec<_> = views
             .iter()
             .cycle()
@@ -1075,10 +1077,7 @@ mod tests {
     #[test]
     fn finished_views_leave_a_set_of_buffers_per_thread_at_most() {
         let pools = ViewBuffersPool::default();
-        let threads = rayon::ThreadPoolBuilder::new()
-            .num_threads(2)
-            .build()
-            .unwrap();
+        let threads = thread_pool(2);
         threads.install(|| {
             let sets: Vec<_> = (0..3).map(|_| pools.take(8, 8, 10)).collect();
             for set in sets {
@@ -1102,10 +1101,7 @@ mod tests {
     fn no_buffers_wait_for_views_that_will_not_come() {
         let pools = ViewBuffersPool::default();
         pools.to_come.store(3, Ordering::Relaxed);
-        let threads = rayon::ThreadPoolBuilder::new()
-            .num_threads(4)
-            .build()
-            .unwrap();
+        let threads = thread_pool(4);
         threads.install(|| {
             // Two of three views start; one more is to come, so one finished set waits.
             let sets: Vec<_> = (0..2).map(|_| pools.take(8, 8, 10)).collect();
