@@ -693,7 +693,7 @@ fn composite_tile_impl<S: WeightSink, const AVX2: bool>(
         let p = &proj[sid as usize];
         let spans = RowSpans::solve::<AVX2>(p, x0, y0, tw, th);
         let tag = k as u32 + 1;
-        evaluations += falloff.compute(p, &spans, spans.mask & !done_rows, x0);
+        evaluations += falloff.compute::<AVX2>(p, &spans, spans.mask & !done_rows, x0);
         let mut blended = 0;
         for (&hr, g) in falloff.hr.iter().zip(&falloff.gauss).take(falloff.n) {
             let hr = usize::from(hr);

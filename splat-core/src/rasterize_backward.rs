@@ -459,7 +459,7 @@ impl Rasterizer {
             let mut s_uyy = [0.0_f32; LANES];
             let mut s_uxy = [0.0_f32; LANES];
             let spans = RowSpans::solve::<AVX2>(p, x0, y0, tw, th);
-            falloff.compute(p, &spans, spans.mask & active, x0);
+            falloff.compute::<AVX2>(p, &spans, spans.mask & active, x0);
             if falloff.n == 0 {
                 out[kk] = ProjectedGrad::default();
                 continue;
