@@ -1,8 +1,10 @@
 //! Cache hints for the tile loops, which read memory in orders the hardware's prefetchers do
 //! not foresee: a tile's splat records scattered over the projection buffer, and the rows of
-//! row-major images 16 rows a tile apart. A hint reads nothing for the program and never
-//! faults, so none of these changes a result.
+//! row-major images 16 rows a tile apart; and for the chain, whose per-group records (about
+//! 730 bytes each, read in order) the hardware's prefetchers bring too late. A hint reads
+//! nothing for the program and never faults, so none of these changes a result.
 
+use crate::project::ChainLanes;
 use crate::projected::Projected;
 
 /// Hints the CPU to bring `proj[i]` into the cache (nothing if `i` is out of range).
@@ -11,6 +13,15 @@ pub(crate) fn record(proj: &[Projected], i: usize) {
     if let Some(rec) = proj.get(i) {
         // The line the record starts in: the fields the walks read first.
         bytes(std::ptr::from_ref(rec).cast(), 1);
+    }
+}
+
+/// Hints the CPU to bring the whole record `chain[group]` into the cache (nothing if `group` is
+/// out of range).
+#[inline(always)]
+pub(crate) fn chain(chain: &[ChainLanes], group: usize) {
+    if let Some(rec) = chain.get(group) {
+        bytes(std::ptr::from_ref(rec).cast(), size_of::<ChainLanes>());
     }
 }
 
