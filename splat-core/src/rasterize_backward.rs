@@ -282,7 +282,7 @@ impl Rasterizer {
             let it = &self.chain[group];
             // The projection's record of the group after next (22 lane vectors and three masks,
             // a dozen cache lines): the first loads of each group's record were the chain's
-            // hottest instructions, and the hint takes about a tenth off the chain's time.
+            // hottest instructions, and the hint takes a tenth to a sixth off the chain's time.
             prefetch::chain(&self.chain, group + 2);
             let grads = ProjectedGradLanes::gather(&records);
             let d_colour = colour_grad8(&cv.v, it, &grads);
