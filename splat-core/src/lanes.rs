@@ -69,7 +69,10 @@ impl Real for f64 {
 /// The array of `f(0)`, `f(1)`, …: `std::array::from_fn` as a plain loop that always
 /// inlines. (`from_fn`'s closure sits behind several layers of calls, and where the inliner gave
 /// up on them the closure ran out of line, compiled without the caller's AVX2, so its floors
-/// became library calls.)
+/// became library calls.) The closure itself can still be left out of line when its body is
+/// large (a matrix-vector product in lanes, for example), and then runs without AVX2 too: such
+/// closures carry `#[inline(always)]` (in the projection and its chain that took a fifth off
+/// the chain; look for calls in the `_avx2` functions' disassembly after changing one).
 #[inline(always)]
 pub(crate) fn array<T: Copy + Default, const N: usize>(mut f: impl FnMut(usize) -> T) -> [T; N] {
     let mut r = [T::default(); N];

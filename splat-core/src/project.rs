@@ -230,6 +230,7 @@ impl<T: Real<Scalar = f64>> Cov2<T> {
     }
 
     /// The inverse of the covariance before dilation (infinite when it is singular).
+    #[inline(always)]
     fn conic0(&self) -> [T; 3] {
         let [s00, s01, s11] = self.s;
         [s11 / self.det0, -s01 / self.det0, s00 / self.det0]
@@ -342,7 +343,10 @@ fn cov_factor(
         [xy - wz, one - (xx + zz), yz + wx],
         [xz + wy, yz - wx, one - (xx + yy)],
     ];
-    let mc = array(|j| mat_vec(v.rot, array(|c| rot[j][c] * scale[j])));
+    let mc = array(
+        #[inline(always)]
+        |j| mat_vec(v.rot, array(|c| rot[j][c] * scale[j])),
+    );
     (rot, mc)
 }
 
@@ -359,7 +363,10 @@ fn jacobian(v: &ViewConsts, z: F8, u: [F8; 2]) -> [[F8; 3]; 2] {
 /// T's rows M_cᵀ·j_r (so Σ₂ = T·Tᵀ before dilation), in glam's order (`mct * j`).
 #[inline(always)]
 fn t_rows(mc: &[[F8; 3]; 3], j: &[[F8; 3]; 2]) -> [[F8; 3]; 2] {
-    array(|r| array(|c| mc[c][0] * j[r][0] + mc[c][1] * j[r][1] + mc[c][2] * j[r][2]))
+    array(
+        #[inline(always)]
+        |r| array(|c| mc[c][0] * j[r][0] + mc[c][1] * j[r][1] + mc[c][2] * j[r][2]),
+    )
 }
 
 /// Why each lane is not drawn so far: the first reason found wins, as the early returns of a
@@ -761,13 +768,17 @@ pub(crate) fn project_backward8(
     let (fx, fy) = (F8::splat(v.fx), F8::splat(v.fy));
     let gj0 = lanes_mat_vec(&mc, gt0);
     let gj1 = lanes_mat_vec(&mc, gt1);
-    let gmc: [[F8; 3]; 3] = array(|col| array(|r| j0[r] * gt0[col] + j1[r] * gt1[col]));
+    let gmc: [[F8; 3]; 3] = array(
+        #[inline(always)]
+        |col| array(|r| j0[r] * gt0[col] + j1[r] * gt1[col]),
+    );
 
     let zz = z * z;
     let mut dp = [zero; 3];
     dp[2] = dp[2] + (-fx / zz * gj0[0] - fy / zz * gj1[1]);
     dp[2] = dp[2] + fx * it.u[0] / zz * gj0[2];
-    let free = it.clamped.map(|c| c.map(|c| !c));
+    // (`array`, not `map`: `map`'s closure was left out of line, compiled without AVX2.)
+    let free: [Mask; 2] = array(|a| array(|l| !it.clamped[a][l]));
     dp[0] = F8::select(free[0], dp[0] + -fx / zz * gj0[2], dp[0]);
     dp[2] = F8::select(free[0], dp[2] + fx * it.p_cam[0] / (zz * z) * gj0[2], dp[2]);
     dp[2] = dp[2] + fy * it.u[1] / zz * gj1[2];
@@ -782,7 +793,10 @@ pub(crate) fn project_backward8(
     let mean = array(|c| d_mean[c] + dm[c]);
 
     // M_c = W·R·S.
-    let gm: [[F8; 3]; 3] = array(|col| mat_vec(rt, gmc[col]));
+    let gm: [[F8; 3]; 3] = array(
+        #[inline(always)]
+        |col| mat_vec(rt, gmc[col]),
+    );
     let r = &rot;
     let d_scale: [F8; 3] = array(|a| gm[a][0] * r[a][0] + gm[a][1] * r[a][1] + gm[a][2] * r[a][2]);
     let g_r: [[F8; 3]; 3] = array(|col| array(|rr| gm[col][rr] * it.scale[col]));

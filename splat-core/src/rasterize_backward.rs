@@ -16,7 +16,7 @@ use rayon::prelude::*;
 
 use crate::constants::{MAX_ALPHA, MIN_ALPHA};
 use crate::disjoint::DisjointWrites;
-use crate::lanes::{F8, WIDTH};
+use crate::lanes::{F8, WIDTH, array};
 use crate::prefetch;
 use crate::project::{
     ChainView, ProjectedGrad, ProjectedGradLanes, ViewConsts, colour_grad8, project_backward8,
@@ -265,7 +265,7 @@ impl Rasterizer {
         let end = first + n;
         for group in first / WIDTH..end.div_ceil(WIDTH) {
             let i0 = group * WIDTH;
-            let active: [bool; WIDTH] = std::array::from_fn(|l| {
+            let active: [bool; WIDTH] = array(|l| {
                 let i = i0 + l;
                 (first..end).contains(&i) && self.visible[i] && !self.splat_grads[i].is_zero()
             });

@@ -254,13 +254,23 @@ fn add_owned<T, R>(
 ) {
     // Splat indices are u32 (the list's type), so both bounds fit.
     let (first, count) = (first as u32, owned.len() as u32);
-    let mut add_block = |mut mask: u64, ids: &[u32], records: &[R]| {
+    // A function, not a closure: as a closure it was left out of line, compiled without the
+    // AVX2 of `add_owned_avx2`.
+    #[inline(always)]
+    fn add_block<T, R>(
+        mut mask: u64,
+        ids: &[u32],
+        records: &[R],
+        owned: &mut [T],
+        first: u32,
+        add: &impl Fn(&mut T, &R),
+    ) {
         while mask != 0 {
             let k = mask.trailing_zeros() as usize;
             mask &= mask - 1;
             add(&mut owned[(ids[k] - first) as usize], &records[k]);
         }
-    };
+    }
     let blocks = list.chunks_exact(SCAN_BLOCK);
     let (tail, tail_records) = (
         blocks.remainder(),
@@ -270,9 +280,23 @@ fn add_owned<T, R>(
         let ids: &[u32; SCAN_BLOCK] = ids
             .try_into()
             .unwrap_or_else(|_| unreachable!("exact chunks"));
-        add_block(block_mask(ids, first, count), ids, records);
+        add_block(
+            block_mask(ids, first, count),
+            ids,
+            records,
+            owned,
+            first,
+            add,
+        );
     }
-    add_block(owned_bits(tail, first, count), tail, tail_records);
+    add_block(
+        owned_bits(tail, first, count),
+        tail,
+        tail_records,
+        owned,
+        first,
+        add,
+    );
 }
 
 /// Bit k set when `ids[k]` is in `first..first + count` (`ids` at most 64 entries long).
