@@ -195,8 +195,14 @@ impl ViewCamera {
             // NaN fails the comparisons and is refused here too.
             inside[l] = lo_z > 0.0 && x0 <= x1 && y0 <= y1;
         }
-        // The bounds are whole numbers, inside the image where the box is inside it.
-        let whole = bounds.map(|b| b.map(crate::cpu::small_whole));
+        // The bounds are whole numbers, inside the image where the box is inside it. (Loops,
+        // not `map`: `map`'s closures were left out of line, compiled without the caller's AVX2.)
+        let mut whole = [[0_u32; N]; 4];
+        for (w, b) in whole.iter_mut().zip(&bounds) {
+            for (w, &b) in w.iter_mut().zip(b) {
+                *w = crate::cpu::small_whole(b);
+            }
+        }
         std::array::from_fn(|l| {
             inside[l].then(|| {
                 let [x0, x1, y0, y1] = whole.map(|b| b[l]);
