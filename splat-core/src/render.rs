@@ -85,6 +85,20 @@ impl SplatGrads {
             && self.screen_grad_norm.len() == n
     }
 
+    /// Every gradient array as floats, in field order: means, log-scales, rotations, opacity
+    /// logits, SH coefficients, screen-space norms.
+    #[must_use]
+    pub fn float_arrays(&self) -> [&[f32]; 6] {
+        [
+            bytemuck::cast_slice(&self.means),
+            bytemuck::cast_slice(&self.log_scales),
+            self.rotations.as_flattened(),
+            &self.opacity_logits,
+            self.sh.as_flattened(),
+            &self.screen_grad_norm,
+        ]
+    }
+
     /// Resizes to `splats` and sets every gradient to zero, reusing the allocations (zeroed in
     /// parallel: at 250 k splats of degree 3 these are 60 MB, rewritten before every backward).
     pub fn reset(&mut self, splats: &Splats) {

@@ -1181,14 +1181,7 @@ fn first_non_finite(s: &Splats) -> Option<usize> {
 pub(crate) fn zero_non_finite_grads(g: &mut SplatGrads) -> u64 {
     let n = g.means.len();
     let k = g.sh.len().checked_div(n).unwrap_or(0);
-    if all_finite(&[
-        bytemuck::cast_slice(&g.means),
-        bytemuck::cast_slice(&g.log_scales),
-        g.rotations.as_flattened(),
-        &g.opacity_logits,
-        g.sh.as_flattened(),
-        &g.screen_grad_norm,
-    ]) {
+    if all_finite(&g.float_arrays()) {
         return 0;
     }
     // The search reads every gradient in parallel; the rare repair is serial.

@@ -191,15 +191,7 @@ pub(crate) fn update(
 
 /// Whether every gradient in `g` is zero.
 fn all_zero(g: &SplatGrads) -> bool {
-    let floats: [&[f32]; 6] = [
-        bytemuck::cast_slice(&g.means),
-        bytemuck::cast_slice(&g.log_scales),
-        g.rotations.as_flattened(),
-        &g.opacity_logits,
-        g.sh.as_flattened(),
-        &g.screen_grad_norm,
-    ];
-    floats.iter().all(|f| f.iter().all(|&x| x == 0.0))
+    g.float_arrays().iter().all(|f| f.iter().all(|&x| x == 0.0))
 }
 
 /// Applies `plan` to `state` with the gradients of the view whose [`Rasterizer::backward_sums`]
