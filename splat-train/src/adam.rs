@@ -181,6 +181,12 @@ impl AdamStep {
         }
     }
 
+    /// Whether this step's loops run their AVX2 instantiations (decided once, when the step's
+    /// constants are made).
+    pub(crate) fn uses_avx2(&self) -> bool {
+        self.avx2
+    }
+
     /// Updates `p` (with its moments `m`, `v`) by the gradients `g`: whole records of
     /// `rates` (the slices start at a record), the AVX2 instantiation where the CPU has it.
     pub(crate) fn update(

@@ -231,12 +231,12 @@ pub(crate) fn update_chained(
         .reduce(UpdateOutcome::default, |a, b| a + b)
 }
 
-/// The update of one chunk, leaving its gradients zero: compiled with AVX2 where the CPU has it
-/// (its finiteness checks and clamps read every value of the chunk; Adam dispatches on its own).
+/// The update of one chunk, leaving its gradients zero: compiled with AVX2 where Adam's step
+/// uses it (its finiteness checks and clamps read every value of the chunk).
 fn update_chunk(plan: &UpdatePlan, widths: &[usize; 5], c: &mut Chunk<'_>) -> UpdateOutcome {
     #[cfg(target_arch = "x86_64")]
-    if splat_core::has_avx2() {
-        // SAFETY: the CPU reports AVX2.
+    if plan.adam.uses_avx2() {
+        // SAFETY: `uses_avx2` is only true when the CPU reports AVX2 (`splat_core::has_avx2`).
         #[allow(unsafe_code)]
         return unsafe { update_chunk_avx2(plan, widths, c) };
     }
