@@ -522,17 +522,25 @@ impl Rasterizer {
                     ul_out[l] = gauss * da;
                 }
             }
+            // Each lane's dx in the tile's left and right half-rows, the same in every row.
+            let mut dx_half = [[0.0_f32; LANES]; 2];
+            for (h, dxs) in dx_half.iter_mut().enumerate() {
+                let xb = half_row_dx(p.xy[0], x0, h);
+                for (l, dx) in dxs.iter_mut().enumerate() {
+                    *dx = xb - l as f32;
+                }
+            }
             for ((&hr, wl), ul) in falloff.hr.iter().zip(&weight).zip(&moment).take(falloff.n) {
                 let hr = usize::from(hr);
                 let dy = spans.dy[hr / 2];
-                let xb = half_row_dx(p.xy[0], x0, hr);
+                let dxl = &dx_half[hr & 1];
                 let base = hr * LANES;
                 let grl: &[f32; LANES] = lanes_mut(g_r, base);
                 let ggl: &[f32; LANES] = lanes_mut(g_g, base);
                 let gbl: &[f32; LANES] = lanes_mut(g_b, base);
                 let gdl: &[f32; LANES] = lanes_mut(&mut g_d, base);
                 for l in 0..LANES {
-                    let dx = xb - l as f32;
+                    let dx = dxl[l];
                     let wv = wl[l];
                     s_col[0][l] += wv * grl[l];
                     s_col[1][l] += wv * ggl[l];

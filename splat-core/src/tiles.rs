@@ -451,6 +451,11 @@ pub(crate) struct RowSpans {
     pub hi: [f32; TILE_SIZE as usize],
     /// Splat centre minus pixel-row centre, per row.
     pub dy: [f32; TILE_SIZE as usize],
+    /// [`RowExponent`]'s k₂ and k₃ per row, solved here for all rows at once so the falloff's
+    /// half-row loop only loads them.
+    pub k2: [f32; TILE_SIZE as usize],
+    /// See `k2`.
+    pub k3: [f32; TILE_SIZE as usize],
     /// Bit `2·row + half` set when that half-row has pixels in the span.
     pub mask: u32,
 }
@@ -469,6 +474,9 @@ impl RowSpans {
         let mut lo = [0.0_f32; N];
         let mut hi = [0.0_f32; N];
         let mut dy = [0.0_f32; N];
+        let mut k2 = [0.0_f32; N];
+        let mut k3 = [0.0_f32; N];
+        let exponent = RowExponent::coefficients(p.conic);
         // The conic's determinant a·c − b², from the f32 entries in f64 (their products are
         // exact there): for a long thin splat it is far below the rounding of a·c in f32, so
         // b²·d² − a·c·d² came out wrong by more than itself and rows the splat crosses were
@@ -494,6 +502,7 @@ impl RowSpans {
             lo[r] = l;
             hi[r] = if empty { -1.0 } else { h };
             dy[r] = d;
+            (k2[r], k3[r]) = exponent.row(d);
         }
         #[cfg(target_arch = "x86_64")]
         if AVX2 {
@@ -501,10 +510,24 @@ impl RowSpans {
             // run only where `has_avx2()` found the feature.
             #[allow(unsafe_code)]
             let mask = unsafe { half_row_mask_avx2(&lo, &hi) };
-            return Self { lo, hi, dy, mask };
+            return Self {
+                lo,
+                hi,
+                dy,
+                k2,
+                k3,
+                mask,
+            };
         }
         let mask = half_row_mask(&lo, &hi);
-        Self { lo, hi, dy, mask }
+        Self {
+            lo,
+            hi,
+            dy,
+            k2,
+            k3,
+            mask,
+        }
     }
 }
 
@@ -618,6 +641,7 @@ impl Falloff {
     /// [`Self::compute`] lane by lane.
     #[inline(always)]
     fn compute_portable(&mut self, p: &Projected, spans: &RowSpans, mut todo: u32, x0: i32) -> u64 {
+        let k1 = RowExponent::coefficients(p.conic).k1;
         let mut evaluations = 0;
         // A local count: through `self.n` every half-row's stores waited on a reload of it.
         let mut n = 0;
@@ -628,7 +652,11 @@ impl Falloff {
             let first = half_row_x(hr);
             // The span in lane coordinates of this half-row.
             let (lo, hi) = (spans.lo[ly] - first, spans.hi[ly] - first);
-            let row = RowExponent::new(p.conic, spans.dy[ly]);
+            let row = RowExponent {
+                k1,
+                k2: spans.k2[ly],
+                k3: spans.k3[ly],
+            };
             let xb = half_row_dx(p.xy[0], x0, hr);
             let g = &mut self.gauss[n];
             let mut inside = 0_u32;
@@ -656,10 +684,11 @@ impl Falloff {
     #[inline]
     fn compute_avx2(&mut self, p: &Projected, spans: &RowSpans, mut todo: u32, x0: i32) -> u64 {
         use std::arch::x86_64::{
-            _CMP_GE_OQ, _CMP_LE_OQ, _CMP_NLT_UQ, _mm256_add_epi32, _mm256_add_ps, _mm256_and_ps,
-            _mm256_castps_si256, _mm256_castsi256_ps, _mm256_cmp_ps, _mm256_max_ps,
-            _mm256_movemask_ps, _mm256_mul_ps, _mm256_set1_epi32, _mm256_set1_ps, _mm256_setr_ps,
-            _mm256_slli_epi32, _mm256_storeu_ps, _mm256_sub_ps,
+            _CMP_GE_OQ, _CMP_LE_OQ, _CMP_NLT_UQ, _MM_FROUND_NO_EXC, _MM_FROUND_TO_NEAREST_INT,
+            _mm256_add_epi32, _mm256_add_ps, _mm256_and_ps, _mm256_castps_si256,
+            _mm256_castsi256_ps, _mm256_cmp_ps, _mm256_movemask_ps, _mm256_mul_ps, _mm256_round_ps,
+            _mm256_set1_epi32, _mm256_set1_ps, _mm256_setr_ps, _mm256_slli_epi32, _mm256_storeu_ps,
+            _mm256_sub_ps,
         };
         let lane = _mm256_setr_ps(0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0);
         let min_t = _mm256_set1_ps(EXP2_MIN);
@@ -675,27 +704,37 @@ impl Falloff {
             _mm256_set1_ps(c0),
         ];
         let bias = _mm256_set1_epi32(EXP2_BIAS.cast_signed());
-        let k1 = _mm256_set1_ps(RowExponent::new(p.conic, 0.0).k1);
+        let k1 = _mm256_set1_ps(RowExponent::coefficients(p.conic).k1);
+        // The lanes' pixel columns in the tile, left and right half-rows.
+        let column = [lane, _mm256_add_ps(lane, _mm256_set1_ps(LANES as f32))];
+        // Lane offsets dx and k₁·dx of the tile's left and right half-rows, the same for every
+        // row: taken out of the half-row loop, whose exponential is a chain of dependent
+        // operations that these would lengthen.
+        let u_half = [
+            _mm256_sub_ps(_mm256_set1_ps(half_row_dx(p.xy[0], x0, 0)), lane),
+            _mm256_sub_ps(_mm256_set1_ps(half_row_dx(p.xy[0], x0, 1)), lane),
+        ];
+        let k1u_half = [_mm256_mul_ps(k1, u_half[0]), _mm256_mul_ps(k1, u_half[1])];
         let mut evaluations = 0;
         let mut n = 0;
         while todo != 0 {
             let hr = todo.trailing_zeros() as usize;
             todo &= todo - 1;
             let ly = hr / 2;
-            let first = half_row_x(hr);
-            let row = RowExponent::new(p.conic, spans.dy[ly]);
-            let u = _mm256_sub_ps(_mm256_set1_ps(half_row_dx(p.xy[0], x0, hr)), lane);
+            let (u, k1u) = (u_half[hr & 1], k1u_half[hr & 1]);
             let t = _mm256_add_ps(
-                _mm256_mul_ps(
-                    u,
-                    _mm256_add_ps(_mm256_mul_ps(k1, u), _mm256_set1_ps(row.k2)),
-                ),
-                _mm256_set1_ps(row.k3),
+                _mm256_mul_ps(u, _mm256_add_ps(k1u, _mm256_set1_ps(spans.k2[ly]))),
+                _mm256_set1_ps(spans.k3[ly]),
             );
-            // fast_exp2, lane by lane.
-            let clamped = _mm256_max_ps(t, min_t);
-            let shifted = _mm256_add_ps(clamped, round);
-            let f = _mm256_sub_ps(clamped, _mm256_sub_ps(shifted, round));
+            // fast_exp2, lane by lane. Its clamp to the least exponent is left out: lanes below
+            // it fail `keep` below and are stored as 0 whatever the arithmetic gave them. The
+            // rounding is `vroundps` (to nearest, ties to even, as `fast_exp2`'s addition of
+            // 1.5·2²³ does), a step shorter than removing the addend again.
+            let shifted = _mm256_add_ps(t, round);
+            let f = _mm256_sub_ps(
+                t,
+                _mm256_round_ps::<{ _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC }>(t),
+            );
             let mut poly = _mm256_add_ps(_mm256_mul_ps(c4, f), c3);
             poly = _mm256_add_ps(_mm256_mul_ps(poly, f), c2);
             poly = _mm256_add_ps(_mm256_mul_ps(poly, f), c1);
@@ -705,9 +744,11 @@ impl Falloff {
                 bias,
             )));
             let gauss = _mm256_mul_ps(_mm256_add_ps(one, _mm256_mul_ps(poly, f)), scale);
+            // Whole numbers, so comparing the columns with the span is exactly comparing the
+            // lanes with the span less the half-row's first column, as the portable path does.
             let in_span = _mm256_and_ps(
-                _mm256_cmp_ps::<_CMP_GE_OQ>(lane, _mm256_set1_ps(spans.lo[ly] - first)),
-                _mm256_cmp_ps::<_CMP_LE_OQ>(lane, _mm256_set1_ps(spans.hi[ly] - first)),
+                _mm256_cmp_ps::<_CMP_GE_OQ>(column[hr & 1], _mm256_set1_ps(spans.lo[ly])),
+                _mm256_cmp_ps::<_CMP_LE_OQ>(column[hr & 1], _mm256_set1_ps(spans.hi[ly])),
             );
             // t ≤ 0, and not below the least exponent (where `fast_exp2` gives 0).
             let keep = _mm256_and_ps(
@@ -760,14 +801,33 @@ pub(crate) struct RowExponent {
 
 impl RowExponent {
     /// The row at `dy` of the splat whose conic is `conic`.
+    #[cfg(test)]
+    pub(crate) fn new(conic: [f32; 3], dy: f32) -> Self {
+        let exponent = RowExponent::coefficients(conic);
+        let (k2, k3) = exponent.row(dy);
+        Self {
+            k1: exponent.k1,
+            k2,
+            k3,
+        }
+    }
+
+    /// The splat's own factors: k₁, and in place of k₂ and k₃ the factors −log₂e·b and
+    /// −½·log₂e·c that [`Self::row`] multiplies by the row's dy.
     #[inline(always)]
-    pub(crate) fn new([a, b, c]: [f32; 3], dy: f32) -> Self {
+    pub(crate) fn coefficients([a, b, c]: [f32; 3]) -> Self {
         use std::f32::consts::LOG2_E;
         Self {
             k1: (-0.5 * LOG2_E) * a,
-            k2: -LOG2_E * b * dy,
-            k3: (-0.5 * LOG2_E) * c * dy * dy,
+            k2: -LOG2_E * b,
+            k3: (-0.5 * LOG2_E) * c,
         }
+    }
+
+    /// k₂ and k₃ of the row at `dy`, from [`Self::coefficients`].
+    #[inline(always)]
+    pub(crate) fn row(self, dy: f32) -> (f32, f32) {
+        (self.k2 * dy, self.k3 * dy * dy)
     }
 
     /// The exponent at offset `dx`.
