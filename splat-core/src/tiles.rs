@@ -882,8 +882,8 @@ mod tests {
     use rand::{RngExt, SeedableRng};
 
     use super::{
-        Bins, HALF_ROWS, LANES, RowExponent, RowSpans, SCAN_BLOCK, TILE_SIZE, fast_exp2,
-        half_row_mask, owned_bits,
+        Bins, EXP2_MIN, Falloff, HALF_ROWS, LANES, RowExponent, RowSpans, SCAN_BLOCK, TILE_SIZE,
+        fast_exp2, half_row_dx, half_row_mask, owned_bits,
     };
     #[cfg(target_arch = "x86_64")]
     use super::{half_row_mask_avx2, owned_bits_avx2};
@@ -1190,6 +1190,87 @@ mod tests {
         }
         // Every row state occurs: empty, first half, second half, both.
         assert_eq!(seen.len(), 4);
+    }
+
+    /// The AVX2 falloff must store the portable one's bits: it takes the lane offsets, k₁·dx
+    /// and the span's columns per tile half, rounds with `vroundps` and leaves lanes below the
+    /// least exponent (no clamp there) to its keep mask. Splats from a fraction of a pixel to
+    /// thousands of pixels across, at every angle, centred inside and far outside partial and
+    /// whole tiles, over random subsets of their half-rows. The cases must include lanes kept
+    /// and lanes below the least exponent (outside the span, where the unclamped arithmetic
+    /// gives no valid 2ⁿ and only the mask may decide what is stored).
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn vector_and_scalar_falloffs_agree() {
+        if !crate::has_avx2() {
+            return;
+        }
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(31);
+        let ts = TILE_SIZE as i32;
+        let (mut below_least, mut kept) = (0_u64, 0_u64);
+        for case in 0..200_000 {
+            let axis =
+                |rng: &mut rand_pcg::Pcg64| 0.2 * 25_000.0_f64.powf(rng.random_range(0.0..1.0));
+            let (s1, s2) = (axis(&mut rng), axis(&mut rng));
+            let (_, conic64) = footprint([s1, s2], rng.random_range(0.0..std::f64::consts::PI));
+            let conic = conic64.map(|v| v as f32);
+            let opacity: f32 = rng.random_range(0.004..1.0);
+            let (x0, y0) = (ts * rng.random_range(0..64), ts * rng.random_range(0..64));
+            let reach = 3.0 * s1.max(s2) as f32;
+            let centre = [
+                x0 as f32 + rng.random_range(-reach..reach + 16.0),
+                y0 as f32 + rng.random_range(-reach..reach + 16.0),
+            ];
+            let (tw, th) = if case % 10 == 0 {
+                (rng.random_range(1..=ts), rng.random_range(1..=ts))
+            } else {
+                (ts, ts)
+            };
+            let p = Projected {
+                xy: centre,
+                conic,
+                opacity,
+                q_max: quad_bound(opacity),
+                ..Projected::default()
+            };
+            let spans = RowSpans::solve::<false>(&p, x0, y0, tw, th);
+            let todo = if case % 2 == 0 {
+                spans.mask
+            } else {
+                spans.mask & rng.random::<u32>()
+            };
+            let (mut scalar, mut vector) = (Falloff::new(), Falloff::new());
+            let scalar_evaluations = scalar.compute::<false>(&p, &spans, todo, x0);
+            let vector_evaluations = vector.compute::<true>(&p, &spans, todo, x0);
+            assert_eq!(vector_evaluations, scalar_evaluations, "case {case}");
+            assert_eq!(vector.n, scalar.n, "case {case}");
+            assert_eq!(vector.hr[..scalar.n], scalar.hr[..scalar.n], "case {case}");
+            for (i, (v, s)) in vector
+                .gauss
+                .iter()
+                .zip(&scalar.gauss)
+                .take(scalar.n)
+                .enumerate()
+            {
+                assert_eq!(
+                    v.map(f32::to_bits),
+                    s.map(f32::to_bits),
+                    "case {case}, half-row {i}"
+                );
+                let hr = usize::from(scalar.hr[i]);
+                let row = RowExponent::new(conic, spans.dy[hr / 2]);
+                let xb = half_row_dx(p.xy[0], x0, hr);
+                for (l, &g) in s.iter().enumerate() {
+                    below_least += u64::from(row.at(xb - l as f32) < EXP2_MIN);
+                    kept += u64::from(g > 0.0);
+                }
+            }
+        }
+        assert!(
+            below_least > 1_000,
+            "{below_least} lanes below the least exponent"
+        );
+        assert!(kept > 100_000, "{kept} lanes kept");
     }
 
     /// The radix sort must give the order of a plain sort of the keys, for any thread count:
