@@ -78,6 +78,11 @@ pub struct Rasterizer {
     /// Per (tile, splat) pair, in list order: whether the forward pass blended the splat into
     /// any pixel of the tile. The backward pass skips the others, whose gradients are zero.
     pub(crate) pair_live: Vec<bool>,
+    /// Per (tile, splat) pair, in list order: its row spans' half-row mask
+    /// ([`RowSpans`]`::mask`) where the forward pass reached it, else 0. The backward pass walks
+    /// these half-rows and lets the alpha test decide the lanes, instead of solving the spans
+    /// again.
+    pub(crate) pair_rows: Vec<u32>,
     pub(crate) output: RenderOutput,
     pub(crate) stats: RenderStats,
     pub(crate) phases: RasterPhases,
@@ -101,6 +106,8 @@ struct TileOut<'a> {
     last: &'a mut [u32],
     /// Per entry of the tile's list: whether the splat was blended into any pixel.
     live: &'a mut [bool],
+    /// Per entry of the tile's list: its half-row mask, 0 past an early stop.
+    rows: &'a mut [u32],
 }
 
 /// The pixel extent of tile `tile`: origin and size (partial at the right and bottom edges).
@@ -310,7 +317,9 @@ impl Rasterizer {
         let images = OutputImages::new(&mut self.output, w, h, bg);
         // Not cleared: each tile's walk writes its whole run.
         self.pair_live.resize(bins.pairs(), false);
+        self.pair_rows.resize(bins.pairs(), 0);
         let live_runs = DisjointWrites::new(&mut self.pair_live);
+        let row_runs = DisjointWrites::new(&mut self.pair_rows);
         self.px_t
             .par_chunks_mut(TILE_PIXELS)
             .zip(self.px_d.par_chunks_mut(TILE_PIXELS))
@@ -324,13 +333,15 @@ impl Rasterizer {
                     // SAFETY: [start, end) is this tile's own run of `pair_live`: the tiles'
                     // runs are disjoint (and `run` checks they end inside the vector).
                     #[allow(unsafe_code)]
-                    let live = unsafe { live_runs.run(start, end) };
+                    let (live, rows) =
+                        unsafe { (live_runs.run(start, end), row_runs.run(start, end)) };
                     let o = TileOut {
                         t: &mut *t,
                         d: &mut *d,
                         rgb: rgb.as_mut_slice(),
                         last,
                         live,
+                        rows,
                     };
                     let list = &bins.list[start..end];
                     // The tile's rows of the output images are written once it is composited,
@@ -571,6 +582,7 @@ pub(crate) struct TileScratch {
     rgb: [[f32; 3]; TILE_PIXELS],
     last: [u32; TILE_PIXELS],
     live: Vec<bool>,
+    rows: Vec<u32>,
 }
 
 impl TileScratch {
@@ -581,6 +593,7 @@ impl TileScratch {
             rgb: [[0.0; 3]; TILE_PIXELS],
             last: [0; TILE_PIXELS],
             live: Vec::new(),
+            rows: Vec::new(),
         }
     }
 }
@@ -598,12 +611,14 @@ pub(crate) fn walk_tile<S: WeightSink>(
     let list = &r.bins.list[r.bins.offsets[tile]..r.bins.offsets[tile + 1]];
     let ext = tile_extent(tile, tiles_x, cam.width, cam.height);
     scratch.live.resize(list.len(), false);
+    scratch.rows.resize(list.len(), 0);
     let o = TileOut {
         t: &mut scratch.t,
         d: &mut scratch.d,
         rgb: &mut scratch.rgb,
         last: &mut scratch.last,
         live: &mut scratch.live[..list.len()],
+        rows: &mut scratch.rows[..list.len()],
     };
     composite_tile(list, &r.proj, ext, o, sink, r.use_avx2());
 }
@@ -684,14 +699,16 @@ fn composite_tile_impl<S: WeightSink, const AVX2: bool>(
     let opaque_one = std::hint::black_box(1.0_f32);
     let opaque_zero = std::hint::black_box(0_u32);
     let mut falloff = Falloff::new();
-    // Entries past an early stop (every pixel done) stay not live.
+    // Entries past an early stop (every pixel done) stay not live, and reach no half-row.
     o.live.fill(false);
+    o.rows.fill(0);
     for (k, &sid) in list.iter().enumerate() {
         if let Some(&ahead) = list.get(k + PREFETCH_AHEAD) {
             prefetch::record(proj, ahead as usize);
         }
         let p = &proj[sid as usize];
         let spans = RowSpans::solve::<AVX2>(p, x0, y0, tw, th);
+        o.rows[k] = spans.mask;
         let tag = k as u32 + 1;
         evaluations += falloff.compute::<AVX2>(p, &spans, spans.mask & !done_rows, x0);
         let mut blended = 0;

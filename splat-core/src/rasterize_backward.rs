@@ -28,11 +28,13 @@ use crate::{Rasterizer, RenderCamera, RenderOptions, SplatGrads, SplatGradsMut, 
 /// Splats per task of the chain phase.
 const CHAIN_CHUNK: usize = 256;
 
-/// One tile's list: its splats front to back, and which of them the forward pass blended.
+/// One tile's list: its splats front to back, which of them the forward pass blended, and the
+/// half-rows it found each reaching.
 #[derive(Clone, Copy)]
 struct Entries<'a> {
     list: &'a [u32],
     live: &'a [bool],
+    rows: &'a [u32],
 }
 
 /// Per-pixel loss gradients the tile walk needs, gathered from the row-major inputs.
@@ -170,6 +172,7 @@ impl Rasterizer {
             let entries = Entries {
                 list: &this.bins.list[s..e],
                 live: &this.pair_live[s..e],
+                rows: &this.pair_rows[s..e],
             };
             this.backward_tile(tile, entries, cam, &pg, out, avx2);
         });
@@ -358,7 +361,7 @@ impl Rasterizer {
     fn backward_tile_impl<const AVX2: bool>(
         &self,
         tile: usize,
-        Entries { list, live }: Entries<'_>,
+        Entries { list, live, rows }: Entries<'_>,
         cam: &RenderCamera,
         pg: &PixelGrads<'_>,
         out: &mut [ProjectedGrad],
@@ -462,7 +465,9 @@ impl Rasterizer {
             let mut s_uy = [0.0_f32; LANES];
             let mut s_uyy = [0.0_f32; LANES];
             let mut s_uxy = [0.0_f32; LANES];
-            let spans = RowSpans::solve::<AVX2>(p, x0, y0, tw, th);
+            // The forward pass's half-rows, each lane left to the alpha test (see
+            // `RowSpans::of_rows`): no spans to solve again.
+            let spans = RowSpans::of_rows(p, rows[kk], y0, tw);
             falloff.compute::<AVX2>(p, &spans, spans.mask & active, x0);
             if falloff.n == 0 {
                 out[kk] = ProjectedGrad::default();

@@ -531,6 +531,37 @@ impl RowSpans {
     }
 }
 
+impl RowSpans {
+    /// Spans over every real column of the tile in each row, for the half-rows of `mask` (a
+    /// mask [`Self::solve`] gave for the same splat and tile): the lanes outside the solved
+    /// spans are evaluated too and fail the alpha test, as every pixel outside them does
+    /// (`spans_hold_every_pixel_the_lane_test_passes`), and a lane that fails it passes nothing
+    /// on in either walk, so a walk over these spans composites and differentiates exactly what
+    /// it would over the solved ones. Each row's dy, k₂ and k₃ are the solve's.
+    #[inline(always)]
+    pub fn of_rows(p: &Projected, mask: u32, y0: i32, tw: i32) -> Self {
+        const N: usize = TILE_SIZE as usize;
+        let exponent = RowExponent::coefficients(p.conic);
+        let y0f = y0 as f32;
+        let mut dy = [0.0_f32; N];
+        let mut k2 = [0.0_f32; N];
+        let mut k3 = [0.0_f32; N];
+        for r in 0..N {
+            let d = p.xy[1] - (y0f + r as f32);
+            dy[r] = d;
+            (k2[r], k3[r]) = exponent.row(d);
+        }
+        Self {
+            lo: [0.0; N],
+            hi: [(tw - 1) as f32; N],
+            dy,
+            k2,
+            k3,
+            mask,
+        }
+    }
+}
+
 /// Bit `2·row + half` set when that half-row of the tile has pixels in the row's span
 /// [`lo`, `hi`] (tile-local pixels).
 #[inline(always)]
@@ -1271,6 +1302,86 @@ mod tests {
             "{below_least} lanes below the least exponent"
         );
         assert!(kept > 100_000, "{kept} lanes kept");
+    }
+
+    /// The backward walk's spans ([`RowSpans::of_rows`], every real column of the rows the
+    /// forward's solved mask holds) must give the falloff of the solved spans on every lane that
+    /// can pass the alpha test: a lane may differ only where the solved spans stored 0 and the
+    /// whole row's value fails the test. Portable and AVX2 falloffs, splats of every size and
+    /// angle around partial and whole tiles.
+    #[test]
+    fn whole_row_spans_change_only_lanes_that_fail_the_alpha_test() {
+        use crate::constants::{MAX_ALPHA, MIN_ALPHA};
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(37);
+        let ts = TILE_SIZE as i32;
+        let (mut same, mut differ) = (0_u64, 0_u64);
+        for case in 0..100_000 {
+            let axis =
+                |rng: &mut rand_pcg::Pcg64| 0.2 * 25_000.0_f64.powf(rng.random_range(0.0..1.0));
+            let (s1, s2) = (axis(&mut rng), axis(&mut rng));
+            let (_, conic64) = footprint([s1, s2], rng.random_range(0.0..std::f64::consts::PI));
+            let conic = conic64.map(|v| v as f32);
+            let opacity: f32 = rng.random_range(0.004..1.0);
+            let (x0, y0) = (ts * rng.random_range(0..64), ts * rng.random_range(0..64));
+            let reach = 3.0 * s1.max(s2) as f32;
+            let centre = [
+                x0 as f32 + rng.random_range(-reach..reach + 16.0),
+                y0 as f32 + rng.random_range(-reach..reach + 16.0),
+            ];
+            let (tw, th) = if case % 10 == 0 {
+                (rng.random_range(1..=ts), rng.random_range(1..=ts))
+            } else {
+                (ts, ts)
+            };
+            let p = Projected {
+                xy: centre,
+                conic,
+                opacity,
+                q_max: quad_bound(opacity),
+                ..Projected::default()
+            };
+            let solved = RowSpans::solve::<false>(&p, x0, y0, tw, th);
+            let whole = RowSpans::of_rows(&p, solved.mask, y0, tw);
+            for r in 0..TILE_SIZE as usize {
+                assert_eq!(whole.dy[r].to_bits(), solved.dy[r].to_bits());
+                assert_eq!(whole.k2[r].to_bits(), solved.k2[r].to_bits());
+                assert_eq!(whole.k3[r].to_bits(), solved.k3[r].to_bits());
+            }
+            let mut paths = vec![false];
+            #[cfg(target_arch = "x86_64")]
+            if crate::has_avx2() {
+                paths.push(true);
+            }
+            for avx2 in paths {
+                let (mut a, mut b) = (Falloff::new(), Falloff::new());
+                if avx2 {
+                    a.compute::<true>(&p, &solved, solved.mask, x0);
+                    b.compute::<true>(&p, &whole, solved.mask, x0);
+                } else {
+                    a.compute::<false>(&p, &solved, solved.mask, x0);
+                    b.compute::<false>(&p, &whole, solved.mask, x0);
+                }
+                assert_eq!(a.n, b.n);
+                for (ga, gb) in a.gauss.iter().zip(&b.gauss).take(a.n) {
+                    for (&x, &y) in ga.iter().zip(gb) {
+                        if x.to_bits() == y.to_bits() {
+                            same += 1;
+                        } else {
+                            differ += 1;
+                            let alpha = (opacity * y).min(MAX_ALPHA);
+                            assert!(
+                                x == 0.0 && alpha < MIN_ALPHA,
+                                "case {case}: solved {x}, whole row {y} (alpha {alpha})"
+                            );
+                        }
+                    }
+                }
+            }
+        }
+        assert!(
+            same > 1_000_000 && differ > 100_000,
+            "{same} lanes alike, {differ} not"
+        );
     }
 
     /// The radix sort must give the order of a plain sort of the keys, for any thread count:
