@@ -468,7 +468,7 @@ impl Rasterizer {
             // The forward pass's half-rows, each lane left to the alpha test (see
             // `RowSpans::of_rows`): no spans to solve again.
             let spans = RowSpans::of_rows(p, rows[kk], y0, tw);
-            falloff.compute::<AVX2>(p, &spans, spans.mask & active, x0);
+            falloff.compute_rows::<AVX2>(p, &spans, spans.mask & active, x0);
             if falloff.n == 0 {
                 out[kk] = ProjectedGrad::default();
                 continue;

@@ -664,9 +664,32 @@ impl Falloff {
             // SAFETY: only the AVX2 instantiations of the tile walks ask for `AVX2`, and they
             // run only where `has_avx2()` found the feature.
             #[allow(unsafe_code)]
-            return unsafe { self.compute_avx2(p, spans, todo, x0) };
+            return unsafe { self.compute_avx2::<true>(p, spans, todo, x0) };
         }
         self.compute_portable(p, spans, todo, x0)
+    }
+
+    /// [`Self::compute`] without the span's lane mask, for spans that hold every column of
+    /// their rows ([`RowSpans::of_rows`]); returns nothing (the backward walk counts nothing).
+    #[inline(always)]
+    pub fn compute_rows<const AVX2: bool>(
+        &mut self,
+        p: &Projected,
+        spans: &RowSpans,
+        todo: u32,
+        x0: i32,
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        if AVX2 {
+            // SAFETY: only the AVX2 instantiations of the tile walks ask for `AVX2`, and they
+            // run only where `has_avx2()` found the feature.
+            #[allow(unsafe_code)]
+            unsafe {
+                self.compute_avx2::<false>(p, spans, todo, x0);
+            }
+            return;
+        }
+        self.compute_portable(p, spans, todo, x0);
     }
 
     /// [`Self::compute`] lane by lane.
@@ -713,7 +736,13 @@ impl Falloff {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,popcnt")]
     #[inline]
-    fn compute_avx2(&mut self, p: &Projected, spans: &RowSpans, mut todo: u32, x0: i32) -> u64 {
+    fn compute_avx2<const SPAN: bool>(
+        &mut self,
+        p: &Projected,
+        spans: &RowSpans,
+        mut todo: u32,
+        x0: i32,
+    ) -> u64 {
         use std::arch::x86_64::{
             _CMP_GE_OQ, _CMP_LE_OQ, _CMP_NLT_UQ, _MM_FROUND_NO_EXC, _MM_FROUND_TO_NEAREST_INT,
             _mm256_add_epi32, _mm256_add_ps, _mm256_and_ps, _mm256_castps_si256,
@@ -777,21 +806,24 @@ impl Falloff {
             let gauss = _mm256_mul_ps(_mm256_add_ps(one, _mm256_mul_ps(poly, f)), scale);
             // Whole numbers, so comparing the columns with the span is exactly comparing the
             // lanes with the span less the half-row's first column, as the portable path does.
-            let in_span = _mm256_and_ps(
-                _mm256_cmp_ps::<_CMP_GE_OQ>(column[hr & 1], _mm256_set1_ps(spans.lo[ly])),
-                _mm256_cmp_ps::<_CMP_LE_OQ>(column[hr & 1], _mm256_set1_ps(spans.hi[ly])),
-            );
             // t ≤ 0, and not below the least exponent (where `fast_exp2` gives 0).
-            let keep = _mm256_and_ps(
-                _mm256_and_ps(in_span, _mm256_cmp_ps::<_CMP_LE_OQ>(t, zero)),
+            let mut keep = _mm256_and_ps(
+                _mm256_cmp_ps::<_CMP_LE_OQ>(t, zero),
                 _mm256_cmp_ps::<_CMP_NLT_UQ>(t, min_t),
             );
+            if SPAN {
+                let in_span = _mm256_and_ps(
+                    _mm256_cmp_ps::<_CMP_GE_OQ>(column[hr & 1], _mm256_set1_ps(spans.lo[ly])),
+                    _mm256_cmp_ps::<_CMP_LE_OQ>(column[hr & 1], _mm256_set1_ps(spans.hi[ly])),
+                );
+                keep = _mm256_and_ps(in_span, keep);
+                evaluations += u64::from(_mm256_movemask_ps(in_span).count_ones());
+            }
             // SAFETY: `n` < HALF_ROWS, one per set bit of the 32-bit `todo`.
             #[allow(unsafe_code)]
             unsafe {
                 _mm256_storeu_ps(self.gauss[n].as_mut_ptr(), _mm256_and_ps(keep, gauss));
             }
-            evaluations += u64::from(_mm256_movemask_ps(in_span).count_ones());
             self.hr[n] = hr as u8;
             n += 1;
         }
@@ -914,7 +946,7 @@ mod tests {
 
     use super::{
         Bins, EXP2_MIN, Falloff, HALF_ROWS, LANES, RowExponent, RowSpans, SCAN_BLOCK, TILE_SIZE,
-        fast_exp2, half_row_dx, half_row_mask, owned_bits,
+        fast_exp2, half_row_dx, half_row_mask, half_row_x, owned_bits,
     };
     #[cfg(target_arch = "x86_64")]
     use super::{half_row_mask_avx2, owned_bits_avx2};
@@ -1307,8 +1339,9 @@ mod tests {
     /// The backward walk's spans ([`RowSpans::of_rows`], every real column of the rows the
     /// forward's solved mask holds) must give the falloff of the solved spans on every lane that
     /// can pass the alpha test: a lane may differ only where the solved spans stored 0 and the
-    /// whole row's value fails the test. Portable and AVX2 falloffs, splats of every size and
-    /// angle around partial and whole tiles.
+    /// whole row's value fails the test; and [`Falloff::compute_rows`] must give the same lanes
+    /// in the tile's real columns. Portable and AVX2 falloffs, splats of every size and angle
+    /// around partial and whole tiles.
     #[test]
     fn whole_row_spans_change_only_lanes_that_fail_the_alpha_test() {
         use crate::constants::{MAX_ALPHA, MIN_ALPHA};
@@ -1362,6 +1395,23 @@ mod tests {
                     b.compute::<false>(&p, &whole, solved.mask, x0);
                 }
                 assert_eq!(a.n, b.n);
+                // Without the span's lane mask: the same lanes in the tile's real columns (the
+                // walk never composites the others: no pixel there has a contributor).
+                let mut c = Falloff::new();
+                if avx2 {
+                    c.compute_rows::<true>(&p, &whole, solved.mask, x0);
+                } else {
+                    c.compute_rows::<false>(&p, &whole, solved.mask, x0);
+                }
+                assert_eq!(c.n, b.n);
+                for (i, (gc, gb)) in c.gauss.iter().zip(&b.gauss).take(b.n).enumerate() {
+                    let first = half_row_x(usize::from(b.hr[i])) as i32;
+                    for (l, (&x, &y)) in gc.iter().zip(gb).enumerate() {
+                        if first + (l as i32) < tw {
+                            assert_eq!(x.to_bits(), y.to_bits(), "case {case}");
+                        }
+                    }
+                }
                 for (ga, gb) in a.gauss.iter().zip(&b.gauss).take(a.n) {
                     for (&x, &y) in ga.iter().zip(gb) {
                         if x.to_bits() == y.to_bits() {
