@@ -1012,6 +1012,52 @@ mod tests {
         );
     }
 
+    /// A splat from a fifth of a pixel to thousands of pixels across (long thin ones at every
+    /// angle), of any opacity, and a tile it may reach: centred inside it or far outside, and
+    /// every tenth `case` a partial tile at the image's right or bottom edge.
+    fn random_splat_and_tile(rng: &mut rand_pcg::Pcg64, case: usize) -> RandomPair {
+        let ts = TILE_SIZE as i32;
+        let axis = |rng: &mut rand_pcg::Pcg64| 0.2 * 25_000.0_f64.powf(rng.random_range(0.0..1.0));
+        let (s1, s2) = (axis(rng), axis(rng));
+        let (_, conic64) = footprint([s1, s2], rng.random_range(0.0..std::f64::consts::PI));
+        let opacity: f32 = rng.random_range(0.004..1.0);
+        let (x0, y0) = (ts * rng.random_range(0..64), ts * rng.random_range(0..64));
+        let reach = 3.0 * s1.max(s2) as f32;
+        let centre = [
+            x0 as f32 + rng.random_range(-reach..reach + 16.0),
+            y0 as f32 + rng.random_range(-reach..reach + 16.0),
+        ];
+        let (tw, th) = if case.is_multiple_of(10) {
+            (rng.random_range(1..=ts), rng.random_range(1..=ts))
+        } else {
+            (ts, ts)
+        };
+        let p = Projected {
+            xy: centre,
+            conic: conic64.map(|v| v as f32),
+            opacity,
+            q_max: quad_bound(opacity),
+            ..Projected::default()
+        };
+        RandomPair {
+            p,
+            conic64,
+            axes: (s1, s2),
+            tile: (x0, y0, tw, th),
+        }
+    }
+
+    /// A splat and a tile from [`random_splat_and_tile`].
+    struct RandomPair {
+        p: Projected,
+        /// The splat's conic in f64, before rounding to the f32 of `p`.
+        conic64: [f64; 3],
+        /// Its standard deviations, pixels.
+        axes: (f64, f64),
+        /// The tile's origin and real size (x0, y0, tw, th).
+        tile: (i32, i32, i32, i32),
+    }
+
     /// The spans leave out only pixels where the tile loops' own f32 test, o·G ≥ 1/255 with G
     /// from `RowExponent` and `fast_exp2`, fails (or passes on rounding noise alone, below): so
     /// the half-pixel margin the spans keep is enough for the images. Splats from a fifth of a
@@ -1021,33 +1067,15 @@ mod tests {
     fn spans_hold_every_pixel_the_lane_test_passes() {
         use crate::constants::{MAX_ALPHA, MIN_ALPHA};
         let mut rng = rand_pcg::Pcg64::seed_from_u64(23);
-        let ts = TILE_SIZE as i32;
         let mut passed = 0_u64;
         for case in 0..400_000 {
-            let axis =
-                |rng: &mut rand_pcg::Pcg64| 0.2 * 25_000.0_f64.powf(rng.random_range(0.0..1.0));
-            let (s1, s2) = (axis(&mut rng), axis(&mut rng));
-            let (_, conic64) = footprint([s1, s2], rng.random_range(0.0..std::f64::consts::PI));
-            let conic = conic64.map(|v| v as f32);
-            let opacity: f32 = rng.random_range(0.004..1.0);
-            let (x0, y0) = (ts * rng.random_range(0..64), ts * rng.random_range(0..64));
-            let reach = 3.0 * s1.max(s2) as f32;
-            let centre = [
-                x0 as f32 + rng.random_range(-reach..reach + 16.0),
-                y0 as f32 + rng.random_range(-reach..reach + 16.0),
-            ];
-            let (tw, th) = if case % 10 == 0 {
-                (rng.random_range(1..=ts), rng.random_range(1..=ts))
-            } else {
-                (ts, ts)
-            };
-            let p = Projected {
-                xy: centre,
-                conic,
-                opacity,
-                q_max: quad_bound(opacity),
-                ..Projected::default()
-            };
+            let RandomPair {
+                p,
+                conic64,
+                axes: (s1, s2),
+                tile: (x0, y0, tw, th),
+            } = random_splat_and_tile(&mut rng, case);
+            let (conic, opacity, centre) = (p.conic, p.opacity, p.xy);
             let spans = RowSpans::solve::<false>(&p, x0, y0, tw, th);
             for ly in 0..th {
                 for lx in 0..tw {
@@ -1269,35 +1297,16 @@ mod tests {
             return;
         }
         let mut rng = rand_pcg::Pcg64::seed_from_u64(31);
-        let ts = TILE_SIZE as i32;
         let (mut below_least, mut kept) = (0_u64, 0_u64);
         for case in 0..200_000 {
-            let axis =
-                |rng: &mut rand_pcg::Pcg64| 0.2 * 25_000.0_f64.powf(rng.random_range(0.0..1.0));
-            let (s1, s2) = (axis(&mut rng), axis(&mut rng));
-            let (_, conic64) = footprint([s1, s2], rng.random_range(0.0..std::f64::consts::PI));
-            let conic = conic64.map(|v| v as f32);
-            let opacity: f32 = rng.random_range(0.004..1.0);
-            let (x0, y0) = (ts * rng.random_range(0..64), ts * rng.random_range(0..64));
-            let reach = 3.0 * s1.max(s2) as f32;
-            let centre = [
-                x0 as f32 + rng.random_range(-reach..reach + 16.0),
-                y0 as f32 + rng.random_range(-reach..reach + 16.0),
-            ];
-            let (tw, th) = if case % 10 == 0 {
-                (rng.random_range(1..=ts), rng.random_range(1..=ts))
-            } else {
-                (ts, ts)
-            };
-            let p = Projected {
-                xy: centre,
-                conic,
-                opacity,
-                q_max: quad_bound(opacity),
-                ..Projected::default()
-            };
+            let RandomPair {
+                p,
+                tile: (x0, y0, tw, th),
+                ..
+            } = random_splat_and_tile(&mut rng, case);
+            let conic = p.conic;
             let spans = RowSpans::solve::<false>(&p, x0, y0, tw, th);
-            let todo = if case % 2 == 0 {
+            let todo = if case.is_multiple_of(2) {
                 spans.mask
             } else {
                 spans.mask & rng.random::<u32>()
@@ -1346,33 +1355,14 @@ mod tests {
     fn whole_row_spans_change_only_lanes_that_fail_the_alpha_test() {
         use crate::constants::{MAX_ALPHA, MIN_ALPHA};
         let mut rng = rand_pcg::Pcg64::seed_from_u64(37);
-        let ts = TILE_SIZE as i32;
         let (mut same, mut differ) = (0_u64, 0_u64);
         for case in 0..100_000 {
-            let axis =
-                |rng: &mut rand_pcg::Pcg64| 0.2 * 25_000.0_f64.powf(rng.random_range(0.0..1.0));
-            let (s1, s2) = (axis(&mut rng), axis(&mut rng));
-            let (_, conic64) = footprint([s1, s2], rng.random_range(0.0..std::f64::consts::PI));
-            let conic = conic64.map(|v| v as f32);
-            let opacity: f32 = rng.random_range(0.004..1.0);
-            let (x0, y0) = (ts * rng.random_range(0..64), ts * rng.random_range(0..64));
-            let reach = 3.0 * s1.max(s2) as f32;
-            let centre = [
-                x0 as f32 + rng.random_range(-reach..reach + 16.0),
-                y0 as f32 + rng.random_range(-reach..reach + 16.0),
-            ];
-            let (tw, th) = if case % 10 == 0 {
-                (rng.random_range(1..=ts), rng.random_range(1..=ts))
-            } else {
-                (ts, ts)
-            };
-            let p = Projected {
-                xy: centre,
-                conic,
-                opacity,
-                q_max: quad_bound(opacity),
-                ..Projected::default()
-            };
+            let RandomPair {
+                p,
+                tile: (x0, y0, tw, th),
+                ..
+            } = random_splat_and_tile(&mut rng, case);
+            let opacity = p.opacity;
             let solved = RowSpans::solve::<false>(&p, x0, y0, tw, th);
             let whole = RowSpans::of_rows(&p, solved.mask, y0, tw);
             for r in 0..TILE_SIZE as usize {
