@@ -330,8 +330,9 @@ impl Rasterizer {
                 |rgb, (tile, ((t, d), last))| {
                     let (start, end) = (bins.offsets[tile], bins.offsets[tile + 1]);
                     let ext = tile_extent(tile, tiles_x, w, h);
-                    // SAFETY: [start, end) is this tile's own run of `pair_live`: the tiles'
-                    // runs are disjoint (and `run` checks they end inside the vector).
+                    // SAFETY: [start, end) is this tile's own run of `pair_live` and of
+                    // `pair_rows`: the tiles' runs are disjoint (and `run` checks they end
+                    // inside the vectors).
                     #[allow(unsafe_code)]
                     let (live, rows) =
                         unsafe { (live_runs.run(start, end), row_runs.run(start, end)) };
