@@ -33,7 +33,9 @@ pub struct RenderStats {
     pub culled_non_finite: usize,
     /// (tile, splat) pairs composited.
     pub pairs: usize,
-    /// (pixel, splat) pairs whose Gaussian was evaluated.
+    /// (pixel, splat) pairs whose Gaussian was evaluated: every pixel in the image of each
+    /// half-row a splat reaches (since session 60; before, only the pixels inside its exact
+    /// row spans were counted).
     pub pixel_evaluations: u64,
     /// (pixel, splat) pairs that contributed (passed the alpha and transmittance tests).
     pub contributions: u64,
@@ -708,7 +710,7 @@ fn composite_tile_impl<S: WeightSink, const AVX2: bool>(
             prefetch::record(proj, ahead as usize);
         }
         let p = &proj[sid as usize];
-        let spans = RowSpans::solve::<AVX2>(p, x0, y0, tw, th);
+        let spans = RowSpans::reach::<AVX2>(p, x0, y0, tw, th);
         o.rows[k] = spans.mask;
         let tag = k as u32 + 1;
         evaluations += falloff.compute::<AVX2>(p, &spans, spans.mask & !done_rows, x0);

@@ -463,8 +463,9 @@ pub(crate) struct RowSpans {
 impl RowSpans {
     /// Solves the spans of splat `p` in the tile at pixel origin (`x0`, `y0`) of `tw` × `th`
     /// real pixels; with `AVX2` the half-row mask is built with AVX2 compares and bit masks
-    /// (the same bits), which only callers compiled with AVX2 may ask for.
-    #[inline(always)]
+    /// (the same bits), which only callers compiled with AVX2 may ask for. The tests' exact
+    /// spans: the walks take [`Self::reach`]'s half-rows and let the alpha test decide lanes.
+    #[cfg(test)]
     pub fn solve<const AVX2: bool>(p: &Projected, x0: i32, y0: i32, tw: i32, th: i32) -> Self {
         const N: usize = TILE_SIZE as usize;
         let [a, b, c] = p.conic;
@@ -532,6 +533,105 @@ impl RowSpans {
 }
 
 impl RowSpans {
+    /// The half-rows of the tile at pixel origin (`x0`, `y0`), `tw` × `th` real pixels, that
+    /// splat `p` can reach, with spans over every real column ([`Self::of_rows`]): the tile
+    /// walks evaluate every lane of those half-rows and let the alpha test decide, which every
+    /// pixel outside the exact spans fails (`spans_hold_every_pixel_the_lane_test_passes`).
+    /// A half-row is kept when its pixels, widened by `SPAN_MARGIN`, meet the ellipse
+    /// q ≤ q_max (with a relative 2⁻¹⁰ for rounding): the least q along a row is
+    /// a·(dx − dx*)² + (det/a)·dy², at the point of the segment nearest the row's vertex
+    /// dx* = −b·dy/a, so no square root and no rounding to pixels (the exact spans' solve cost
+    /// a quarter of the compositing walk). The determinant is taken in f64 as the exact spans
+    /// take it. With `AVX2` eight rows a vector (the same operations in the same order, so the
+    /// same mask), which only callers compiled with AVX2 may ask for.
+    #[inline(always)]
+    pub fn reach<const AVX2: bool>(p: &Projected, x0: i32, y0: i32, tw: i32, th: i32) -> Self {
+        let [a, b, c] = p.conic;
+        let det = (f64::from(a) * f64::from(c) - f64::from(b) * f64::from(b)) as f32;
+        let inv_a = 1.0 / a;
+        let det_a = det * inv_a;
+        let bound = p.q_max * (1.0 + 1.0 / 1024.0);
+        let x0f = x0 as f32;
+        let last_l = 7.min(tw - 1) as f32;
+        let last_r = 15.min(tw - 1) as f32;
+        let seg = [
+            (
+                p.xy[0] - (x0f + last_l) - SPAN_MARGIN,
+                p.xy[0] - x0f + SPAN_MARGIN,
+            ),
+            (
+                p.xy[0] - (x0f + last_r) - SPAN_MARGIN,
+                p.xy[0] - (x0f + 8.0) + SPAN_MARGIN,
+            ),
+        ];
+        let mut spans = Self::of_rows(p, 0, y0, tw);
+        #[cfg(target_arch = "x86_64")]
+        if AVX2 {
+            use std::arch::x86_64::{
+                _CMP_LE_OQ, _CMP_LT_OQ, _mm256_add_ps, _mm256_and_ps, _mm256_cmp_ps,
+                _mm256_loadu_ps, _mm256_max_ps, _mm256_min_ps, _mm256_movemask_ps, _mm256_mul_ps,
+                _mm256_set1_ps, _mm256_setr_ps, _mm256_sub_ps,
+            };
+            // SAFETY: only the AVX2 instantiations of the tile walks ask for `AVX2`, and they
+            // run only where `has_avx2()` found the feature; the loads are rows 0..8 and 8..16
+            // of the 16-row `dy`.
+            #[allow(unsafe_code)]
+            unsafe {
+                let lane = _mm256_setr_ps(0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0);
+                let (mut first, mut second) = (0_u32, 0_u32);
+                for base in [0_usize, 8] {
+                    let d = _mm256_loadu_ps(spans.dy.as_ptr().add(base));
+                    let r = _mm256_add_ps(_mm256_set1_ps(base as f32), lane);
+                    let real = _mm256_cmp_ps::<_CMP_LT_OQ>(r, _mm256_set1_ps(th as f32));
+                    let vertex =
+                        _mm256_mul_ps(_mm256_mul_ps(_mm256_set1_ps(-b), d), _mm256_set1_ps(inv_a));
+                    let bq = _mm256_mul_ps(_mm256_mul_ps(_mm256_set1_ps(det_a), d), d);
+                    let bnd = _mm256_set1_ps(bound);
+                    // Each half's least q, as the portable loop's closure (a loop, not a
+                    // closure: one LLVM left out of line would run without AVX2).
+                    let mut reached = [0_u32; 2];
+                    for (h, &(lo, hi)) in seg.iter().enumerate() {
+                        let x = _mm256_sub_ps(
+                            _mm256_min_ps(
+                                _mm256_max_ps(vertex, _mm256_set1_ps(lo)),
+                                _mm256_set1_ps(hi),
+                            ),
+                            vertex,
+                        );
+                        let q = _mm256_add_ps(
+                            _mm256_mul_ps(_mm256_mul_ps(_mm256_set1_ps(a), x), x),
+                            bq,
+                        );
+                        let kept = _mm256_and_ps(real, _mm256_cmp_ps::<_CMP_LE_OQ>(q, bnd));
+                        reached[h] = _mm256_movemask_ps(kept).cast_unsigned();
+                    }
+                    first |= reached[0] << base;
+                    second |= reached[1] << base;
+                }
+                if tw <= 8 {
+                    second = 0;
+                }
+                spans.mask = spread_bits(first) | (spread_bits(second) << 1);
+            }
+            return spans;
+        }
+        let (mut first, mut second) = (0_u32, 0_u32);
+        for r in 0..TILE_SIZE as usize {
+            let d = spans.dy[r];
+            let vertex = -b * d * inv_a;
+            let bq = det_a * d * d;
+            let q = |(lo, hi): (f32, f32)| {
+                let x = vertex.max(lo).min(hi) - vertex;
+                a * x * x + bq
+            };
+            let real = (r as i32) < th;
+            first |= u32::from(real & (q(seg[0]) <= bound)) << r;
+            second |= u32::from(real & (tw > 8) & (q(seg[1]) <= bound)) << r;
+        }
+        spans.mask = spread_bits(first) | (spread_bits(second) << 1);
+        spans
+    }
+
     /// Spans over every real column of the tile in each row, for the half-rows of `mask` (a
     /// mask [`Self::solve`] gave for the same splat and tile): the lanes outside the solved
     /// spans are evaluated too and fail the alpha test, as every pixel outside them does
@@ -564,7 +664,7 @@ impl RowSpans {
 
 /// Bit `2·row + half` set when that half-row of the tile has pixels in the row's span
 /// [`lo`, `hi`] (tile-local pixels).
-#[inline(always)]
+#[cfg(test)]
 fn half_row_mask(lo: &[f32; TILE_SIZE as usize], hi: &[f32; TILE_SIZE as usize]) -> u32 {
     let half = (LANES - 1) as f32;
     let mut mask = 0_u32;
@@ -579,9 +679,8 @@ fn half_row_mask(lo: &[f32; TILE_SIZE as usize], hi: &[f32; TILE_SIZE as usize])
 /// [`half_row_mask`] from four 8-lane compares and their sign masks, the two 16-bit masks of
 /// first and second halves then interleaved. LLVM compiles the loop above into per-row scalar
 /// code (about 70 instructions of a span's 150) and does not find this form itself.
-#[cfg(target_arch = "x86_64")]
+#[cfg(all(test, target_arch = "x86_64"))]
 #[target_feature(enable = "avx2")]
-#[inline]
 fn half_row_mask_avx2(lo: &[f32; TILE_SIZE as usize], hi: &[f32; TILE_SIZE as usize]) -> u32 {
     use std::arch::x86_64::{
         _CMP_GT_OQ, _CMP_LE_OQ, _mm256_and_ps, _mm256_cmp_ps, _mm256_loadu_ps, _mm256_movemask_ps,
@@ -608,7 +707,6 @@ fn half_row_mask_avx2(lo: &[f32; TILE_SIZE as usize], hi: &[f32; TILE_SIZE as us
 }
 
 /// Moves bit i of the low 16 bits of `x` to bit 2·i.
-#[cfg(target_arch = "x86_64")]
 #[inline(always)]
 fn spread_bits(x: u32) -> u32 {
     let mut x = x & 0xffff;
@@ -981,6 +1079,7 @@ mod tests {
                 ..Projected::default()
             };
             let spans = RowSpans::solve::<false>(&p, x0, y0, tw, th);
+            let reach = RowSpans::reach::<false>(&p, x0, y0, tw, th).mask;
             for ly in 0..th {
                 for lx in 0..tw {
                     let dx = f64::from(p.xy[0]) - f64::from(x0 + lx);
@@ -1003,6 +1102,10 @@ mod tests {
                     );
                     let bit = 2 * row + half;
                     assert!(bit < HALF_ROWS && spans.mask & (1 << bit) != 0);
+                    assert!(
+                        reach & (1 << bit) != 0,
+                        "case {case}: ({lx}, {ly}) not reached"
+                    );
                 }
             }
         }
@@ -1065,6 +1168,7 @@ mod tests {
     /// far outside the tile.
     #[test]
     fn spans_hold_every_pixel_the_lane_test_passes() {
+        // Also the half-rows of `RowSpans::reach`, which the tile walks take.
         use crate::constants::{MAX_ALPHA, MIN_ALPHA};
         let mut rng = rand_pcg::Pcg64::seed_from_u64(23);
         let mut passed = 0_u64;
@@ -1077,6 +1181,16 @@ mod tests {
             } = random_splat_and_tile(&mut rng, case);
             let (conic, opacity, centre) = (p.conic, p.opacity, p.xy);
             let spans = RowSpans::solve::<false>(&p, x0, y0, tw, th);
+            // The half-rows the walks take: the same from both instantiations.
+            let reach = RowSpans::reach::<false>(&p, x0, y0, tw, th).mask;
+            #[cfg(target_arch = "x86_64")]
+            if crate::has_avx2() {
+                assert_eq!(
+                    RowSpans::reach::<true>(&p, x0, y0, tw, th).mask,
+                    reach,
+                    "case {case}"
+                );
+            }
             for ly in 0..th {
                 for lx in 0..tw {
                     // The tile loops' arithmetic: dx from the half-row's origin, dy per row.
@@ -1117,6 +1231,11 @@ mod tests {
                     );
                     let bit = 2 * row + lx as usize / LANES;
                     assert!(spans.mask & (1 << bit) != 0);
+                    assert!(
+                        reach & (1 << bit) != 0,
+                        "case {case}: axes {s1:.1} × {s2:.1} px, pixel ({lx}, {ly}) with alpha \
+                         {alpha} (true {true_alpha}) in a half-row `reach` leaves out"
+                    );
                 }
             }
         }

@@ -27,7 +27,10 @@ use crate::pipeline::training_view;
 
 /// Floating-point operations the rasteriser spends on one evaluated (pixel, splat) pair in the
 /// forward pass, and in forward + backward together: counted by hand from the tile loops
-/// (docs/benchmarks/splat-core.md), so GFLOP/s figures are estimates of useful work.
+/// (docs/benchmarks/splat-core.md), so GFLOP/s figures are estimates. Since session 60 every
+/// pixel of a half-row a splat reaches counts as evaluated (it is: the lanes outside the exact
+/// span are computed and fail the alpha test), about twice the pixels inside the spans counted
+/// before, so the figures are of work done rather than of useful work.
 pub const FLOPS_PER_PAIR_FORWARD: f64 = 40.0;
 /// See [`FLOPS_PER_PAIR_FORWARD`]: forward (40) plus backward (70).
 pub const FLOPS_PER_PAIR_FORWARD_BACKWARD: f64 = 110.0;
