@@ -468,7 +468,7 @@ impl RowSpans {
     #[cfg(test)]
     pub fn solve<const AVX2: bool>(p: &Projected, x0: i32, y0: i32, tw: i32, th: i32) -> Self {
         const N: usize = TILE_SIZE as usize;
-        let [a, b, c] = p.conic;
+        let [a, b, _] = p.conic;
         let q_max = p.q_max;
         let (x0f, y0f) = (x0 as f32, y0 as f32);
         let last_x = (tw - 1) as f32;
@@ -478,11 +478,7 @@ impl RowSpans {
         let mut k2 = [0.0_f32; N];
         let mut k3 = [0.0_f32; N];
         let exponent = RowExponent::coefficients(p.conic);
-        // The conic's determinant a·c − b², from the f32 entries in f64 (their products are
-        // exact there): for a long thin splat it is far below the rounding of a·c in f32, so
-        // b²·d² − a·c·d² came out wrong by more than itself and rows the splat crosses were
-        // found empty.
-        let det = (f64::from(a) * f64::from(c) - f64::from(b) * f64::from(b)) as f32;
+        let det = conic_det(p.conic);
         let a_q = a * q_max;
         // One division a splat and tile, not two per row: the product's extra rounding
         // (relative 2⁻²⁴ of dx) is far inside `SPAN_MARGIN`.
@@ -532,6 +528,14 @@ impl RowSpans {
     }
 }
 
+/// The conic's determinant a·c − b², from the f32 entries in f64 (their products are exact
+/// there): for a long thin splat it is far below the rounding of a·c in f32, so b²·d² − a·c·d²
+/// came out wrong by more than itself and rows the splat crosses were found empty.
+#[inline(always)]
+fn conic_det([a, b, c]: [f32; 3]) -> f32 {
+    (f64::from(a) * f64::from(c) - f64::from(b) * f64::from(b)) as f32
+}
+
 impl RowSpans {
     /// The half-rows of the tile at pixel origin (`x0`, `y0`), `tw` × `th` real pixels, that
     /// splat `p` can reach, with spans over every real column ([`Self::of_rows`]): the tile
@@ -541,13 +545,12 @@ impl RowSpans {
     /// q ≤ q_max (with a relative 2⁻¹⁰ for rounding): the least q along a row is
     /// a·(dx − dx*)² + (det/a)·dy², at the point of the segment nearest the row's vertex
     /// dx* = −b·dy/a, so no square root and no rounding to pixels (the exact spans' solve cost
-    /// a quarter of the compositing walk). The determinant is taken in f64 as the exact spans
-    /// take it. With `AVX2` eight rows a vector (the same operations in the same order, so the
+    /// a quarter of the compositing walk). The determinant is [`conic_det`]'s. With `AVX2` eight rows a vector (the same operations in the same order, so the
     /// same mask), which only callers compiled with AVX2 may ask for.
     #[inline(always)]
     pub fn reach<const AVX2: bool>(p: &Projected, x0: i32, y0: i32, tw: i32, th: i32) -> Self {
-        let [a, b, c] = p.conic;
-        let det = (f64::from(a) * f64::from(c) - f64::from(b) * f64::from(b)) as f32;
+        let [a, b, _] = p.conic;
+        let det = conic_det(p.conic);
         let inv_a = 1.0 / a;
         let det_a = det * inv_a;
         let bound = p.q_max * (1.0 + 1.0 / 1024.0);
@@ -633,11 +636,11 @@ impl RowSpans {
     }
 
     /// Spans over every real column of the tile in each row, for the half-rows of `mask` (a
-    /// mask [`Self::solve`] gave for the same splat and tile): the lanes outside the solved
+    /// mask [`Self::reach`] gave for the same splat and tile): the lanes outside the exact
     /// spans are evaluated too and fail the alpha test, as every pixel outside them does
     /// (`spans_hold_every_pixel_the_lane_test_passes`), and a lane that fails it passes nothing
     /// on in either walk, so a walk over these spans composites and differentiates exactly what
-    /// it would over the solved ones. Each row's dy, k₂ and k₃ are the solve's.
+    /// it would over the exact ones. Each row's dy, k₂ and k₃ are the exact solve's.
     #[inline(always)]
     pub fn of_rows(p: &Projected, mask: u32, y0: i32, tw: i32) -> Self {
         const N: usize = TILE_SIZE as usize;
