@@ -440,14 +440,15 @@ fn sort_by_depth(keys: &mut Vec<u64>, scratch: &mut Vec<u64>, counts: &mut Vec<u
 /// x range (tile local, inclusive, as floats) and the half-rows that range touches.
 ///
 /// Pixels outside a span have o·G < 1/255 and would fail the per-pixel test anyway, so spans
-/// only save work: the images and gradients are those of the per-pixel tests alone. The 16 rows
-/// are solved in one pass of fixed-length loops that LLVM turns into two 8-lane vector steps
-/// (square root and division included) in the AVX2 instantiations, instead of a scalar square
-/// root and two divisions per row with a branch on each.
+/// only save work: the images and gradients are those of the per-pixel tests alone. The tile
+/// walks take whole rows ([`RowSpans::reach`], [`RowSpans::of_rows`]: every real column of the
+/// half-rows a splat reaches, no square root); the exact per-row solve (`solve`, 16 rows in two
+/// 8-lane vector steps) is the tests' reference for which pixels those half-rows must hold.
 pub(crate) struct RowSpans {
-    /// Tile-local first pixel of each row's span (≥ 0).
+    /// Tile-local first pixel of each row's span (≥ 0; 0 for whole rows).
     pub lo: [f32; TILE_SIZE as usize],
-    /// Tile-local last pixel of each row's span (≤ tile width − 1); below `lo` when empty.
+    /// Tile-local last pixel of each row's span (≤ tile width − 1; the width − 1 for whole
+    /// rows); below `lo` when empty.
     pub hi: [f32; TILE_SIZE as usize],
     /// Splat centre minus pixel-row centre, per row.
     pub dy: [f32; TILE_SIZE as usize],
