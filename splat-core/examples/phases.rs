@@ -2,8 +2,12 @@
 //! one camera that frames it, and prints the minimum and the median over the repeats.
 //!
 //! ```text
-//! cargo run --release -p splat-core --example phases -- MODEL.ply [REPEATS] [THREADS]
+//! cargo run --release -p splat-core --example phases -- MODEL.ply|torus [REPEATS] [THREADS]
 //! ```
+//!
+//! `torus` times the criterion bench's scene instead (`benches/rasterize.rs`: 250k splats on a
+//! bumpy torus, its camera, 1024²), so a change to the tile walks can be judged phase by phase
+//! on the figure issue 14 sets.
 //!
 //! The minimum is what to compare between builds on a shared machine: other work only ever adds
 //! time, so the fastest repeat is the one least disturbed (on the project's machine, one thread,
@@ -19,7 +23,12 @@ use std::path::Path;
 use std::time::Duration;
 
 use glam::{Mat3, Vec3};
-use splat_core::{Rasterizer, RenderCamera, RenderOptions, SplatGrads};
+use splat_core::{Rasterizer, RenderCamera, RenderOptions, SplatGrads, Splats};
+
+#[path = "../benches/common/torus.rs"]
+mod torus;
+#[path = "../benches/common/torus_view.rs"]
+mod torus_view;
 
 fn main() {
     if let Err(e) = run() {
@@ -31,36 +40,21 @@ fn main() {
 fn run() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
     let Some(path) = args.get(1) else {
-        return Err("usage: phases MODEL.ply [REPEATS] [THREADS]".into());
+        return Err("usage: phases MODEL.ply|torus [REPEATS] [THREADS]".into());
     };
     let repeats: usize = args.get(2).map_or(Ok(30), |s| s.parse())?;
     let threads: usize = args.get(3).map_or(Ok(2), |s| s.parse())?;
     rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build_global()?;
-    let splats = splat_core::ply::read_splats(Path::new(path))?;
-    if splats.is_empty() {
-        return Err(format!("{path} holds no splats").into());
-    }
-    let (lo, hi) = splats.means.iter().fold(
-        (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
-        |(lo, hi), &m| (lo.min(m), hi.max(m)),
-    );
-    let size = 1024;
-    let tan_half = 10.0_f32.to_radians().tan();
-    let focal = 0.5 * size as f32 / tan_half;
-    let distance = 1.15 * 0.5 * (hi - lo).max_element() / tan_half;
-    let eye = 0.5 * (lo + hi) - Vec3::new(0.0, 0.0, distance);
-    let cam = RenderCamera {
-        width: size,
-        height: size,
-        fx: focal,
-        fy: focal,
-        cx: 0.5 * size as f32,
-        cy: 0.5 * size as f32,
-        rotation: Mat3::IDENTITY,
-        translation: -eye,
+    let (splats, cam) = if path == "torus" {
+        (torus_view::torus_scene(250_000), torus_view::camera(1024))
+    } else {
+        let splats = splat_core::ply::read_splats(Path::new(path))?;
+        let cam = framing_camera(&splats).ok_or_else(|| format!("{path} holds no splats"))?;
+        (splats, cam)
     };
+    let size = cam.width;
     let opts = RenderOptions::default();
     let pixels = (size * size) as usize;
     let pattern = |i: usize, k: usize| ((i.wrapping_mul(k)) % 1000) as f32 * 1e-9 - 5e-7;
@@ -115,5 +109,43 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
         ms.sort_by(f64::total_cmp);
         println!("  {name:<15} {:8.2} / {:8.2}", ms[0], ms[ms.len() / 2]);
     }
+    let mut total: Vec<f64> = times
+        .iter()
+        .map(|t| t.iter().map(Duration::as_secs_f64).sum::<f64>() * 1e3)
+        .collect();
+    total.sort_by(f64::total_cmp);
+    println!(
+        "  {:<15} {:8.2} / {:8.2}",
+        "all",
+        total[0],
+        total[total.len() / 2]
+    );
     Ok(())
+}
+
+/// A camera looking down +z at the bounding box of `splats` from a distance that fits it in a
+/// 20° field of view, 1024² pixels; `None` for an empty model.
+fn framing_camera(splats: &Splats) -> Option<RenderCamera> {
+    if splats.is_empty() {
+        return None;
+    }
+    let (lo, hi) = splats.means.iter().fold(
+        (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
+        |(lo, hi), &m| (lo.min(m), hi.max(m)),
+    );
+    let size = 1024;
+    let tan_half = 10.0_f32.to_radians().tan();
+    let focal = 0.5 * size as f32 / tan_half;
+    let distance = 1.15 * 0.5 * (hi - lo).max_element() / tan_half;
+    let eye = 0.5 * (lo + hi) - Vec3::new(0.0, 0.0, distance);
+    Some(RenderCamera {
+        width: size,
+        height: size,
+        fx: focal,
+        fy: focal,
+        cx: 0.5 * size as f32,
+        cy: 0.5 * size as f32,
+        rotation: Mat3::IDENTITY,
+        translation: -eye,
+    })
 }
