@@ -75,15 +75,12 @@ pub struct Rasterizer {
     pub(crate) px_t: Vec<f32>,
     /// Accumulated Σ wᵢ zᵢ per pixel, tile-major.
     pub(crate) px_d: Vec<f32>,
-    /// One past the index (in the tile's list) of the last splat that contributed, tile-major.
-    pub(crate) px_last: Vec<u32>,
-    /// Per (tile, splat) pair, in list order: whether the forward pass blended the splat into
-    /// any pixel of the tile. The backward pass skips the others, whose gradients are zero.
-    pub(crate) pair_live: Vec<bool>,
-    /// Per (tile, splat) pair, in list order: its row spans' half-row mask
-    /// ([`RowSpans`]`::mask`) where the forward pass reached it, else 0. The backward pass walks
-    /// these half-rows and lets the alpha test decide the lanes, instead of solving the spans
-    /// again.
+    /// Per pixel, tile-major: where the compositing stopped ([`Finish`]).
+    pub(crate) px_finish: Vec<u32>,
+    /// Per (tile, splat) pair, in list order: the half-rows (bit `2·row + half`) in which the
+    /// forward pass blended the splat into at least one pixel, 0 if none. The backward pass
+    /// walks exactly these half-rows (no others pass a gradient) and lets the alpha test and
+    /// [`Finish`] decide the lanes, instead of solving the spans again.
     pub(crate) pair_rows: Vec<u32>,
     pub(crate) output: RenderOutput,
     pub(crate) stats: RenderStats,
@@ -105,10 +102,8 @@ struct TileOut<'a> {
     t: &'a mut [f32],
     d: &'a mut [f32],
     rgb: &'a mut [[f32; 3]],
-    last: &'a mut [u32],
-    /// Per entry of the tile's list: whether the splat was blended into any pixel.
-    live: &'a mut [bool],
-    /// Per entry of the tile's list: its half-row mask, 0 past an early stop.
+    finish: &'a mut [u32],
+    /// Per entry of the tile's list: the half-rows it was blended into.
     rows: &'a mut [u32],
 }
 
@@ -311,39 +306,34 @@ impl Rasterizer {
         let n_px = (tiles_x * tiles_y) as usize * TILE_PIXELS;
         self.px_t.resize(n_px, 1.0);
         self.px_d.resize(n_px, 0.0);
-        self.px_last.resize(n_px, 0);
+        self.px_finish.resize(n_px, 0);
         let bins = &self.bins;
         let proj = &self.proj;
         let (w, h) = (cam.width, cam.height);
         let avx2 = self.use_avx2();
         let images = OutputImages::new(&mut self.output, w, h, bg);
         // Not cleared: each tile's walk writes its whole run.
-        self.pair_live.resize(bins.pairs(), false);
         self.pair_rows.resize(bins.pairs(), 0);
-        let live_runs = DisjointWrites::new(&mut self.pair_live);
         let row_runs = DisjointWrites::new(&mut self.pair_rows);
         self.px_t
             .par_chunks_mut(TILE_PIXELS)
             .zip(self.px_d.par_chunks_mut(TILE_PIXELS))
-            .zip(self.px_last.par_chunks_mut(TILE_PIXELS))
+            .zip(self.px_finish.par_chunks_mut(TILE_PIXELS))
             .enumerate()
             .map_init(
                 || vec![[0.0_f32; 3]; TILE_PIXELS],
-                |rgb, (tile, ((t, d), last))| {
+                |rgb, (tile, ((t, d), finish))| {
                     let (start, end) = (bins.offsets[tile], bins.offsets[tile + 1]);
                     let ext = tile_extent(tile, tiles_x, w, h);
-                    // SAFETY: [start, end) is this tile's own run of `pair_live` and of
-                    // `pair_rows`: the tiles' runs are disjoint (and `run` checks they end
-                    // inside the vectors).
+                    // SAFETY: [start, end) is this tile's own run of `pair_rows`: the tiles'
+                    // runs are disjoint (and `run` checks they end inside the vector).
                     #[allow(unsafe_code)]
-                    let (live, rows) =
-                        unsafe { (live_runs.run(start, end), row_runs.run(start, end)) };
+                    let rows = unsafe { row_runs.run(start, end) };
                     let o = TileOut {
                         t: &mut *t,
                         d: &mut *d,
                         rgb: rgb.as_mut_slice(),
-                        last,
-                        live,
+                        finish,
                         rows,
                     };
                     let list = &bins.list[start..end];
@@ -561,6 +551,40 @@ fn project_chunk_impl(splats: &Splats, v: &ViewConsts, first: usize, o: ProjectO
     }
 }
 
+/// Where a pixel's compositing stopped, as the tile walks keep it per pixel (a `u32`): `OPEN`
+/// while its transmittance lasts; k + 1 ([`Finish::tag`]) once entry k of the tile's list would
+/// have taken it below [`MIN_TRANSMITTANCE`] (that entry and every later one are not blended);
+/// `OUTSIDE` for the tile's pixels beyond the image, as if stopped at the first entry. The
+/// backward pass's test "entry kk was blended into this pixel" is then kk < [`Finish::limit`]
+/// and alpha ≥ 1/255 (the forward's own test), so no walk keeps a per-pixel record of the last
+/// entry blended: one maximum and one store fewer per half-row of the compositing.
+pub(crate) struct Finish;
+
+impl Finish {
+    /// Not done.
+    pub(crate) const OPEN: u32 = 0;
+    /// Outside the image: done before the first entry.
+    pub(crate) const OUTSIDE: u32 = 1;
+
+    /// The value of a pixel that entry `k` of its tile's list finished.
+    #[inline(always)]
+    pub(crate) fn tag(k: usize) -> u32 {
+        k as u32 + 1
+    }
+
+    /// The first list index not blended into a pixel whose value is `f`; signed, since the
+    /// backward's compare of list indices is then one AVX2 instruction (tile lists are far
+    /// shorter than 2³¹).
+    #[inline(always)]
+    pub(crate) fn limit(f: u32) -> i32 {
+        if f == Self::OPEN {
+            i32::MAX
+        } else {
+            (f - 1).cast_signed()
+        }
+    }
+}
+
 /// What a tile walk hands on of each splat's blending weights wᵢ = Tᵢ·αᵢ besides compositing
 /// them: nothing in the forward pass, their sums per splat in a contribution pass.
 pub(crate) trait WeightSink {
@@ -583,8 +607,7 @@ pub(crate) struct TileScratch {
     t: [f32; TILE_PIXELS],
     d: [f32; TILE_PIXELS],
     rgb: [[f32; 3]; TILE_PIXELS],
-    last: [u32; TILE_PIXELS],
-    live: Vec<bool>,
+    finish: [u32; TILE_PIXELS],
     rows: Vec<u32>,
 }
 
@@ -594,8 +617,7 @@ impl TileScratch {
             t: [0.0; TILE_PIXELS],
             d: [0.0; TILE_PIXELS],
             rgb: [[0.0; 3]; TILE_PIXELS],
-            last: [0; TILE_PIXELS],
-            live: Vec::new(),
+            finish: [0; TILE_PIXELS],
             rows: Vec::new(),
         }
     }
@@ -613,14 +635,12 @@ pub(crate) fn walk_tile<S: WeightSink>(
     let tiles_x = cam.width.div_ceil(TILE_SIZE);
     let list = &r.bins.list[r.bins.offsets[tile]..r.bins.offsets[tile + 1]];
     let ext = tile_extent(tile, tiles_x, cam.width, cam.height);
-    scratch.live.resize(list.len(), false);
     scratch.rows.resize(list.len(), 0);
     let o = TileOut {
         t: &mut scratch.t,
         d: &mut scratch.d,
         rgb: &mut scratch.rgb,
-        last: &mut scratch.last,
-        live: &mut scratch.live[..list.len()],
+        finish: &mut scratch.finish,
         rows: &mut scratch.rows[..list.len()],
     };
     composite_tile(list, &r.proj, ext, o, sink, r.use_avx2());
@@ -681,29 +701,28 @@ fn composite_tile_impl<S: WeightSink, const AVX2: bool>(
     let mut cg = [0.0_f32; TILE_PIXELS];
     let mut cb = [0.0_f32; TILE_PIXELS];
     let mut d = [0.0_f32; TILE_PIXELS];
-    let mut last = [0_u32; TILE_PIXELS];
-    // Pixels outside the image start as done, so only real pixels are counted; a half-row
-    // whose 8 pixels are all done (T spent, or outside the image) is skipped by every later
-    // splat, through one bit each in `done_rows`.
-    // (0 or 1 in 32-bit lanes like the colours', so the masks need no packing to bytes.)
-    let mut done = [1_u32; TILE_PIXELS];
+    // Per pixel, where it is done ([`Finish`]: 32-bit lanes like the colours', so the masks
+    // need no packing to bytes). Pixels outside the image start as done, so only real pixels
+    // are counted; a half-row whose 8 pixels are all done is skipped by every later splat,
+    // through one bit each in `done_rows`.
+    let mut done = [Finish::OUTSIDE; TILE_PIXELS];
     for ly in 0..th as usize {
-        done[ly * ts..ly * ts + tw as usize].fill(0);
+        done[ly * ts..ly * ts + tw as usize].fill(Finish::OPEN);
     }
     let mut done_count = [0_u32; HALF_ROWS];
     let mut done_rows = 0_u32;
     for (hr, n) in done_count.iter_mut().enumerate() {
-        *n = done[hr * LANES..(hr + 1) * LANES].iter().sum();
+        *n = done[hr * LANES..(hr + 1) * LANES]
+            .iter()
+            .map(|&f| u32::from(f != Finish::OPEN))
+            .sum();
         if *n == LANES as u32 {
             done_rows |= 1 << hr;
         }
     }
     let (mut evaluations, mut contributions) = (0_u64, 0_u64);
-    let opaque_one = std::hint::black_box(1.0_f32);
-    let opaque_zero = std::hint::black_box(0_u32);
     let mut falloff = Falloff::new();
-    // Entries past an early stop (every pixel done) stay not live, and reach no half-row.
-    o.live.fill(false);
+    // Entries past an early stop (every pixel done) are blended nowhere.
     o.rows.fill(0);
     for (k, &sid) in list.iter().enumerate() {
         if let Some(&ahead) = list.get(k + PREFETCH_AHEAD) {
@@ -711,10 +730,9 @@ fn composite_tile_impl<S: WeightSink, const AVX2: bool>(
         }
         let p = &proj[sid as usize];
         let spans = RowSpans::reach::<AVX2>(p, x0, y0, tw, th);
-        o.rows[k] = spans.mask;
-        let tag = k as u32 + 1;
+        let tag = Finish::tag(k);
         evaluations += falloff.compute::<AVX2>(p, &spans, spans.mask & !done_rows, x0);
-        let mut blended = 0;
+        let mut used = 0_u32;
         for (&hr, g) in falloff.hr.iter().zip(&falloff.gauss).take(falloff.n) {
             let hr = usize::from(hr);
             let base = hr * LANES;
@@ -725,55 +743,173 @@ fn composite_tile_impl<S: WeightSink, const AVX2: bool>(
             let gl: &mut [f32; LANES] = lanes_mut(&mut cg, base);
             let bl: &mut [f32; LANES] = lanes_mut(&mut cb, base);
             let dl: &mut [f32; LANES] = lanes_mut(&mut d, base);
-            let ll: &mut [u32; LANES] = lanes_mut(&mut last, base);
-            let mut finished = 0;
-            let mut contributed = 0;
             let mut weights = [0.0_f32; LANES];
-            for l in 0..LANES {
-                // G is 0 outside the span, so alpha fails the 1/255 test there.
-                let alpha = (p.opacity * g[l]).min(MAX_ALPHA);
-                let ti = tl[l];
-                let one_m = 1.0 - alpha;
-                let next_t = ti * one_m;
-                let valid = (donel[l] == 0) & (alpha >= MIN_ALPHA);
-                let finish = valid & (next_t < MIN_TRANSMITTANCE);
-                let add = valid & !finish;
-                let w = if add { alpha * ti } else { 0.0 };
-                weights[l] = w;
-                rl[l] += w * p.color[0];
-                gl[l] += w * p.color[1];
-                bl[l] += w * p.color[2];
-                dl[l] += w * p.depth;
-                // Every lane is stored, written as arithmetic (T times a 1 the compiler cannot
-                // see, the larger tag: tags grow along the list) rather than `if add { new }
-                // else { old }`, which LLVM turns into masked stores (slow on AMD, and the next
-                // splat's loads cannot forward from them).
-                tl[l] = ti * if add { one_m } else { opaque_one };
-                ll[l] = ll[l].max(if add { tag } else { opaque_zero });
-                donel[l] |= u32::from(finish);
-                finished += u32::from(finish);
-                contributed += u32::from(add);
-            }
+            let px = HalfRow {
+                t: tl,
+                r: rl,
+                g: gl,
+                b: bl,
+                d: dl,
+                done: donel,
+            };
+            let (finished, contributed) = px.blend::<AVX2>(p, g, tag, &mut weights);
             sink.add(k, &weights);
-            blended += contributed;
+            let bit = 1_u32 << hr;
+            if contributed > 0 {
+                used |= bit;
+            }
             contributions += u64::from(contributed);
             done_count[hr] += finished;
             if done_count[hr] == LANES as u32 {
-                done_rows |= 1 << hr;
+                done_rows |= bit;
             }
         }
-        o.live[k] = blended > 0;
+        o.rows[k] = used;
         if done_rows == u32::MAX {
             break;
         }
     }
     o.t.copy_from_slice(&t);
     o.d.copy_from_slice(&d);
-    o.last.copy_from_slice(&last);
+    o.finish.copy_from_slice(&done);
     for (i, px) in o.rgb.iter_mut().enumerate() {
         *px = [cr[i], cg[i], cb[i]];
     }
     (evaluations, contributions)
+}
+
+/// One half-row's compositing state: 8 pixels' transmittance, colour and depth sums, and
+/// [`Finish`] values.
+struct HalfRow<'a> {
+    t: &'a mut [f32; LANES],
+    r: &'a mut [f32; LANES],
+    g: &'a mut [f32; LANES],
+    b: &'a mut [f32; LANES],
+    d: &'a mut [f32; LANES],
+    done: &'a mut [u32; LANES],
+}
+
+impl HalfRow<'_> {
+    /// Blends splat `p` of falloff `gauss` (list entry `tag` − 1) into the half-row, writes its
+    /// weights wᵢ = Tᵢ·αᵢ (0 where it is not blended) into `weights`, and returns how many
+    /// pixels it finished and how many it was blended into. With `AVX2` in AVX2 intrinsics
+    /// (the same IEEE operations in the same order, so the same bits), which only callers
+    /// compiled with AVX2 may ask for: LLVM's vectoriser turned the lane loop into scalar code
+    /// with a branch per lane once it no longer kept a last-blended index per pixel.
+    #[inline(always)]
+    fn blend<const AVX2: bool>(
+        self,
+        p: &Projected,
+        gauss: &[f32; LANES],
+        tag: u32,
+        weights: &mut [f32; LANES],
+    ) -> (u32, u32) {
+        #[cfg(target_arch = "x86_64")]
+        if AVX2 {
+            return self.blend_avx2(p, gauss, tag, weights);
+        }
+        let opaque_one = std::hint::black_box(1.0_f32);
+        let opaque_zero = std::hint::black_box(0_u32);
+        let mut finished = 0;
+        let mut contributed = 0;
+        for l in 0..LANES {
+            // G is 0 outside the span, so alpha fails the 1/255 test there.
+            let alpha = (p.opacity * gauss[l]).min(MAX_ALPHA);
+            let ti = self.t[l];
+            let one_m = 1.0 - alpha;
+            let next_t = ti * one_m;
+            let valid = (self.done[l] == Finish::OPEN) & (alpha >= MIN_ALPHA);
+            let finish = valid & (next_t < MIN_TRANSMITTANCE);
+            let add = valid & !finish;
+            let w = if add { alpha * ti } else { 0.0 };
+            weights[l] = w;
+            self.r[l] += w * p.color[0];
+            self.g[l] += w * p.color[1];
+            self.b[l] += w * p.color[2];
+            self.d[l] += w * p.depth;
+            // Every lane is stored, written as arithmetic (T times a 1 the compiler cannot
+            // see, the tag or a 0 it cannot see kept by a maximum) rather than `if add { new }
+            // else { old }`, which LLVM turns into masked stores or branches.
+            self.t[l] = ti * if add { one_m } else { opaque_one };
+            self.done[l] = self.done[l].max(if finish { tag } else { opaque_zero });
+            finished += u32::from(finish);
+            contributed += u32::from(add);
+        }
+        (finished, contributed)
+    }
+
+    /// [`Self::blend`]'s lanes as AVX2 vectors. Every lane is stored, its new value chosen by
+    /// arithmetic (T times 1, the tag under a mask or'ed into an open pixel's 0), not by masked
+    /// stores (slow on AMD, and the next splat's loads cannot forward from them).
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    fn blend_avx2(
+        self,
+        p: &Projected,
+        gauss: &[f32; LANES],
+        tag: u32,
+        weights: &mut [f32; LANES],
+    ) -> (u32, u32) {
+        use std::arch::x86_64::{
+            _CMP_GE_OQ, _CMP_LT_OQ, _mm256_add_ps, _mm256_and_ps, _mm256_and_si256,
+            _mm256_andnot_ps, _mm256_blendv_ps, _mm256_castps_si256, _mm256_castsi256_ps,
+            _mm256_cmp_ps, _mm256_cmpeq_epi32, _mm256_loadu_ps, _mm256_loadu_si256, _mm256_min_ps,
+            _mm256_movemask_ps, _mm256_mul_ps, _mm256_or_si256, _mm256_set1_epi32, _mm256_set1_ps,
+            _mm256_setzero_si256, _mm256_storeu_ps, _mm256_storeu_si256, _mm256_sub_ps,
+        };
+        // SAFETY: only the AVX2 instantiations of the tile walks ask for `AVX2`, and they run
+        // only where `has_avx2()` found the feature; every load and store is of 8 lanes of an
+        // 8-lane array.
+        #[allow(unsafe_code)]
+        unsafe {
+            let one = _mm256_set1_ps(1.0);
+            let alpha = _mm256_min_ps(
+                _mm256_mul_ps(_mm256_set1_ps(p.opacity), _mm256_loadu_ps(gauss.as_ptr())),
+                _mm256_set1_ps(MAX_ALPHA),
+            );
+            let ti = _mm256_loadu_ps(self.t.as_ptr());
+            let one_m = _mm256_sub_ps(one, alpha);
+            let next_t = _mm256_mul_ps(ti, one_m);
+            let done = _mm256_loadu_si256(self.done.as_ptr().cast());
+            let open = _mm256_castsi256_ps(_mm256_cmpeq_epi32(done, _mm256_setzero_si256()));
+            let valid = _mm256_and_ps(
+                open,
+                _mm256_cmp_ps::<_CMP_GE_OQ>(alpha, _mm256_set1_ps(MIN_ALPHA)),
+            );
+            let finish = _mm256_and_ps(
+                valid,
+                _mm256_cmp_ps::<_CMP_LT_OQ>(next_t, _mm256_set1_ps(MIN_TRANSMITTANCE)),
+            );
+            let add = _mm256_andnot_ps(finish, valid);
+            let w = _mm256_and_ps(add, _mm256_mul_ps(alpha, ti));
+            _mm256_storeu_ps(weights.as_mut_ptr(), w);
+            for (sum, c) in [
+                (&mut *self.r, p.color[0]),
+                (&mut *self.g, p.color[1]),
+                (&mut *self.b, p.color[2]),
+                (&mut *self.d, p.depth),
+            ] {
+                let v = _mm256_add_ps(
+                    _mm256_loadu_ps(sum.as_ptr()),
+                    _mm256_mul_ps(w, _mm256_set1_ps(c)),
+                );
+                _mm256_storeu_ps(sum.as_mut_ptr(), v);
+            }
+            _mm256_storeu_ps(
+                self.t.as_mut_ptr(),
+                _mm256_mul_ps(ti, _mm256_blendv_ps(one, one_m, add)),
+            );
+            let tags = _mm256_and_si256(
+                _mm256_castps_si256(finish),
+                _mm256_set1_epi32(tag.cast_signed()),
+            );
+            _mm256_storeu_si256(self.done.as_mut_ptr().cast(), _mm256_or_si256(done, tags));
+            (
+                _mm256_movemask_ps(finish).count_ones(),
+                _mm256_movemask_ps(add).count_ones(),
+            )
+        }
+    }
 }
 
 /// How many list entries ahead the tile loops prefetch the projected record: a tile's list is

@@ -21,19 +21,20 @@ use crate::prefetch;
 use crate::project::{
     ChainView, ProjectedGrad, ProjectedGradLanes, ViewConsts, colour_grad8, project_backward8,
 };
-use crate::rasterize::{DEPTH_MIN_ALPHA, PREFETCH_AHEAD, lanes_mut, tile_extent, tile_major_index};
+use crate::rasterize::{
+    DEPTH_MIN_ALPHA, Finish, PREFETCH_AHEAD, lanes_mut, tile_extent, tile_major_index,
+};
 use crate::tiles::{Falloff, HALF_ROWS, LANES, RowSpans, TILE_PIXELS, TILE_SIZE, half_row_dx};
 use crate::{Rasterizer, RenderCamera, RenderOptions, SplatGrads, SplatGradsMut, Splats, sh};
 
 /// Splats per task of the chain phase.
 const CHAIN_CHUNK: usize = 256;
 
-/// One tile's list: its splats front to back, which of them the forward pass blended, and the
-/// half-rows it found each reaching.
+/// One tile's list: its splats front to back and the half-rows the forward pass blended each
+/// into.
 #[derive(Clone, Copy)]
 struct Entries<'a> {
     list: &'a [u32],
-    live: &'a [bool],
     rows: &'a [u32],
 }
 
@@ -171,7 +172,6 @@ impl Rasterizer {
             let out = unsafe { slots.run(s, e) };
             let entries = Entries {
                 list: &this.bins.list[s..e],
-                live: &this.pair_live[s..e],
                 rows: &this.pair_rows[s..e],
             };
             this.backward_tile(tile, entries, cam, &pg, out, avx2);
@@ -361,7 +361,7 @@ impl Rasterizer {
     fn backward_tile_impl<const AVX2: bool>(
         &self,
         tile: usize,
-        Entries { list, live, rows }: Entries<'_>,
+        Entries { list, rows }: Entries<'_>,
         cam: &RenderCamera,
         pg: &PixelGrads<'_>,
         out: &mut [ProjectedGrad],
@@ -379,8 +379,8 @@ impl Rasterizer {
         let mut k_bg = [0.0_f32; TILE_PIXELS];
         let mut t_cur = [0.0_f32; TILE_PIXELS];
         let mut acc_dot = [0.0_f32; TILE_PIXELS];
-        let mut last = [0_u32; TILE_PIXELS];
-        let mut max_last = 0;
+        // Per pixel, the first list index not blended into it; 0 (none) outside the image.
+        let mut limit = [0_i32; TILE_PIXELS];
         for ly in 0..th as usize {
             for lx in 0..tw as usize {
                 let (x, y) = (x0 as usize + lx, y0 as usize + ly);
@@ -408,48 +408,31 @@ impl Rasterizer {
                 // ∂C/∂αᵢ has −T_N·bg/(1 − αᵢ); ∂A/∂αᵢ = T_N/(1 − αᵢ).
                 k_bg[idx] = (g_a - bg_dot) * t_n;
                 t_cur[idx] = t_n;
-                last[idx] = self.px_last[k];
-                max_last = max_last.max(last[idx]);
+                limit[idx] = Finish::limit(self.px_finish[k]);
             }
         }
-        for slot in out.iter_mut().skip(max_last as usize) {
+        // Entries past the last one blended anywhere pass nothing.
+        let end = rows.iter().rposition(|&m| m != 0).map_or(0, |k| k + 1);
+        for slot in &mut out[end..] {
             *slot = ProjectedGrad::default();
         }
-        // Half-row `hr` has a pixel that composited splat `kk` exactly when kk < its largest
-        // `last`; walking back to front, half-rows join the active set in decreasing order of
-        // that bound and never leave it.
-        let mut joins = [(0_u32, 0_u32); HALF_ROWS];
-        for (hr, j) in joins.iter_mut().enumerate() {
-            let lastl: &[u32; LANES] = lanes_mut(&mut last, hr * LANES);
-            *j = (lastl.iter().copied().max().unwrap_or(0), hr as u32);
-        }
-        joins.sort_unstable_by(|x, y| y.cmp(x));
-        let mut joined = 0;
-        let mut active = 0_u32;
         let mut falloff = Falloff::new();
         // A 1 the compiler cannot see, so `T·1` stays a multiply and a plain store.
         let opaque_one = std::hint::black_box(1.0_f32);
         let mut weight = [[0.0_f32; LANES]; HALF_ROWS];
         let mut moment = [[0.0_f32; LANES]; HALF_ROWS];
         let [g_r, g_g, g_b] = &mut g_rgb;
-        for kk in (0..max_last as usize).rev() {
+        for kk in (0..end).rev() {
             if let Some(ahead) = kk.checked_sub(PREFETCH_AHEAD) {
                 prefetch::record(&self.proj, list[ahead] as usize);
             }
             let p = &self.proj[list[kk] as usize];
             let [a, b, c] = p.conic;
-            let kk32 = kk as u32;
-            // The signed compare of the tags below is one AVX2 instruction, the unsigned one
-            // three; tags are list positions, far below 2³¹.
-            let kk_signed = kk32.cast_signed();
-            while joined < HALF_ROWS && joins[joined].0 > kk32 {
-                active |= 1 << joins[joined].1;
-                joined += 1;
-            }
+            let kk_signed = kk as i32;
             // A splat the forward pass blended into no pixel of the tile (every pixel it
             // reaches below 1/255 or already done) passes no gradient and changes no pixel's
             // running state; a third of the pairs at paper scale.
-            if !live[kk] {
+            if rows[kk] == 0 {
                 out[kk] = ProjectedGrad::default();
                 continue;
             }
@@ -465,14 +448,11 @@ impl Rasterizer {
             let mut s_uy = [0.0_f32; LANES];
             let mut s_uyy = [0.0_f32; LANES];
             let mut s_uxy = [0.0_f32; LANES];
-            // The forward pass's half-rows, each lane left to the alpha test (see
-            // `RowSpans::of_rows`): no spans to solve again.
+            // The half-rows the forward pass blended the splat into, each lane left to the
+            // alpha test and the pixel's limit (see `RowSpans::of_rows`): no spans to solve
+            // again, and no half-row that would pass nothing.
             let spans = RowSpans::of_rows(p, rows[kk], y0, tw);
-            falloff.compute_rows::<AVX2>(p, &spans, spans.mask & active, x0);
-            if falloff.n == 0 {
-                out[kk] = ProjectedGrad::default();
-                continue;
-            }
+            falloff.compute_rows::<AVX2>(p, &spans, spans.mask, x0);
             // First each half-row's running state and, per lane, the weight w (0 where the
             // splat was not composited) and u = G·∂L/∂α, into `weight` and `moment`; then the
             // sums over them. In one loop the ten sums, the state and the splat's constants
@@ -485,7 +465,7 @@ impl Rasterizer {
                 .take(falloff.n)
             {
                 let base = usize::from(hr) * LANES;
-                let lastl: &[u32; LANES] = lanes_mut(&mut last, base);
+                let liml: &[i32; LANES] = lanes_mut(&mut limit, base);
                 let tl: &mut [f32; LANES] = lanes_mut(&mut t_cur, base);
                 let al: &mut [f32; LANES] = lanes_mut(&mut acc_dot, base);
                 let grl: &[f32; LANES] = lanes_mut(g_r, base);
@@ -498,7 +478,7 @@ impl Rasterizer {
                     let gauss = gs[l];
                     let raw = p.opacity * gauss;
                     let alpha = raw.min(MAX_ALPHA);
-                    let valid = (kk_signed < lastl[l].cast_signed()) & (alpha >= MIN_ALPHA);
+                    let valid = (kk_signed < liml[l]) & (alpha >= MIN_ALPHA);
                     let one_m = 1.0 - alpha;
                     let inv = 1.0 / one_m;
                     let t_i = tl[l] * inv;
@@ -666,8 +646,9 @@ mod tests {
         run_walking(portable, false, s, cam, d_rgb).0
     }
 
-    /// As [`run`]; with `every_entry`, the backward walks every entry of the tile lists, also
-    /// those the forward blended nowhere. Also returns how many entries were not blended.
+    /// As [`run`]; with `every_entry`, the backward walks every half-row of every entry of the
+    /// tile lists, also those the forward blended nowhere. Also returns how many entries were
+    /// not blended.
     fn run_walking(
         portable: bool,
         every_entry: bool,
@@ -679,9 +660,9 @@ mod tests {
         r.portable_only = portable;
         let opts = RenderOptions::default();
         let out = r.forward(s, cam, &opts).clone();
-        let not_blended = r.pair_live.iter().filter(|&&live| !live).count();
+        let not_blended = r.pair_rows.iter().filter(|&&m| m == 0).count();
         if every_entry {
-            r.pair_live.fill(true);
+            r.pair_rows.fill(u32::MAX);
         }
         let n_px = (cam.width * cam.height) as usize;
         let d_alpha: Vec<f32> = (0..n_px).map(|i| (i % 7) as f32 * 1e-2 - 0.03).collect();

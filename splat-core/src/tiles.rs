@@ -637,7 +637,8 @@ impl RowSpans {
     }
 
     /// Spans over every real column of the tile in each row, for the half-rows of `mask` (a
-    /// mask [`Self::reach`] gave for the same splat and tile): the lanes outside the exact
+    /// mask [`Self::reach`] gave for the same splat and tile, or the part of it the forward
+    /// pass blended the splat into): the lanes outside the exact
     /// spans are evaluated too and fail the alpha test, as every pixel outside them does
     /// (`spans_hold_every_pixel_the_lane_test_passes`), and a lane that fails it passes nothing
     /// on in either walk, so a walk over these spans composites and differentiates exactly what
