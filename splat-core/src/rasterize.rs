@@ -702,21 +702,19 @@ fn composite_tile_impl<S: WeightSink, const AVX2: bool>(
     let mut cb = [0.0_f32; TILE_PIXELS];
     let mut d = [0.0_f32; TILE_PIXELS];
     // Per pixel, where it is done ([`Finish`]: 32-bit lanes like the colours', so the masks
-    // need no packing to bytes). Pixels outside the image start as done, so only real pixels
-    // are counted; a half-row whose 8 pixels are all done is skipped by every later splat,
-    // through one bit each in `done_rows`.
+    // need no packing to bytes). Pixels outside the image start as done; a half-row whose 8
+    // pixels are all done is skipped by every later splat, through one bit each in
+    // `done_rows`.
     let mut done = [Finish::OUTSIDE; TILE_PIXELS];
     for ly in 0..th as usize {
         done[ly * ts..ly * ts + tw as usize].fill(Finish::OPEN);
     }
-    let mut done_count = [0_u32; HALF_ROWS];
     let mut done_rows = 0_u32;
-    for (hr, n) in done_count.iter_mut().enumerate() {
-        *n = done[hr * LANES..(hr + 1) * LANES]
+    for hr in 0..HALF_ROWS {
+        if done[hr * LANES..(hr + 1) * LANES]
             .iter()
-            .map(|&f| u32::from(f != Finish::OPEN))
-            .sum();
-        if *n == LANES as u32 {
+            .all(|&f| f != Finish::OPEN)
+        {
             done_rows |= 1 << hr;
         }
     }
@@ -752,15 +750,14 @@ fn composite_tile_impl<S: WeightSink, const AVX2: bool>(
                 d: dl,
                 done: donel,
             };
-            let (finished, contributed) = px.blend::<AVX2>(p, g, tag, &mut weights);
+            let (contributed, all_done) = px.blend::<AVX2>(p, g, tag, &mut weights);
             sink.add(k, &weights);
             let bit = 1_u32 << hr;
             if contributed > 0 {
                 used |= bit;
             }
             contributions += u64::from(contributed);
-            done_count[hr] += finished;
-            if done_count[hr] == LANES as u32 {
+            if all_done {
                 done_rows |= bit;
             }
         }
@@ -792,7 +789,7 @@ struct HalfRow<'a> {
 impl HalfRow<'_> {
     /// Blends splat `p` of falloff `gauss` (list entry `tag` − 1) into the half-row, writes its
     /// weights wᵢ = Tᵢ·αᵢ (0 where it is not blended) into `weights`, and returns how many
-    /// pixels it finished and how many it was blended into. With `AVX2` in AVX2 intrinsics
+    /// pixels it was blended into and whether all 8 are done after it. With `AVX2` in AVX2 intrinsics
     /// (the same IEEE operations in the same order, so the same bits), which only callers
     /// compiled with AVX2 may ask for: LLVM's vectoriser turned the lane loop into scalar code
     /// with a branch per lane once it no longer kept a last-blended index per pixel.
@@ -803,14 +800,13 @@ impl HalfRow<'_> {
         gauss: &[f32; LANES],
         tag: u32,
         weights: &mut [f32; LANES],
-    ) -> (u32, u32) {
+    ) -> (u32, bool) {
         #[cfg(target_arch = "x86_64")]
         if AVX2 {
             return self.blend_avx2(p, gauss, tag, weights);
         }
         let opaque_one = std::hint::black_box(1.0_f32);
         let opaque_zero = std::hint::black_box(0_u32);
-        let mut finished = 0;
         let mut contributed = 0;
         for l in 0..LANES {
             // G is 0 outside the span, so alpha fails the 1/255 test there.
@@ -832,10 +828,9 @@ impl HalfRow<'_> {
             // else { old }`, which LLVM turns into masked stores or branches.
             self.t[l] = ti * if add { one_m } else { opaque_one };
             self.done[l] = self.done[l].max(if finish { tag } else { opaque_zero });
-            finished += u32::from(finish);
             contributed += u32::from(add);
         }
-        (finished, contributed)
+        (contributed, self.done.iter().all(|&f| f != Finish::OPEN))
     }
 
     /// [`Self::blend`]'s lanes as AVX2 vectors. Every lane is stored, its new value chosen by
@@ -849,7 +844,7 @@ impl HalfRow<'_> {
         gauss: &[f32; LANES],
         tag: u32,
         weights: &mut [f32; LANES],
-    ) -> (u32, u32) {
+    ) -> (u32, bool) {
         use std::arch::x86_64::{
             _CMP_GE_OQ, _CMP_LT_OQ, _mm256_add_ps, _mm256_and_ps, _mm256_and_si256,
             _mm256_andnot_ps, _mm256_blendv_ps, _mm256_castps_si256, _mm256_castsi256_ps,
@@ -905,8 +900,8 @@ impl HalfRow<'_> {
             );
             _mm256_storeu_si256(self.done.as_mut_ptr().cast(), _mm256_or_si256(done, tags));
             (
-                _mm256_movemask_ps(finish).count_ones(),
                 _mm256_movemask_ps(add).count_ones(),
+                _mm256_movemask_ps(_mm256_andnot_ps(finish, open)) == 0,
             )
         }
     }
