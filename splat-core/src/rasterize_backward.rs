@@ -490,13 +490,15 @@ impl Rasterizer {
                         + p.color[2] * gbl[l]
                         + p.depth * gdl[l];
                     let behind = al[l];
-                    let d_alpha = t_i * (cg - behind) + kl[l] * inv;
+                    let own = cg - behind;
+                    let d_alpha = t_i * own + kl[l] * inv;
                     wl_out[l] = if valid { w } else { 0.0 };
                     // Stores of every lane, written as arithmetic (α of 0, T times 1) rather
                     // than `if valid { new } else { old }`, which LLVM turns into masked stores
                     // that the next splat's loads cannot forward from.
                     let av = if valid { alpha } else { 0.0 };
-                    al[l] = av * cg + (1.0 - av) * behind;
+                    // α·c + (1 − α)·behind, with the difference ∂L/∂α already needed.
+                    al[l] = behind + av * own;
                     tl[l] *= if valid { inv } else { opaque_one };
                     // Where o·G is clamped at 0.99, alpha does not depend on o or G.
                     let da = if valid & (raw < MAX_ALPHA) {
