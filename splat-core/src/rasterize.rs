@@ -16,7 +16,7 @@ use crate::{Error, RenderCamera, RenderOptions, RenderOutput, Splats};
 
 /// The most pixels a view may have, counted after padding to whole 16×16 tiles: 2²⁶, an
 /// 8192 × 8192 image. The forward pass keeps 44 bytes per pixel (transmittance, depth sum, colour
-/// and last contributor per tile pixel, then the RGB, alpha and depth images), so this bounds
+/// and where its compositing stopped per tile pixel, then the RGB, alpha and depth images), so this bounds
 /// those buffers at 2.75 GiB; a larger view is refused before anything is allocated rather than
 /// aborting the process when an allocation fails (and its tile count cannot overflow).
 pub const MAX_PIXELS: u64 = 1 << 26;
