@@ -15,10 +15,11 @@ use crate::tiles::{Bins, Falloff, HALF_ROWS, LANES, RowSpans, TILE_PIXELS, TILE_
 use crate::{Error, RenderCamera, RenderOptions, RenderOutput, Splats};
 
 /// The most pixels a view may have, counted after padding to whole 16×16 tiles: 2²⁶, an
-/// 8192 × 8192 image. The forward pass keeps 44 bytes per pixel (transmittance, depth sum, colour
-/// and where its compositing stopped per tile pixel, then the RGB, alpha and depth images), so this bounds
-/// those buffers at 2.75 GiB; a larger view is refused before anything is allocated rather than
-/// aborting the process when an allocation fails (and its tile count cannot overflow).
+/// 8192 × 8192 image. The forward pass keeps 44 bytes per pixel (transmittance, depth sum,
+/// colour and where its compositing stopped per tile pixel, then the RGB, alpha and depth
+/// images), so this bounds those buffers at 2.75 GiB; a larger view is refused before anything
+/// is allocated rather than aborting the process when an allocation fails (and its tile count
+/// cannot overflow).
 pub const MAX_PIXELS: u64 = 1 << 26;
 
 /// Bytes the forward pass keeps per (tile-padded) pixel.
