@@ -11,7 +11,9 @@ use crate::lanes::WIDTH;
 use crate::prefetch;
 use crate::project::{ChainLanes, Cull, ProjectedGrad, ViewConsts, project8};
 use crate::projected::Projected;
-use crate::tiles::{Bins, Falloff, HALF_ROWS, LANES, RowSpans, TILE_PIXELS, TILE_SIZE};
+use crate::tiles::{
+    Bins, Falloff, HALF_ROWS, LANES, RowSpans, TILE_PIXELS, TILE_SIZE, evaluated_pixels,
+};
 use crate::{Error, RenderCamera, RenderOptions, RenderOutput, Splats};
 
 /// The most pixels a view may have, counted after padding to whole 16×16 tiles: 2²⁶, an
@@ -730,7 +732,9 @@ fn composite_tile_impl<S: WeightSink, const AVX2: bool>(
         let p = &proj[sid as usize];
         let spans = RowSpans::reach::<AVX2>(p, x0, y0, tw, th);
         let tag = Finish::tag(k);
-        evaluations += falloff.compute::<AVX2>(p, &spans, spans.mask & !done_rows, x0);
+        let todo = spans.mask & !done_rows;
+        evaluations += evaluated_pixels(todo, tw);
+        falloff.compute::<AVX2>(p, &spans, todo, x0);
         let mut used = 0_u32;
         for (&hr, g) in falloff.hr.iter().zip(&falloff.gauss).take(falloff.n) {
             let hr = usize::from(hr);

@@ -445,10 +445,13 @@ fn sort_by_depth(keys: &mut Vec<u64>, scratch: &mut Vec<u64>, counts: &mut Vec<u
 /// half-rows a splat reaches, no square root); the exact per-row solve (`solve`, 16 rows in two
 /// 8-lane vector steps) is the tests' reference for which pixels those half-rows must hold.
 pub(crate) struct RowSpans {
-    /// Tile-local first pixel of each row's span (≥ 0; 0 for whole rows).
+    /// Tile-local first pixel of each row's span (≥ 0; 0 for whole rows): the exact solve's,
+    /// which only the tests read (the falloff takes every lane of a half-row).
+    #[cfg(test)]
     pub lo: [f32; TILE_SIZE as usize],
-    /// Tile-local last pixel of each row's span (≤ tile width − 1; the width − 1 for whole
-    /// rows); below `lo` when empty.
+    /// Tile-local last pixel of each row's span (≤ tile width − 1; 15 for whole rows); below
+    /// `lo` when empty.
+    #[cfg(test)]
     pub hi: [f32; TILE_SIZE as usize],
     /// Splat centre minus pixel-row centre, per row.
     pub dy: [f32; TILE_SIZE as usize],
@@ -568,7 +571,7 @@ impl RowSpans {
                 p.xy[0] - (x0f + 8.0) + SPAN_MARGIN,
             ),
         ];
-        let mut spans = Self::of_rows(p, 0, y0, tw);
+        let mut spans = Self::of_rows(p, 0, y0);
         #[cfg(target_arch = "x86_64")]
         if AVX2 {
             use std::arch::x86_64::{
@@ -644,7 +647,7 @@ impl RowSpans {
     /// on in either walk, so a walk over these spans composites and differentiates exactly what
     /// it would over the exact ones. Each row's dy, k₂ and k₃ are the exact solve's.
     #[inline(always)]
-    pub fn of_rows(p: &Projected, mask: u32, y0: i32, tw: i32) -> Self {
+    pub fn of_rows(p: &Projected, mask: u32, y0: i32) -> Self {
         const N: usize = TILE_SIZE as usize;
         let exponent = RowExponent::coefficients(p.conic);
         let y0f = y0 as f32;
@@ -657,8 +660,10 @@ impl RowSpans {
             (k2[r], k3[r]) = exponent.row(d);
         }
         Self {
+            #[cfg(test)]
             lo: [0.0; N],
-            hi: [(tw - 1) as f32; N],
+            #[cfg(test)]
+            hi: [(N - 1) as f32; N],
             dy,
             k2,
             k3,
@@ -750,32 +755,13 @@ impl Falloff {
     }
 
     /// Fills the buffer with splat `p`'s falloff over the half-rows of `todo` (bits of
-    /// `spans.mask`) in the tile whose pixel origin has x = `x0`; returns the number of
-    /// (pixel, splat) pairs inside the spans, counted from the lanes' span masks. With `AVX2`
-    /// the lanes are written in AVX2 intrinsics (the same IEEE operations in the same order, so
-    /// the same bits), which only callers compiled with AVX2 may ask for.
+    /// `spans.mask`) in the tile whose pixel origin has x = `x0`, all 8 lanes of each (the
+    /// walks' alpha test and per-pixel state reject the lanes past a partial tile's last
+    /// column: no pixel there is open in the forward or has a contributor in the backward).
+    /// With `AVX2` the lanes are written in AVX2 intrinsics (the same IEEE operations in the
+    /// same order, so the same bits), which only callers compiled with AVX2 may ask for.
     #[inline(always)]
     pub fn compute<const AVX2: bool>(
-        &mut self,
-        p: &Projected,
-        spans: &RowSpans,
-        todo: u32,
-        x0: i32,
-    ) -> u64 {
-        #[cfg(target_arch = "x86_64")]
-        if AVX2 {
-            // SAFETY: only the AVX2 instantiations of the tile walks ask for `AVX2`, and they
-            // run only where `has_avx2()` found the feature.
-            #[allow(unsafe_code)]
-            return unsafe { self.compute_avx2::<true>(p, spans, todo, x0) };
-        }
-        self.compute_portable(p, spans, todo, x0)
-    }
-
-    /// [`Self::compute`] without the span's lane mask, for spans that hold every column of
-    /// their rows ([`RowSpans::of_rows`]); returns nothing (the backward walk counts nothing).
-    #[inline(always)]
-    pub fn compute_rows<const AVX2: bool>(
         &mut self,
         p: &Projected,
         spans: &RowSpans,
@@ -788,7 +774,7 @@ impl Falloff {
             // run only where `has_avx2()` found the feature.
             #[allow(unsafe_code)]
             unsafe {
-                self.compute_avx2::<false>(p, spans, todo, x0);
+                self.compute_avx2(p, spans, todo, x0);
             }
             return;
         }
@@ -797,61 +783,43 @@ impl Falloff {
 
     /// [`Self::compute`] lane by lane.
     #[inline(always)]
-    fn compute_portable(&mut self, p: &Projected, spans: &RowSpans, mut todo: u32, x0: i32) -> u64 {
+    fn compute_portable(&mut self, p: &Projected, spans: &RowSpans, mut todo: u32, x0: i32) {
         let k1 = RowExponent::coefficients(p.conic).k1;
-        let mut evaluations = 0;
         // A local count: through `self.n` every half-row's stores waited on a reload of it.
         let mut n = 0;
         while todo != 0 {
             let hr = todo.trailing_zeros() as usize;
             todo &= todo - 1;
             let ly = hr / 2;
-            let first = half_row_x(hr);
-            // The span in lane coordinates of this half-row.
-            let (lo, hi) = (spans.lo[ly] - first, spans.hi[ly] - first);
             let row = RowExponent {
                 k1,
                 k2: spans.k2[ly],
                 k3: spans.k3[ly],
             };
             let xb = half_row_dx(p.xy[0], x0, hr);
-            let g = &mut self.gauss[n];
-            let mut inside = 0_u32;
-            for (l, g) in g.iter_mut().enumerate() {
-                let lf = l as f32;
-                let in_span = (lf >= lo) & (lf <= hi);
-                let t = row.at(xb - lf);
+            for (l, g) in self.gauss[n].iter_mut().enumerate() {
+                let t = row.at(xb - l as f32);
                 let gauss = fast_exp2(t);
-                *g = if in_span & (t <= 0.0) { gauss } else { 0.0 };
-                inside += u32::from(in_span);
+                *g = if t <= 0.0 { gauss } else { 0.0 };
             }
-            evaluations += u64::from(inside);
             self.hr[n] = hr as u8;
             n += 1;
         }
         self.n = n;
-        evaluations
     }
 
     /// [`Self::compute_portable`] in AVX2 intrinsics: written out because LLVM's vectoriser
     /// packed the row's scalar coefficients into lanes with a dozen shuffles and blends a
-    /// half-row, and counted the span's pixels with packs and byte masks.
+    /// half-row.
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,popcnt")]
+    #[target_feature(enable = "avx2")]
     #[inline]
-    fn compute_avx2<const SPAN: bool>(
-        &mut self,
-        p: &Projected,
-        spans: &RowSpans,
-        mut todo: u32,
-        x0: i32,
-    ) -> u64 {
+    fn compute_avx2(&mut self, p: &Projected, spans: &RowSpans, mut todo: u32, x0: i32) {
         use std::arch::x86_64::{
-            _CMP_GE_OQ, _CMP_LE_OQ, _CMP_NLT_UQ, _MM_FROUND_NO_EXC, _MM_FROUND_TO_NEAREST_INT,
+            _CMP_LE_OQ, _CMP_NLT_UQ, _MM_FROUND_NO_EXC, _MM_FROUND_TO_NEAREST_INT,
             _mm256_add_epi32, _mm256_add_ps, _mm256_and_ps, _mm256_castps_si256,
-            _mm256_castsi256_ps, _mm256_cmp_ps, _mm256_movemask_ps, _mm256_mul_ps, _mm256_round_ps,
-            _mm256_set1_epi32, _mm256_set1_ps, _mm256_setr_ps, _mm256_slli_epi32, _mm256_storeu_ps,
-            _mm256_sub_ps,
+            _mm256_castsi256_ps, _mm256_cmp_ps, _mm256_mul_ps, _mm256_round_ps, _mm256_set1_epi32,
+            _mm256_set1_ps, _mm256_setr_ps, _mm256_slli_epi32, _mm256_storeu_ps, _mm256_sub_ps,
         };
         let lane = _mm256_setr_ps(0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0);
         let min_t = _mm256_set1_ps(EXP2_MIN);
@@ -868,8 +836,6 @@ impl Falloff {
         ];
         let bias = _mm256_set1_epi32(EXP2_BIAS.cast_signed());
         let k1 = _mm256_set1_ps(RowExponent::coefficients(p.conic).k1);
-        // The lanes' pixel columns in the tile, left and right half-rows.
-        let column = [lane, _mm256_add_ps(lane, _mm256_set1_ps(LANES as f32))];
         // Lane offsets dx and k₁·dx of the tile's left and right half-rows, the same for every
         // row: taken out of the half-row loop, whose exponential is a chain of dependent
         // operations that these would lengthen.
@@ -878,7 +844,6 @@ impl Falloff {
             _mm256_sub_ps(_mm256_set1_ps(half_row_dx(p.xy[0], x0, 1)), lane),
         ];
         let k1u_half = [_mm256_mul_ps(k1, u_half[0]), _mm256_mul_ps(k1, u_half[1])];
-        let mut evaluations = 0;
         let mut n = 0;
         while todo != 0 {
             let hr = todo.trailing_zeros() as usize;
@@ -907,21 +872,11 @@ impl Falloff {
                 bias,
             )));
             let gauss = _mm256_mul_ps(_mm256_add_ps(one, _mm256_mul_ps(poly, f)), scale);
-            // Whole numbers, so comparing the columns with the span is exactly comparing the
-            // lanes with the span less the half-row's first column, as the portable path does.
             // t ≤ 0, and not below the least exponent (where `fast_exp2` gives 0).
-            let mut keep = _mm256_and_ps(
+            let keep = _mm256_and_ps(
                 _mm256_cmp_ps::<_CMP_LE_OQ>(t, zero),
                 _mm256_cmp_ps::<_CMP_NLT_UQ>(t, min_t),
             );
-            if SPAN {
-                let in_span = _mm256_and_ps(
-                    _mm256_cmp_ps::<_CMP_GE_OQ>(column[hr & 1], _mm256_set1_ps(spans.lo[ly])),
-                    _mm256_cmp_ps::<_CMP_LE_OQ>(column[hr & 1], _mm256_set1_ps(spans.hi[ly])),
-                );
-                keep = _mm256_and_ps(in_span, keep);
-                evaluations += u64::from(_mm256_movemask_ps(in_span).count_ones());
-            }
             // SAFETY: `n` < HALF_ROWS, one per set bit of the 32-bit `todo`.
             #[allow(unsafe_code)]
             unsafe {
@@ -931,8 +886,19 @@ impl Falloff {
             n += 1;
         }
         self.n = n;
-        evaluations
     }
+}
+
+/// The (pixel, splat) pairs a falloff over the half-rows of `todo` evaluates in a tile `tw`
+/// pixels wide: each half-row's real columns (`RenderStats::pixel_evaluations`), counted once
+/// an entry from its mask instead of lane by lane.
+#[inline(always)]
+pub(crate) fn evaluated_pixels(todo: u32, tw: i32) -> u64 {
+    const LEFT: u32 = 0x5555_5555;
+    let lanes = LANES as i32;
+    let left = u64::from((todo & LEFT).count_ones()) * tw.clamp(0, lanes) as u64;
+    let right = u64::from((todo & !LEFT).count_ones()) * (tw - lanes).clamp(0, lanes) as u64;
+    left + right
 }
 
 /// The tile-local x of half-row `hr`'s first pixel, 0 or `LANES`, as a float: through `i32`,
@@ -1436,9 +1402,18 @@ mod tests {
                 spans.mask & rng.random::<u32>()
             };
             let (mut scalar, mut vector) = (Falloff::new(), Falloff::new());
-            let scalar_evaluations = scalar.compute::<false>(&p, &spans, todo, x0);
-            let vector_evaluations = vector.compute::<true>(&p, &spans, todo, x0);
-            assert_eq!(vector_evaluations, scalar_evaluations, "case {case}");
+            scalar.compute::<false>(&p, &spans, todo, x0);
+            vector.compute::<true>(&p, &spans, todo, x0);
+            // The evaluation count from the mask: each half-row's real columns.
+            let real_columns: u64 = (0..HALF_ROWS)
+                .filter(|&hr| todo & (1 << hr) != 0)
+                .map(|hr| {
+                    (0..LANES)
+                        .filter(|&l| half_row_x(hr) + (l as f32) < tw as f32)
+                        .count() as u64
+                })
+                .sum();
+            assert_eq!(super::evaluated_pixels(todo, tw), real_columns, "case {case}");
             assert_eq!(vector.n, scalar.n, "case {case}");
             assert_eq!(vector.hr[..scalar.n], scalar.hr[..scalar.n], "case {case}");
             for (i, (v, s)) in vector
@@ -1469,26 +1444,26 @@ mod tests {
         assert!(kept > 100_000, "{kept} lanes kept");
     }
 
-    /// The backward walk's spans ([`RowSpans::of_rows`], every real column of the rows the
-    /// forward's solved mask holds) must give the falloff of the solved spans on every lane that
-    /// can pass the alpha test: a lane may differ only where the solved spans stored 0 and the
-    /// whole row's value fails the test; and [`Falloff::compute_rows`] must give the same lanes
-    /// in the tile's real columns. Portable and AVX2 falloffs, splats of every size and angle
-    /// around partial and whole tiles.
+    /// The walks' falloff takes every lane of the half-rows it is given ([`RowSpans::of_rows`]
+    /// for whole rows, the exact solve's dy, k₂ and k₃): every lane outside the exact solved
+    /// span of its row must fail the alpha test (or lie past a partial tile's last column,
+    /// where no pixel is open in the forward nor has a contributor in the backward), so the
+    /// walks composite and differentiate exactly what they would over the exact spans.
+    /// Portable and AVX2 falloffs, splats of every size and angle around partial and whole
+    /// tiles.
     #[test]
-    fn whole_row_spans_change_only_lanes_that_fail_the_alpha_test() {
+    fn lanes_outside_the_exact_spans_fail_the_alpha_test() {
         use crate::constants::{MAX_ALPHA, MIN_ALPHA};
         let mut rng = rand_pcg::Pcg64::seed_from_u64(37);
-        let (mut same, mut differ) = (0_u64, 0_u64);
+        let (mut inside, mut outside) = (0_u64, 0_u64);
         for case in 0..100_000 {
             let RandomPair {
                 p,
                 tile: (x0, y0, tw, th),
                 ..
             } = random_splat_and_tile(&mut rng, case);
-            let opacity = p.opacity;
             let solved = RowSpans::solve::<false>(&p, x0, y0, tw, th);
-            let whole = RowSpans::of_rows(&p, solved.mask, y0, tw);
+            let whole = RowSpans::of_rows(&p, solved.mask, y0);
             for r in 0..TILE_SIZE as usize {
                 assert_eq!(whole.dy[r].to_bits(), solved.dy[r].to_bits());
                 assert_eq!(whole.k2[r].to_bits(), solved.k2[r].to_bits());
@@ -1500,51 +1475,38 @@ mod tests {
                 paths.push(true);
             }
             for avx2 in paths {
-                let (mut a, mut b) = (Falloff::new(), Falloff::new());
+                let mut f = Falloff::new();
                 if avx2 {
-                    a.compute::<true>(&p, &solved, solved.mask, x0);
-                    b.compute::<true>(&p, &whole, solved.mask, x0);
+                    f.compute::<true>(&p, &whole, solved.mask, x0);
                 } else {
-                    a.compute::<false>(&p, &solved, solved.mask, x0);
-                    b.compute::<false>(&p, &whole, solved.mask, x0);
+                    f.compute::<false>(&p, &whole, solved.mask, x0);
                 }
-                assert_eq!(a.n, b.n);
-                // Without the span's lane mask: the same lanes in the tile's real columns (the
-                // walk never composites the others: no pixel there has a contributor).
-                let mut c = Falloff::new();
-                if avx2 {
-                    c.compute_rows::<true>(&p, &whole, solved.mask, x0);
-                } else {
-                    c.compute_rows::<false>(&p, &whole, solved.mask, x0);
-                }
-                assert_eq!(c.n, b.n);
-                for (i, (gc, gb)) in c.gauss.iter().zip(&b.gauss).take(b.n).enumerate() {
-                    let first = half_row_x(usize::from(b.hr[i])) as i32;
-                    for (l, (&x, &y)) in gc.iter().zip(gb).enumerate() {
-                        if first + (l as i32) < tw {
-                            assert_eq!(x.to_bits(), y.to_bits(), "case {case}");
+                assert_eq!(f.n, solved.mask.count_ones() as usize);
+                for (&hr, g) in f.hr.iter().zip(&f.gauss).take(f.n) {
+                    let hr = usize::from(hr);
+                    let row = hr / 2;
+                    for (l, &gauss) in g.iter().enumerate() {
+                        let column = half_row_x(hr) + l as f32;
+                        if solved.lo[row] <= column && column <= solved.hi[row] {
+                            inside += 1;
+                            continue;
                         }
-                    }
-                }
-                for (ga, gb) in a.gauss.iter().zip(&b.gauss).take(a.n) {
-                    for (&x, &y) in ga.iter().zip(gb) {
-                        if x.to_bits() == y.to_bits() {
-                            same += 1;
-                        } else {
-                            differ += 1;
-                            let alpha = (opacity * y).min(MAX_ALPHA);
-                            assert!(
-                                x == 0.0 && alpha < MIN_ALPHA,
-                                "case {case}: solved {x}, whole row {y} (alpha {alpha})"
-                            );
-                        }
+                        outside += 1;
+                        let alpha = (p.opacity * gauss).min(MAX_ALPHA);
+                        assert!(
+                            alpha < MIN_ALPHA || column >= tw as f32,
+                            "case {case}: column {column} of row {row} outside the span \
+                             [{}, {}] with alpha {alpha}",
+                            solved.lo[row],
+                            solved.hi[row]
+                        );
                     }
                 }
             }
         }
         assert!(
-            same > 1_000_000 && differ > 100_000,
-            "{same} lanes alike, {differ} not"
+            inside > 1_000_000 && outside > 100_000,
+            "{inside} lanes inside the spans, {outside} outside"
         );
     }
 
