@@ -1413,7 +1413,11 @@ mod tests {
                         .count() as u64
                 })
                 .sum();
-            assert_eq!(super::evaluated_pixels(todo, tw), real_columns, "case {case}");
+            assert_eq!(
+                super::evaluated_pixels(todo, tw),
+                real_columns,
+                "case {case}"
+            );
             assert_eq!(vector.n, scalar.n, "case {case}");
             assert_eq!(vector.hr[..scalar.n], scalar.hr[..scalar.n], "case {case}");
             for (i, (v, s)) in vector
