@@ -686,8 +686,9 @@ fn composite_tile_avx2<S: WeightSink>(
 
 /// Composites one tile front to back (Inria `renderCUDA`), splat by splat over the 8-pixel
 /// half-rows each can reach (first the falloff of all of them, then the compositing), stopping
-/// once every pixel's transmittance is spent. Every half-row runs all 8 lanes with the span as
-/// a mask and no branches, so it maps onto one SIMD vector. Returns the (pixel, splat)
+/// once every pixel's transmittance is spent. Every half-row runs all 8 lanes with no branches
+/// (the alpha test and the pixels' [`Finish`] decide each lane), so it maps onto one SIMD
+/// vector. Returns the (pixel, splat)
 /// evaluations and contributions.
 #[inline(always)]
 fn composite_tile_impl<S: WeightSink, const AVX2: bool>(
@@ -794,9 +795,9 @@ struct HalfRow<'a> {
 impl HalfRow<'_> {
     /// Blends splat `p` of falloff `gauss` (list entry `tag` − 1) into the half-row, writes its
     /// weights wᵢ = Tᵢ·αᵢ (0 where it is not blended) into `weights`, and returns how many
-    /// pixels it was blended into and whether all 8 are done after it. With `AVX2` in AVX2 intrinsics
-    /// (the same IEEE operations in the same order, so the same bits), which only callers
-    /// compiled with AVX2 may ask for: LLVM's vectoriser turned the lane loop into scalar code
+    /// pixels it was blended into and whether all 8 are done after it. With `AVX2` in AVX2
+    /// intrinsics (the same IEEE operations in the same order, so the same bits), which only
+    /// callers compiled with AVX2 may ask for: LLVM's vectoriser turned the lane loop into scalar code
     /// with a branch per lane once it no longer kept a last-blended index per pixel.
     #[inline(always)]
     fn blend<const AVX2: bool>(
@@ -814,7 +815,8 @@ impl HalfRow<'_> {
         let opaque_zero = std::hint::black_box(0_u32);
         let mut contributed = 0;
         for l in 0..LANES {
-            // G is 0 outside the span, so alpha fails the 1/255 test there.
+            // Outside the splat's reach alpha fails the 1/255 test; past a partial tile's
+            // last column the pixel is done from the start.
             let alpha = (p.opacity * gauss[l]).min(MAX_ALPHA);
             let ti = self.t[l];
             let one_m = 1.0 - alpha;

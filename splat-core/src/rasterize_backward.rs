@@ -354,8 +354,9 @@ impl Rasterizer {
         self.backward_tile_impl::<true>(tile, entries, cam, pg, out);
     }
 
-    /// The tile walk: per splat, its falloff over the half-rows it reaches (see
-    /// `tiles::Falloff`), then the gradients, all 8 lanes of a half-row under the span as a mask.
+    /// The tile walk: per splat, its falloff over the half-rows the forward blended it into (see
+    /// `tiles::Falloff`), then the gradients, all 8 lanes of a half-row, each tested against its
+    /// pixel's limit.
     /// Per-pixel state is kept as one array per component so each lane view is a plain vector.
     #[inline(always)]
     fn backward_tile_impl<const AVX2: bool>(
@@ -488,7 +489,8 @@ impl Rasterizer {
                 let gdl: &[f32; LANES] = lanes_mut(&mut g_d, base);
                 let kl: &[f32; LANES] = lanes_mut(&mut k_bg, base);
                 for l in 0..LANES {
-                    // G is 0 outside the span, so alpha fails the 1/255 test there.
+                    // Outside the splat's reach alpha fails the 1/255 test; past a partial
+                    // tile's last column the limit is 0.
                     let gauss = gs[l];
                     let raw = p.opacity * gauss;
                     let alpha = raw.min(MAX_ALPHA);

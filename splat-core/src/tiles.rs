@@ -737,8 +737,8 @@ fn spread_bits(x: u32) -> u32 {
 pub(crate) struct Falloff {
     /// The half-rows, ascending.
     pub hr: [u8; HALF_ROWS],
-    /// G = 2^t per lane of each half-row ([`RowExponent`]), or 0 outside the span or where
-    /// t > 0 (so o·G fails the alpha ≥ 1/255 test there).
+    /// G = 2^t per lane of each half-row ([`RowExponent`]), or 0 where t > 0 or below the
+    /// least exponent (so o·G fails the alpha ≥ 1/255 test there).
     pub gauss: [[f32; LANES]; HALF_ROWS],
     /// Number of half-rows filled.
     pub n: usize,
@@ -1378,8 +1378,8 @@ mod tests {
     /// least exponent (no clamp there) to its keep mask. Splats from a fraction of a pixel to
     /// thousands of pixels across, at every angle, centred inside and far outside partial and
     /// whole tiles, over random subsets of their half-rows. The cases must include lanes kept
-    /// and lanes below the least exponent (outside the span, where the unclamped arithmetic
-    /// gives no valid 2ⁿ and only the mask may decide what is stored).
+    /// and lanes below the least exponent (far outside the splat, where the unclamped
+    /// arithmetic gives no valid 2ⁿ and only the mask may decide what is stored).
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn vector_and_scalar_falloffs_agree() {
