@@ -194,6 +194,83 @@ pub(crate) fn and(a: Mask, b: Mask) -> Mask {
     array(|l| a[l] & b[l])
 }
 
+/// Eight rows of numbers, one a lane, turned into lane vectors: `out[c].0[l] = rows[l][c]` for
+/// every column c < `out.len()` (each row at least that long). With `AVX2` eight columns at a
+/// time go through [`transpose8_avx2`]; element by element the SH coefficients' transposes had
+/// cost the projection three instructions an element.
+#[inline(always)]
+pub(crate) fn rows_to_lanes<const AVX2: bool>(rows: [&[f32]; WIDTH], out: &mut [F8]) {
+    let cols = out.len();
+    let rows: [&[f32]; WIDTH] = array(|l| &rows[l][..cols]);
+    let mut done = 0;
+    #[cfg(target_arch = "x86_64")]
+    if AVX2 {
+        use std::arch::x86_64::{_mm256_loadu_ps, _mm256_storeu_ps};
+        while done + WIDTH <= cols {
+            // SAFETY: only AVX2 instantiations pass `AVX2`, and they run where `has_avx2()`
+            // found the feature; each load reads the 8 numbers rows[l][done..done + 8] and each
+            // store writes the 8 lanes of out[done + c], all in bounds (done + 8 ≤ cols).
+            #[allow(unsafe_code)]
+            unsafe {
+                let block = transpose8_avx2(std::array::from_fn(|l| {
+                    _mm256_loadu_ps(rows[l][done..done + WIDTH].as_ptr())
+                }));
+                for (c, v) in block.into_iter().enumerate() {
+                    _mm256_storeu_ps(out[done + c].0.as_mut_ptr(), v);
+                }
+            }
+            done += WIDTH;
+        }
+    }
+    for (c, v) in out.iter_mut().enumerate().skip(done) {
+        *v = F8(std::array::from_fn(|l| rows[l][c]));
+    }
+}
+
+/// The 8 × 8 transpose of eight AVX2 vectors (vector i's element j becomes vector j's element
+/// i): pairs of rows interleaved, then pairs of pairs, then the 128-bit halves exchanged, 24
+/// shuffles in all. Moves numbers only, so their bits are kept.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+fn transpose8_avx2(r: [std::arch::x86_64::__m256; WIDTH]) -> [std::arch::x86_64::__m256; WIDTH] {
+    use std::arch::x86_64::{
+        _mm256_permute2f128_ps, _mm256_shuffle_ps, _mm256_unpackhi_ps, _mm256_unpacklo_ps,
+    };
+    // t: in each 128-bit half, rows 2i and 2i + 1 interleaved (low or high two columns).
+    let t = [
+        _mm256_unpacklo_ps(r[0], r[1]),
+        _mm256_unpackhi_ps(r[0], r[1]),
+        _mm256_unpacklo_ps(r[2], r[3]),
+        _mm256_unpackhi_ps(r[2], r[3]),
+        _mm256_unpacklo_ps(r[4], r[5]),
+        _mm256_unpackhi_ps(r[4], r[5]),
+        _mm256_unpacklo_ps(r[6], r[7]),
+        _mm256_unpackhi_ps(r[6], r[7]),
+    ];
+    // s[j], s[j + 4]: column j of rows 0–3 and 4–7 in the low half, column j + 4 in the high.
+    let s = [
+        _mm256_shuffle_ps::<0x44>(t[0], t[2]),
+        _mm256_shuffle_ps::<0xEE>(t[0], t[2]),
+        _mm256_shuffle_ps::<0x44>(t[1], t[3]),
+        _mm256_shuffle_ps::<0xEE>(t[1], t[3]),
+        _mm256_shuffle_ps::<0x44>(t[4], t[6]),
+        _mm256_shuffle_ps::<0xEE>(t[4], t[6]),
+        _mm256_shuffle_ps::<0x44>(t[5], t[7]),
+        _mm256_shuffle_ps::<0xEE>(t[5], t[7]),
+    ];
+    [
+        _mm256_permute2f128_ps::<0x20>(s[0], s[4]),
+        _mm256_permute2f128_ps::<0x20>(s[1], s[5]),
+        _mm256_permute2f128_ps::<0x20>(s[2], s[6]),
+        _mm256_permute2f128_ps::<0x20>(s[3], s[7]),
+        _mm256_permute2f128_ps::<0x31>(s[0], s[4]),
+        _mm256_permute2f128_ps::<0x31>(s[1], s[5]),
+        _mm256_permute2f128_ps::<0x31>(s[2], s[6]),
+        _mm256_permute2f128_ps::<0x31>(s[3], s[7]),
+    ]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -239,6 +316,49 @@ mod tests {
         for l in 0..WIDTH {
             let want = if mask[l] { xs[l] } else { ys[l] };
             assert_eq!(picked.0[l].to_bits(), want.to_bits());
+        }
+    }
+
+    /// Rows to lanes, with AVX2 where the CPU has it and without: every number lands where the
+    /// element-by-element definition puts it (column counts of whole, partial and no 8 × 8
+    /// blocks), bits and all.
+    #[test]
+    fn rows_turn_into_lanes() {
+        let row_data: Vec<Vec<f32>> = (0..WIDTH)
+            .map(|l| (0..51).map(|c| (100 * l + c) as f32 + 0.25).collect())
+            .collect();
+        for cols in [0, 3, 8, 12, 27, 48, 51] {
+            let rows: [&[f32]; WIDTH] = array(|l| &row_data[l][..]);
+            let mut want = vec![F8::default(); cols];
+            rows_to_lanes::<false>(rows, &mut want);
+            for (c, v) in want.iter().enumerate() {
+                for l in 0..WIDTH {
+                    assert_eq!(
+                        v.0[l].to_bits(),
+                        row_data[l][c].to_bits(),
+                        "{cols}: ({l}, {c})"
+                    );
+                }
+            }
+            #[cfg(target_arch = "x86_64")]
+            if crate::has_avx2() {
+                let mut got = vec![F8::default(); cols];
+                rows_to_lanes_avx2(rows, &mut got);
+                assert_eq!(got, want, "{cols} columns");
+            }
+        }
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    fn rows_to_lanes_avx2(rows: [&[f32]; WIDTH], out: &mut [F8]) {
+        #[target_feature(enable = "avx2")]
+        fn run(rows: [&[f32]; WIDTH], out: &mut [F8]) {
+            rows_to_lanes::<true>(rows, out);
+        }
+        // SAFETY: called only where `has_avx2()` found the feature.
+        #[allow(unsafe_code)]
+        unsafe {
+            run(rows, out);
         }
     }
 }

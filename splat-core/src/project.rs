@@ -11,7 +11,7 @@ use glam::{Mat3, Vec3};
 use glam::{Quat, Vec2};
 
 use crate::constants::{DILATION, EXTENT_SIGMAS, FOV_CLAMP_MARGIN, MIN_ALPHA, NEAR_PLANE};
-use crate::lanes::{D8, F8, Mask, Real, WIDTH, and, array};
+use crate::lanes::{D8, F8, Mask, Real, WIDTH, and, array, rows_to_lanes};
 use crate::projected::{Projected, quad_bound};
 use crate::{
     MIN_QUAT_NORM, RenderCamera, RenderOptions, Splats, all_finite, num_sh_coeffs, sh, sigmoid,
@@ -397,16 +397,34 @@ impl Culls {
 /// (`expf` of the opacity and scales, `logf` of the alpha bound) and the tile rectangle left
 /// scalar. Stores the eight chains in `chain` and hands `emit` what the tiles draw of each of
 /// the first `lanes_used` lanes, or why the splat is culled (straight into the caller's
-/// arrays: an array of results in between cost a copy).
+/// arrays: an array of results in between cost a copy). `AVX2` (asked for only by callers
+/// compiled with AVX2) moves the SH coefficients into lanes with AVX2 shuffles.
+/// Working memory [`project8`] reuses from group to group: zeroed once by the caller rather
+/// than once a group (the zeroing was a library call, and the loads that followed could not
+/// take their data from its stores).
+pub(crate) struct Scratch {
+    /// The SH coefficients in lanes: coefficient kk's channel ch is vector 3·kk + ch.
+    sh: [F8; 3 * 16],
+}
+
+impl Default for Scratch {
+    fn default() -> Self {
+        Self {
+            sh: [F8::default(); 3 * 16],
+        }
+    }
+}
+
 #[inline(always)]
 #[allow(clippy::too_many_lines)]
 #[allow(clippy::needless_range_loop)] // a lane's index reads several arrays of lanes
-pub(crate) fn project8(
+pub(crate) fn project8<const AVX2: bool>(
     splats: &Splats,
     idx: [usize; WIDTH],
     lanes_used: usize,
     v: &ViewConsts,
     chain: &mut ChainLanes,
+    scratch: &mut Scratch,
     mut emit: impl FnMut(usize, Result<Drawn, Cull>),
 ) {
     let k = splats.coeffs_per_splat();
@@ -528,18 +546,13 @@ pub(crate) fn project8(
     let d: [F8; 3] = array(|c| mean[c] - F8::splat(v.center[c]));
     let dir_len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
     let dir: [F8; 3] = array(|c| d[c] / dir_len);
-    // The coefficients turned into lanes through memory, all before any is read back: built
-    // one lane at a time in registers, each vector waited on its eight stores.
-    let mut lane_coeffs = [[[0.0_f32; WIDTH]; 3]; 16];
-    for l in 0..WIDTH {
-        for (kk, c) in coeffs(l).iter().enumerate() {
-            for ch in 0..3 {
-                lane_coeffs[kk][ch][l] = c[ch];
-            }
-        }
-    }
+    let lane_coeffs = &mut scratch.sh;
+    rows_to_lanes::<AVX2>(
+        array(|l| coeffs(l).as_flattened()),
+        &mut lane_coeffs[..3 * n_coeffs],
+    );
     let sh = sh::eval_terms(v.degree, n_coeffs, dir, |kk| {
-        array(|ch| F8(lane_coeffs[kk][ch]))
+        array(|ch| lane_coeffs[3 * kk + ch])
     });
     let (color_raw, color) = if v.linear_colour {
         (sh, sh)
@@ -1143,7 +1156,9 @@ mod tests {
 
     use glam::Vec3;
 
-    use super::{ChainLanes, Cull, Intermediates, ViewConsts, project8, reference, within_reach};
+    use super::{
+        ChainLanes, Cull, Intermediates, Scratch, ViewConsts, project8, reference, within_reach,
+    };
     use crate::TILE_SIZE;
     use crate::lanes::WIDTH;
     use crate::projected::{quad_bound, random_footprint};
@@ -1274,7 +1289,15 @@ mod tests {
                     let idx = std::array::from_fn(|l| (start + l).min(n - 1));
                     let mut drawn = [Err(Cull::Hidden); WIDTH];
                     let mut chain = ChainLanes::default();
-                    project8(&splats, idx, WIDTH, &v, &mut chain, |l, r| drawn[l] = r);
+                    project8::<false>(
+                        &splats,
+                        idx,
+                        WIDTH,
+                        &v,
+                        &mut chain,
+                        &mut Scratch::default(),
+                        |l, r| drawn[l] = r,
+                    );
                     let lanes: [_; WIDTH] = std::array::from_fn(|l| {
                         drawn[l].map(|d| Intermediates {
                             out: d.out,
@@ -1344,9 +1367,15 @@ mod tests {
                     let idx = std::array::from_fn(|l| start + l);
                     let mut chain = ChainLanes::default();
                     let mut drawn = [false; WIDTH];
-                    project8(&splats, idx, WIDTH, &v, &mut chain, |l, r| {
-                        drawn[l] = r.is_ok()
-                    });
+                    project8::<false>(
+                        &splats,
+                        idx,
+                        WIDTH,
+                        &v,
+                        &mut chain,
+                        &mut Scratch::default(),
+                        |l, r| drawn[l] = r.is_ok(),
+                    );
                     let mut r = |scale: f32| {
                         if rng.random_range(0..5) == 0 {
                             0.0

@@ -9,7 +9,7 @@ use crate::constants::{MAX_ALPHA, MIN_ALPHA, MIN_TRANSMITTANCE};
 use crate::disjoint::DisjointWrites;
 use crate::lanes::WIDTH;
 use crate::prefetch;
-use crate::project::{ChainLanes, Cull, ProjectedGrad, ViewConsts, project8};
+use crate::project::{ChainLanes, Cull, ProjectedGrad, Scratch, ViewConsts, project8};
 use crate::projected::Projected;
 use crate::tiles::{
     Bins, Falloff, HALF_ROWS, LANES, RowSpans, TILE_PIXELS, TILE_SIZE, evaluated_pixels,
@@ -516,41 +516,55 @@ fn project_chunk(splats: &Splats, v: &ViewConsts, first: usize, out: ProjectOut<
         return unsafe { project_chunk_avx2(splats, v, first, out) };
     }
     let _ = avx2;
-    project_chunk_impl(splats, v, first, out);
+    project_chunk_impl::<false>(splats, v, first, out);
 }
 
 /// [`project_chunk_impl`] compiled with AVX2.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 fn project_chunk_avx2(splats: &Splats, v: &ViewConsts, first: usize, out: ProjectOut<'_>) {
-    project_chunk_impl(splats, v, first, out);
+    project_chunk_impl::<true>(splats, v, first, out);
 }
 
 #[inline(always)]
-fn project_chunk_impl(splats: &Splats, v: &ViewConsts, first: usize, o: ProjectOut<'_>) {
+fn project_chunk_impl<const AVX2: bool>(
+    splats: &Splats,
+    v: &ViewConsts,
+    first: usize,
+    o: ProjectOut<'_>,
+) {
     let len = o.proj.len();
+    let mut scratch = Scratch::default();
     for start in (0..len).step_by(WIDTH) {
         // The last group of a model that is not a multiple of eight repeats its last splat in
         // the spare lanes, whose results are dropped.
         let idx = std::array::from_fn(|l| first + (start + l).min(len - 1));
         let chain = &mut o.chain[start / WIDTH];
-        project8(splats, idx, (len - start).min(WIDTH), v, chain, |l, r| {
-            let j = start + l;
-            match r {
-                Ok(it) => {
-                    o.proj[j] = it.out;
-                    o.rects[j] = it.rect;
-                    o.radii[j] = it.radius;
-                    o.visible[j] = true;
-                    o.non_finite[j] = false;
+        project8::<AVX2>(
+            splats,
+            idx,
+            (len - start).min(WIDTH),
+            v,
+            chain,
+            &mut scratch,
+            |l, r| {
+                let j = start + l;
+                match r {
+                    Ok(it) => {
+                        o.proj[j] = it.out;
+                        o.rects[j] = it.rect;
+                        o.radii[j] = it.radius;
+                        o.visible[j] = true;
+                        o.non_finite[j] = false;
+                    }
+                    Err(c) => {
+                        o.radii[j] = 0;
+                        o.visible[j] = false;
+                        o.non_finite[j] = c == Cull::NonFinite;
+                    }
                 }
-                Err(c) => {
-                    o.radii[j] = 0;
-                    o.visible[j] = false;
-                    o.non_finite[j] = c == Cull::NonFinite;
-                }
-            }
-        });
+            },
+        );
     }
 }
 
