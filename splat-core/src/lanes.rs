@@ -323,6 +323,7 @@ mod tests {
     /// element-by-element definition puts it (column counts of whole, partial and no 8 × 8
     /// blocks), bits and all.
     #[test]
+    #[allow(clippy::needless_range_loop)] // a lane's index reads several arrays
     fn rows_turn_into_lanes() {
         let row_data: Vec<Vec<f32>> = (0..WIDTH)
             .map(|l| (0..51).map(|c| (100 * l + c) as f32 + 0.25).collect())
