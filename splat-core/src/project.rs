@@ -13,6 +13,7 @@ use glam::{Quat, Vec2};
 use crate::constants::{DILATION, EXTENT_SIGMAS, FOV_CLAMP_MARGIN, MIN_ALPHA, NEAR_PLANE};
 use crate::lanes::{D8, F8, Mask, Real, WIDTH, and, array, rows_to_lanes};
 use crate::projected::{Projected, quad_bound};
+use crate::splats::exp;
 use crate::{
     MIN_QUAT_NORM, RenderCamera, RenderOptions, Splats, all_finite, num_sh_coeffs, sh, sigmoid,
 };
@@ -478,10 +479,7 @@ pub(crate) fn project8<const AVX2: bool>(
         array(|c| F8::select(normal, [uw, ux_q, uy_q, uz_q][c] / length, identity[c]));
     let quat_norm = F8::select(normal, norm, F8::splat(0.0));
 
-    let scale: [F8; 3] = {
-        let s: [Vec3; WIDTH] = array(|l| Vec3::new(ls[0].0[l], ls[1].0[l], ls[2].0[l]).exp());
-        array(|c| F8::from_fn(|l| s[l][c]))
-    };
+    let scale: [F8; 3] = array(|c| ls[c].map(exp));
     let quat = [x, y, zq, w];
     let mc = cov_factor(v, quat, scale).1;
 
@@ -876,6 +874,7 @@ pub(crate) mod reference {
     };
     use crate::constants::{EXTENT_SIGMAS, MIN_ALPHA, NEAR_PLANE};
     use crate::projected::{Projected, quad_bound};
+    use crate::splats::exp;
     use crate::{Splats, all_finite, normalize_quat, num_sh_coeffs, sh, sigmoid};
 
     fn finite3(v: Vec3) -> bool {
@@ -930,7 +929,7 @@ pub(crate) mod reference {
             None => (Quat::IDENTITY, 0.0, true),
         };
         let rot = Mat3::from_quat(quat);
-        let scale = ls.exp();
+        let scale = ls.map(exp);
         let m = Mat3::from_cols(
             rot.x_axis * scale.x,
             rot.y_axis * scale.y,
