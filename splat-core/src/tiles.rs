@@ -737,8 +737,8 @@ fn spread_bits(x: u32) -> u32 {
 pub(crate) struct Falloff {
     /// The half-rows, ascending.
     pub hr: [u8; HALF_ROWS],
-    /// G = 2^t per lane of each half-row ([`RowExponent`]), or 0 where t > 0 or below the
-    /// least exponent (so o·G fails the alpha ≥ 1/255 test there).
+    /// G = 2^t per lane of each half-row ([`RowExponent`]), or 0 where t > 0; about 2⁻¹²⁶
+    /// where t is below the least exponent (o·G fails the alpha ≥ 1/255 test there either way).
     pub gauss: [[f32; LANES]; HALF_ROWS],
     /// Number of half-rows filled.
     pub n: usize,
@@ -816,10 +816,10 @@ impl Falloff {
     #[inline]
     fn compute_avx2(&mut self, p: &Projected, spans: &RowSpans, mut todo: u32, x0: i32) {
         use std::arch::x86_64::{
-            _CMP_LE_OQ, _CMP_NLT_UQ, _MM_FROUND_NO_EXC, _MM_FROUND_TO_NEAREST_INT,
-            _mm256_add_epi32, _mm256_add_ps, _mm256_and_ps, _mm256_castps_si256,
-            _mm256_castsi256_ps, _mm256_cmp_ps, _mm256_mul_ps, _mm256_round_ps, _mm256_set1_epi32,
-            _mm256_set1_ps, _mm256_setr_ps, _mm256_slli_epi32, _mm256_storeu_ps, _mm256_sub_ps,
+            _CMP_LE_OQ, _MM_FROUND_NO_EXC, _MM_FROUND_TO_NEAREST_INT, _mm256_add_epi32,
+            _mm256_add_ps, _mm256_and_ps, _mm256_castps_si256, _mm256_castsi256_ps, _mm256_cmp_ps,
+            _mm256_max_ps, _mm256_mul_ps, _mm256_round_ps, _mm256_set1_epi32, _mm256_set1_ps,
+            _mm256_setr_ps, _mm256_slli_epi32, _mm256_storeu_ps, _mm256_sub_ps,
         };
         let lane = _mm256_setr_ps(0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0);
         let min_t = _mm256_set1_ps(EXP2_MIN);
@@ -854,10 +854,11 @@ impl Falloff {
                 _mm256_mul_ps(u, _mm256_add_ps(k1u, _mm256_set1_ps(spans.k2[ly]))),
                 _mm256_set1_ps(spans.k3[ly]),
             );
-            // fast_exp2, lane by lane. Its clamp to the least exponent is left out: lanes below
-            // it fail `keep` below and are stored as 0 whatever the arithmetic gave them. The
-            // rounding is `vroundps` (to nearest, ties to even, as `fast_exp2`'s addition of
-            // 1.5·2²³ does), a step shorter than removing the addend again.
+            // fast_exp2, lane by lane. The rounding is `vroundps` (to nearest, ties to even, as
+            // `fast_exp2`'s addition of 1.5·2²³ does), a step shorter than removing the addend
+            // again.
+            let t_raw = t;
+            let t = _mm256_max_ps(t_raw, min_t);
             let shifted = _mm256_add_ps(t, round);
             let f = _mm256_sub_ps(
                 t,
@@ -872,11 +873,9 @@ impl Falloff {
                 bias,
             )));
             let gauss = _mm256_mul_ps(_mm256_add_ps(one, _mm256_mul_ps(poly, f)), scale);
-            // t ≤ 0, and not below the least exponent (where `fast_exp2` gives 0).
-            let keep = _mm256_and_ps(
-                _mm256_cmp_ps::<_CMP_LE_OQ>(t, zero),
-                _mm256_cmp_ps::<_CMP_NLT_UQ>(t, min_t),
-            );
+            // t ≤ 0 (a rounding above 0 could only come of a conic that is not quite positive
+            // definite, whose falloff would not fall).
+            let keep = _mm256_cmp_ps::<_CMP_LE_OQ>(t_raw, zero);
             // SAFETY: `n` < HALF_ROWS, one per set bit of the 32-bit `todo`.
             #[allow(unsafe_code)]
             unsafe {
@@ -971,7 +970,9 @@ impl RowExponent {
 
 /// 2^t for the Gaussian falloff, with a degree-4 polynomial for 2^f (relative error below 6e-7
 /// for t in [−15, 0], where alphas reach 1/255), written branch-free (no library calls) for the
-/// per-lane loops. Inputs below −126 give 0.
+/// per-lane loops. Inputs below −126 give 2⁻¹²⁶'s value (about 1.2e-38, far below any alpha
+/// that passes the 1/255 test): a clamp, one vector operation, where a test and a mask were
+/// two.
 /// The forward and backward passes both use it, so they see identical alphas.
 #[inline(always)]
 pub(crate) fn fast_exp2(t: f32) -> f32 {
@@ -986,8 +987,7 @@ pub(crate) fn fast_exp2(t: f32) -> f32 {
     // 2ⁿ from the bits of `shifted`, whose low mantissa bits hold n (two's complement): a
     // saturating `n as i32` would not vectorise. Exact for the clamped range n ∈ [−126, 128).
     let scale = f32::from_bits(shifted.to_bits().wrapping_add(EXP2_BIAS) << 23);
-    let r = (1.0 + p * f) * scale;
-    if t < EXP2_MIN { 0.0 } else { r }
+    (1.0 + p * f) * scale
 }
 
 /// The least exponent [`fast_exp2`] builds 2ⁿ for (the least normal f32 is 2⁻¹²⁶).
@@ -1436,8 +1436,14 @@ mod tests {
                 let row = RowExponent::new(conic, spans.dy[hr / 2]);
                 let xb = half_row_dx(p.xy[0], x0, hr);
                 for (l, &g) in s.iter().enumerate() {
-                    below_least += u64::from(row.at(xb - l as f32) < EXP2_MIN);
-                    kept += u64::from(g > 0.0);
+                    let t = row.at(xb - l as f32);
+                    if t < EXP2_MIN {
+                        // Clamped to the least exponent's value, not 0.
+                        below_least += 1;
+                        assert!(g > 0.0 && g < 1.2e-38, "case {case}: {g} below the least");
+                    } else {
+                        kept += u64::from(g > 0.0);
+                    }
                 }
             }
         }
@@ -1603,7 +1609,10 @@ mod tests {
             }
             assert!(worst < tol, "worst relative error {worst} on [{lo}, 0]");
         }
-        assert_eq!(fast_exp2(-127.0), 0.0);
+        // Below the least exponent: 2⁻¹²⁶'s value, to the polynomial's rounding.
+        for t in [-127.0, -1e4, f32::NEG_INFINITY, f32::NAN] {
+            assert!((fast_exp2(t) / f32::MIN_POSITIVE - 1.0).abs() < 1e-6, "{t}");
+        }
         assert_eq!(fast_exp2(0.0), 1.0);
         assert_eq!(fast_exp2(-3.0), 0.125);
     }
