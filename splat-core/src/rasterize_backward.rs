@@ -466,7 +466,7 @@ impl Rasterizer {
             // The half-rows the forward pass blended the splat into, each lane left to the
             // alpha test and the pixel's limit (see `RowSpans::of_rows`): no spans to solve
             // again, and no half-row that would pass nothing.
-            let spans = RowSpans::of_rows(p, rows[kk], y0);
+            let spans = RowSpans::of_rows::<AVX2>(p, rows[kk], y0);
             falloff.compute::<AVX2>(p, &spans, spans.mask, x0);
             // First each half-row's running state and, per lane, the weight w (0 where the
             // splat was not composited) and u = G·∂L/∂α, into `weight` and `moment`; then the
