@@ -233,7 +233,9 @@ pub(crate) fn rows_to_lanes<const AVX2: bool>(rows: [&[f32]; WIDTH], out: &mut [
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 #[inline]
-fn transpose8_avx2(r: [std::arch::x86_64::__m256; WIDTH]) -> [std::arch::x86_64::__m256; WIDTH] {
+pub(crate) fn transpose8_avx2(
+    r: [std::arch::x86_64::__m256; WIDTH],
+) -> [std::arch::x86_64::__m256; WIDTH] {
     use std::arch::x86_64::{
         _mm256_permute2f128_ps, _mm256_shuffle_ps, _mm256_unpackhi_ps, _mm256_unpacklo_ps,
     };

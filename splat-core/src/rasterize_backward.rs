@@ -16,6 +16,8 @@ use rayon::prelude::*;
 
 use crate::constants::{MAX_ALPHA, MIN_ALPHA};
 use crate::disjoint::DisjointWrites;
+#[cfg(target_arch = "x86_64")]
+use crate::lanes::transpose8_avx2;
 use crate::lanes::{F8, WIDTH, array};
 use crate::prefetch;
 use crate::project::{
@@ -600,47 +602,15 @@ fn lane_sums<const AVX2: bool>(rows: [&[f32; LANES]; 8]) -> [f32; 8] {
 #[target_feature(enable = "avx2")]
 #[inline]
 fn lane_sums_avx2(rows: [&[f32; LANES]; 8]) -> [f32; 8] {
-    use std::arch::x86_64::{
-        _mm256_add_ps, _mm256_loadu_ps, _mm256_permute2f128_ps, _mm256_shuffle_ps,
-        _mm256_storeu_ps, _mm256_unpackhi_ps, _mm256_unpacklo_ps,
-    };
+    use std::arch::x86_64::{_mm256_add_ps, _mm256_loadu_ps, _mm256_storeu_ps};
     // SAFETY: each row is 8 floats.
     #[allow(unsafe_code)]
     let r = rows.map(|v| unsafe { _mm256_loadu_ps(v.as_ptr()) });
-    // Pairs of rows interleaved, then quadruples: u[m] holds lane m and lane m + 4 of rows 0..4
-    // (halves of the low quadruple) and of rows 4..8 (the high one).
-    let t = [
-        _mm256_unpacklo_ps(r[0], r[1]),
-        _mm256_unpackhi_ps(r[0], r[1]),
-        _mm256_unpacklo_ps(r[2], r[3]),
-        _mm256_unpackhi_ps(r[2], r[3]),
-        _mm256_unpacklo_ps(r[4], r[5]),
-        _mm256_unpackhi_ps(r[4], r[5]),
-        _mm256_unpacklo_ps(r[6], r[7]),
-        _mm256_unpackhi_ps(r[6], r[7]),
-    ];
-    let u = [
-        _mm256_shuffle_ps::<0x44>(t[0], t[2]),
-        _mm256_shuffle_ps::<0xee>(t[0], t[2]),
-        _mm256_shuffle_ps::<0x44>(t[1], t[3]),
-        _mm256_shuffle_ps::<0xee>(t[1], t[3]),
-        _mm256_shuffle_ps::<0x44>(t[4], t[6]),
-        _mm256_shuffle_ps::<0xee>(t[4], t[6]),
-        _mm256_shuffle_ps::<0x44>(t[5], t[7]),
-        _mm256_shuffle_ps::<0xee>(t[5], t[7]),
-    ];
     // Column l: lane l of every row.
-    let column = |l: usize| {
-        let (low, high) = (u[l % 4], u[4 + l % 4]);
-        if l < 4 {
-            _mm256_permute2f128_ps::<0x20>(low, high)
-        } else {
-            _mm256_permute2f128_ps::<0x31>(low, high)
-        }
-    };
-    let mut total = column(0);
-    for l in 1..LANES {
-        total = _mm256_add_ps(total, column(l));
+    let columns = transpose8_avx2(r);
+    let mut total = columns[0];
+    for &c in &columns[1..] {
+        total = _mm256_add_ps(total, c);
     }
     let mut out = [0.0_f32; 8];
     // SAFETY: `out` is 8 floats.
