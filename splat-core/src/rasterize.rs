@@ -752,15 +752,13 @@ fn composite_tile_impl<S: WeightSink, const AVX2: bool>(
         falloff.compute::<AVX2>(p, &spans, todo, x0);
         let mut used = 0_u32;
         for (&hr, g) in falloff.hr.iter().zip(&falloff.gauss).take(falloff.n) {
-            let hr = usize::from(hr);
-            let base = hr * LANES;
-            // Fixed-size views: one bounds check per half-row, none per lane.
-            let donel: &mut [u32; LANES] = lanes_mut(&mut done, base);
-            let tl: &mut [f32; LANES] = lanes_mut(&mut t, base);
-            let rl: &mut [f32; LANES] = lanes_mut(&mut cr, base);
-            let gl: &mut [f32; LANES] = lanes_mut(&mut cg, base);
-            let bl: &mut [f32; LANES] = lanes_mut(&mut cb, base);
-            let dl: &mut [f32; LANES] = lanes_mut(&mut d, base);
+            // Fixed-size views, no bounds check.
+            let donel: &mut [u32; LANES] = hr.lanes(&mut done);
+            let tl: &mut [f32; LANES] = hr.lanes(&mut t);
+            let rl: &mut [f32; LANES] = hr.lanes(&mut cr);
+            let gl: &mut [f32; LANES] = hr.lanes(&mut cg);
+            let bl: &mut [f32; LANES] = hr.lanes(&mut cb);
+            let dl: &mut [f32; LANES] = hr.lanes(&mut d);
             let mut weights = [0.0_f32; LANES];
             let px = HalfRow {
                 t: tl,
@@ -772,7 +770,7 @@ fn composite_tile_impl<S: WeightSink, const AVX2: bool>(
             };
             let (contributed, all_done) = px.blend::<AVX2>(p, g, tag, &mut weights);
             sink.add(k, &weights);
-            let bit = 1_u32 << hr;
+            let bit = 1_u32 << hr.index();
             if contributed > 0 {
                 used |= bit;
             }
@@ -932,12 +930,3 @@ impl HalfRow<'_> {
 /// in depth order, so its records are scattered over the whole projection buffer (10 MB at 250 k
 /// splats, beyond the L2 cache) and each would otherwise be a cache miss.
 pub(crate) const PREFETCH_AHEAD: usize = 8;
-
-/// The `LANES` elements of `buf` from `base` as a fixed-size array.
-#[inline(always)]
-pub(crate) fn lanes_mut<T>(buf: &mut [T], base: usize) -> &mut [T; LANES] {
-    match (&mut buf[base..base + LANES]).try_into() {
-        Ok(a) => a,
-        Err(_) => unreachable!("a slice of LANES elements converts to [T; LANES]"),
-    }
-}

@@ -23,9 +23,7 @@ use crate::prefetch;
 use crate::project::{
     ChainView, ProjectedGrad, ProjectedGradLanes, ViewConsts, colour_grad8, project_backward8,
 };
-use crate::rasterize::{
-    DEPTH_MIN_ALPHA, Finish, PREFETCH_AHEAD, lanes_mut, tile_extent, tile_major_index,
-};
+use crate::rasterize::{DEPTH_MIN_ALPHA, Finish, PREFETCH_AHEAD, tile_extent, tile_major_index};
 use crate::tiles::{Falloff, HALF_ROWS, LANES, RowSpans, TILE_PIXELS, TILE_SIZE, half_row_dx};
 use crate::{Rasterizer, RenderCamera, RenderOptions, SplatGrads, SplatGradsMut, Splats, sh};
 
@@ -481,15 +479,14 @@ impl Rasterizer {
                 .zip(weight.iter_mut().zip(moment.iter_mut()))
                 .take(falloff.n)
             {
-                let base = usize::from(hr) * LANES;
-                let liml: &[i32; LANES] = lanes_mut(&mut limit, base);
-                let tl: &mut [f32; LANES] = lanes_mut(&mut t_cur, base);
-                let al: &mut [f32; LANES] = lanes_mut(&mut acc_dot, base);
-                let grl: &[f32; LANES] = lanes_mut(g_r, base);
-                let ggl: &[f32; LANES] = lanes_mut(g_g, base);
-                let gbl: &[f32; LANES] = lanes_mut(g_b, base);
-                let gdl: &[f32; LANES] = lanes_mut(&mut g_d, base);
-                let kl: &[f32; LANES] = lanes_mut(&mut k_bg, base);
+                let liml: &[i32; LANES] = hr.lanes(&mut limit);
+                let tl: &mut [f32; LANES] = hr.lanes(&mut t_cur);
+                let al: &mut [f32; LANES] = hr.lanes(&mut acc_dot);
+                let grl: &[f32; LANES] = hr.lanes(g_r);
+                let ggl: &[f32; LANES] = hr.lanes(g_g);
+                let gbl: &[f32; LANES] = hr.lanes(g_b);
+                let gdl: &[f32; LANES] = hr.lanes(&mut g_d);
+                let kl: &[f32; LANES] = hr.lanes(&mut k_bg);
                 for l in 0..LANES {
                     // Outside the splat's reach alpha fails the 1/255 test; past a partial
                     // tile's last column the limit is 0.
@@ -536,14 +533,12 @@ impl Rasterizer {
                 }
             }
             for ((&hr, wl), ul) in falloff.hr.iter().zip(&weight).zip(&moment).take(falloff.n) {
-                let hr = usize::from(hr);
-                let dy = spans.dy[hr / 2];
-                let dxl = &dx_half[hr & 1];
-                let base = hr * LANES;
-                let grl: &[f32; LANES] = lanes_mut(g_r, base);
-                let ggl: &[f32; LANES] = lanes_mut(g_g, base);
-                let gbl: &[f32; LANES] = lanes_mut(g_b, base);
-                let gdl: &[f32; LANES] = lanes_mut(&mut g_d, base);
+                let dy = spans.dy[hr.row()];
+                let dxl = &dx_half[hr.half()];
+                let grl: &[f32; LANES] = hr.lanes(g_r);
+                let ggl: &[f32; LANES] = hr.lanes(g_g);
+                let gbl: &[f32; LANES] = hr.lanes(g_b);
+                let gdl: &[f32; LANES] = hr.lanes(&mut g_d);
                 for l in 0..LANES {
                     let dx = dxl[l];
                     let wv = wl[l];

@@ -766,6 +766,53 @@ fn spread_bits(x: u32) -> u32 {
     (x | (x << 1)) & 0x5555_5555
 }
 
+/// One of a tile's `HALF_ROWS` half-rows (bit 2·row + half of a half-row mask), below
+/// `HALF_ROWS` by construction: the walks' views of a half-row in their per-pixel buffers then
+/// need no bounds check (a compare and a branch in every half-row of three loops).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct HalfRowId(u8);
+
+impl HalfRowId {
+    /// The half-row of `mask`'s lowest set bit (of a zero mask, half-row 0).
+    #[inline(always)]
+    pub(crate) fn lowest(mask: u32) -> Self {
+        Self((mask.trailing_zeros() % HALF_ROWS as u32) as u8)
+    }
+
+    /// Its bit in a half-row mask: 2·row + half.
+    #[inline(always)]
+    pub(crate) fn index(self) -> usize {
+        usize::from(self.0)
+    }
+
+    /// Its row in the tile (reduced modulo the tile's rows, which it is below already, so that
+    /// indexing a row array needs no check).
+    #[inline(always)]
+    pub(crate) fn row(self) -> usize {
+        usize::from(self.0 >> 1) % TILE_SIZE as usize
+    }
+
+    /// 0 for the tile's left half, 1 for its right.
+    #[inline(always)]
+    pub(crate) fn half(self) -> usize {
+        usize::from(self.0 & 1)
+    }
+
+    /// Its `LANES` pixels in a tile's per-pixel buffer.
+    #[inline(always)]
+    pub(crate) fn lanes<T>(self, buf: &mut [T; TILE_PIXELS]) -> &mut [T; LANES] {
+        let base = self.index() * LANES;
+        debug_assert!(base + LANES <= TILE_PIXELS);
+        // SAFETY: the index is below HALF_ROWS (every constructor reduces it modulo
+        // HALF_ROWS), so base + LANES ≤ HALF_ROWS·LANES = TILE_PIXELS: the LANES elements from
+        // base lie in `buf`, and [T; LANES] has T's alignment.
+        #[allow(unsafe_code)]
+        unsafe {
+            &mut *buf.as_mut_ptr().add(base).cast::<[T; LANES]>()
+        }
+    }
+}
+
 /// A splat's Gaussian falloff over the half-rows of a tile it is to be drawn in, computed in a
 /// pass of its own before the compositing that uses it.
 ///
@@ -776,7 +823,7 @@ fn spread_bits(x: u32) -> u32 {
 /// follows has a short chain per half-row.
 pub(crate) struct Falloff {
     /// The half-rows, ascending.
-    pub hr: [u8; HALF_ROWS],
+    pub hr: [HalfRowId; HALF_ROWS],
     /// G = 2^t per lane of each half-row ([`RowExponent`]), or 0 where t > 0; about 2⁻¹²⁶
     /// where t is below the least exponent (o·G fails the alpha ≥ 1/255 test there either way).
     pub gauss: [[f32; LANES]; HALF_ROWS],
@@ -788,7 +835,7 @@ impl Falloff {
     /// Returns an empty buffer.
     pub fn new() -> Self {
         Self {
-            hr: [0; HALF_ROWS],
+            hr: [HalfRowId::default(); HALF_ROWS],
             gauss: [[0.0; LANES]; HALF_ROWS],
             n: 0,
         }
@@ -828,21 +875,21 @@ impl Falloff {
         // A local count: through `self.n` every half-row's stores waited on a reload of it.
         let mut n = 0;
         while todo != 0 {
-            let hr = todo.trailing_zeros() as usize;
+            let hr = HalfRowId::lowest(todo);
             todo &= todo - 1;
-            let ly = hr / 2;
+            let ly = hr.row();
             let row = RowExponent {
                 k1,
                 k2: spans.k2[ly],
                 k3: spans.k3[ly],
             };
-            let xb = half_row_dx(p.xy[0], x0, hr);
+            let xb = half_row_dx(p.xy[0], x0, hr.index());
             for (l, g) in self.gauss[n].iter_mut().enumerate() {
                 let t = row.at(xb - l as f32);
                 let gauss = fast_exp2(t);
                 *g = if t <= 0.0 { gauss } else { 0.0 };
             }
-            self.hr[n] = hr as u8;
+            self.hr[n] = hr;
             n += 1;
         }
         self.n = n;
@@ -885,10 +932,10 @@ impl Falloff {
         let k1u_half = [_mm256_mul_ps(k1, u_half[0]), _mm256_mul_ps(k1, u_half[1])];
         let mut n = 0;
         while todo != 0 {
-            let hr = todo.trailing_zeros() as usize;
+            let hr = HalfRowId::lowest(todo);
             todo &= todo - 1;
-            let ly = hr / 2;
-            let (u, k1u) = (u_half[hr & 1], k1u_half[hr & 1]);
+            let ly = hr.row();
+            let (u, k1u) = (u_half[hr.half()], k1u_half[hr.half()]);
             let t = _mm256_add_ps(
                 _mm256_mul_ps(u, _mm256_add_ps(k1u, _mm256_set1_ps(spans.k2[ly]))),
                 _mm256_set1_ps(spans.k3[ly]),
@@ -914,12 +961,17 @@ impl Falloff {
             // t ≤ 0 (a rounding above 0 could only come of a conic that is not quite positive
             // definite, whose falloff would not fall).
             let keep = _mm256_cmp_ps::<_CMP_LE_OQ>(t_raw, zero);
-            // SAFETY: `n` < HALF_ROWS, one per set bit of the 32-bit `todo`.
+            debug_assert!(n < HALF_ROWS);
+            // SAFETY: `n` < HALF_ROWS, one per set bit of the 32-bit `todo` (so unchecked: the
+            // check was a compare and a branch a half-row).
             #[allow(unsafe_code)]
             unsafe {
-                _mm256_storeu_ps(self.gauss[n].as_mut_ptr(), _mm256_and_ps(keep, gauss));
+                _mm256_storeu_ps(
+                    self.gauss.get_unchecked_mut(n).as_mut_ptr(),
+                    _mm256_and_ps(keep, gauss),
+                );
+                *self.hr.get_unchecked_mut(n) = hr;
             }
-            self.hr[n] = hr as u8;
             n += 1;
         }
         self.n = n;
@@ -1048,8 +1100,8 @@ mod tests {
     use rand::{RngExt, SeedableRng};
 
     use super::{
-        Bins, EXP2_MIN, Falloff, HALF_ROWS, LANES, RowExponent, RowSpans, SCAN_BLOCK, TILE_SIZE,
-        fast_exp2, half_row_dx, half_row_mask, half_row_x, owned_bits,
+        Bins, EXP2_MIN, Falloff, HALF_ROWS, HalfRowId, LANES, RowExponent, RowSpans, SCAN_BLOCK,
+        TILE_PIXELS, TILE_SIZE, fast_exp2, half_row_dx, half_row_mask, half_row_x, owned_bits,
     };
     #[cfg(target_arch = "x86_64")]
     use super::{half_row_mask_avx2, owned_bits_avx2};
@@ -1466,7 +1518,7 @@ mod tests {
                     s.map(f32::to_bits),
                     "case {case}, half-row {i}"
                 );
-                let hr = usize::from(scalar.hr[i]);
+                let hr = scalar.hr[i].index();
                 let row = RowExponent::new(conic, spans.dy[hr / 2]);
                 let xb = half_row_dx(p.xy[0], x0, hr);
                 for (l, &g) in s.iter().enumerate() {
@@ -1527,7 +1579,7 @@ mod tests {
                 }
                 assert_eq!(f.n, solved.mask.count_ones() as usize);
                 for (&hr, g) in f.hr.iter().zip(&f.gauss).take(f.n) {
-                    let hr = usize::from(hr);
+                    let hr = hr.index();
                     let row = hr / 2;
                     for (l, &gauss) in g.iter().enumerate() {
                         let column = half_row_x(hr) + l as f32;
@@ -1627,6 +1679,24 @@ mod tests {
                 assert_eq!(&got, want, "tile {t}, {threads} threads");
             }
         }
+    }
+
+    /// A half-row's id from each bit of a mask (and from an empty one), its row and half, and
+    /// its view of a per-pixel buffer: the same elements as the checked slice.
+    #[test]
+    fn half_row_ids_view_their_own_pixels() {
+        let mut buf: [u32; TILE_PIXELS] = std::array::from_fn(|i| i as u32);
+        for bit in 0..32_u32 {
+            let hr = HalfRowId::lowest((1 << bit) | (1 << 31));
+            assert_eq!(hr.index(), bit as usize);
+            assert_eq!(
+                (hr.row(), hr.half()),
+                ((bit / 2) as usize, (bit % 2) as usize)
+            );
+            let want: [u32; LANES] = std::array::from_fn(|l| bit * LANES as u32 + l as u32);
+            assert_eq!(*hr.lanes(&mut buf), want);
+        }
+        assert_eq!(HalfRowId::lowest(0).index(), 0);
     }
 
     #[test]
