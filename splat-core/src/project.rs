@@ -394,9 +394,10 @@ impl Culls {
 
 /// Projects the splats `idx` (eight, repeats allowed) at once in vector lanes: lane by lane the
 /// same IEEE operations in the same order as the projection of one splat at a time
-/// (`reference::project` in the tests, which checks the bits), with the per-lane library calls
-/// (`expf` of the opacity and scales, `logf` of the alpha bound) and the tile rectangle left
-/// scalar. Stores the eight chains in `chain` and hands `emit` what the tiles draw of each of
+/// (`reference::project` in the tests, which checks the bits), with the tile rectangle left
+/// scalar (the opacity's and scales' exponentials and the alpha bound's logarithm are
+/// branch-free functions, computed as vectors). Stores the eight chains in `chain` and hands
+/// `emit` what the tiles draw of each of
 /// the first `lanes_used` lanes, or why the splat is culled (straight into the caller's
 /// arrays: an array of results in between cost a copy). `AVX2` (asked for only by callers
 /// compiled with AVX2) moves the SH coefficients into lanes with AVX2 shuffles.
