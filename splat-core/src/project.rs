@@ -392,15 +392,6 @@ impl Culls {
     }
 }
 
-/// Projects the splats `idx` (eight, repeats allowed) at once in vector lanes: lane by lane the
-/// same IEEE operations in the same order as the projection of one splat at a time
-/// (`reference::project` in the tests, which checks the bits), with the tile rectangle left
-/// scalar (the opacity's and scales' exponentials and the alpha bound's logarithm are
-/// branch-free functions, computed as vectors). Stores the eight chains in `chain` and hands
-/// `emit` what the tiles draw of each of
-/// the first `lanes_used` lanes, or why the splat is culled (straight into the caller's
-/// arrays: an array of results in between cost a copy). `AVX2` (asked for only by callers
-/// compiled with AVX2) moves the SH coefficients into lanes with AVX2 shuffles.
 /// Working memory [`project8`] reuses from group to group: zeroed once by the caller rather
 /// than once a group (the zeroing was a library call, and the loads that followed could not
 /// take their data from its stores).
@@ -417,6 +408,15 @@ impl Default for Scratch {
     }
 }
 
+/// Projects the splats `idx` (eight, repeats allowed) at once in vector lanes: lane by lane the
+/// same IEEE operations in the same order as the projection of one splat at a time
+/// (`reference::project` in the tests, which checks the bits), with the tile rectangle left
+/// scalar (the opacity's and scales' exponentials and the alpha bound's logarithm are
+/// branch-free functions, computed as vectors). Stores the eight chains in `chain` and hands
+/// `emit` what the tiles draw of each of the first `lanes_used` lanes, or why the splat is
+/// culled (straight into the caller's arrays: an array of results in between cost a copy).
+/// `AVX2` (asked for only by callers compiled with AVX2) moves the SH coefficients into lanes
+/// with AVX2 shuffles; `scratch` is the caller's, reused from group to group.
 #[inline(always)]
 #[allow(clippy::too_many_lines)]
 #[allow(clippy::needless_range_loop)] // a lane's index reads several arrays of lanes

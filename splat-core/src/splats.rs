@@ -29,9 +29,14 @@ pub fn sigmoid(x: f32) -> f32 {
     1.0 / (1.0 + exp(-x))
 }
 
-/// e^x within 2 ulp (1.18 at worst in its test; the C library's `expf` is within 0.502), branch-free and without a
-/// library call, so that the projection computes its eight lanes' opacities and scales as
-/// vectors instead of 32 calls a group of eight splats. Below about −87.3 the result is
+/// 1.5·2²³: added to an f32 of magnitude below 2²² and removed again, it rounds it to an integer
+/// (to nearest, ties to even), and the sum's low mantissa bits hold that integer; [`exp`] and
+/// the tile walks' `fast_exp2` build their powers of two this way.
+pub(crate) const ROUND_TO_INTEGER: f32 = 12_582_912.0;
+
+/// e^x within 2 ulp (1.18 at worst in its test; the C library's `expf` is within 0.502),
+/// branch-free and without a library call, so that the projection computes its eight lanes'
+/// opacities and scales as vectors instead of 32 calls a group of eight splats. Below about −87.3 the result is
 /// subnormal or 0 and above about 88.7 infinite, as `expf` gives; NaN stays NaN.
 ///
 /// e^x = 2ᵏ·eʳ with k = round(x·log₂e) and r = x − k·ln 2 (ln 2 split in two so that k·ln 2's
@@ -40,8 +45,6 @@ pub fn sigmoid(x: f32) -> f32 {
 #[inline(always)]
 pub(crate) fn exp(x: f32) -> f32 {
     use std::f32::consts::LOG2_E;
-    /// 1.5·2²³: added and removed, it rounds an f32 of magnitude below 2²² to an integer.
-    const ROUND: f32 = 12_582_912.0;
     /// ln 2 in two parts: the high one has 12 significant bits, so k·`LN2_HI` is exact.
     const LN2_HI: f32 = 0.693_359_4;
     const LN2_LO: f32 = -2.121_944_4e-4;
@@ -49,11 +52,11 @@ pub(crate) fn exp(x: f32) -> f32 {
     let x = x.clamp(-104.0, 89.0);
     // k from the sum's low mantissa bits (two's complement): a saturating `k as i32` would
     // not vectorise.
-    let shifted = x * LOG2_E + ROUND;
-    let k = shifted - ROUND;
+    let shifted = x * LOG2_E + ROUND_TO_INTEGER;
+    let k = shifted - ROUND_TO_INTEGER;
     let ki = shifted
         .to_bits()
-        .wrapping_sub(ROUND.to_bits())
+        .wrapping_sub(ROUND_TO_INTEGER.to_bits())
         .cast_signed();
     let r = (x - k * LN2_HI) - k * LN2_LO;
     let p = 1.0

@@ -11,6 +11,7 @@ use rayon::prelude::*;
 
 use crate::disjoint::DisjointWrites;
 use crate::projected::Projected;
+use crate::splats::ROUND_TO_INTEGER;
 
 /// Side of a square tile in pixels (Inria's `BLOCK_X = BLOCK_Y = 16`).
 pub const TILE_SIZE: u32 = 16;
@@ -940,7 +941,7 @@ impl Falloff {
         let min_t = _mm256_set1_ps(EXP2_MIN);
         let zero = _mm256_set1_ps(0.0);
         let one = _mm256_set1_ps(1.0);
-        let round = _mm256_set1_ps(EXP2_ROUND);
+        let round = _mm256_set1_ps(ROUND_TO_INTEGER);
         let [c3, c2, c1, c0] = EXP2_POLY;
         let [c3, c2, c1, c0] = [
             _mm256_set1_ps(c3),
@@ -1097,8 +1098,8 @@ pub(crate) fn fast_exp2(t: f32) -> f32 {
     let clamped = t.max(EXP2_MIN);
     // Round to nearest by adding and removing 1.5·2²³ (plain adds: `floor` is a library call
     // on the x86-64 baseline).
-    let shifted = clamped + EXP2_ROUND;
-    let n = shifted - EXP2_ROUND;
+    let shifted = clamped + ROUND_TO_INTEGER;
+    let n = shifted - ROUND_TO_INTEGER;
     let f = clamped - n;
     let [c3, c2, c1, c0] = EXP2_POLY;
     let p = ((c3 * f + c2) * f + c1) * f + c0;
@@ -1110,11 +1111,9 @@ pub(crate) fn fast_exp2(t: f32) -> f32 {
 
 /// The least exponent [`fast_exp2`] builds 2ⁿ for (the least normal f32 is 2⁻¹²⁶).
 const EXP2_MIN: f32 = -126.0;
-/// 1.5·2²³: added and removed, it rounds an f32 of magnitude below 2²² to an integer.
-const EXP2_ROUND: f32 = 12_582_912.0;
-/// 127 − bits(`EXP2_ROUND`), wrapping: added to the bits of t + `EXP2_ROUND`, it leaves n + 127
-/// in the bits that become the exponent of 2ⁿ.
-const EXP2_BIAS: u32 = 127_u32.wrapping_sub(EXP2_ROUND.to_bits());
+/// 127 − bits(`ROUND_TO_INTEGER`), wrapping: added to the bits of t + `ROUND_TO_INTEGER`, it
+/// leaves n + 127 in the bits that become the exponent of 2ⁿ.
+const EXP2_BIAS: u32 = 127_u32.wrapping_sub(ROUND_TO_INTEGER.to_bits());
 /// 2^f on [−½, ½] as 1 + f·P(f), P of degree 3 (highest term first) fitted for least maximum
 /// relative error: 2.9e-6 in f32 arithmetic, two terms shorter than Cephes' degree-5 P at
 /// 1.2e-7. An alpha that far off moves a pixel by under 1e-5 of its range, and the term saves
