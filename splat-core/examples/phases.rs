@@ -107,31 +107,24 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
         threads,
         times.len()
     );
-    for (k, name) in names.iter().enumerate() {
-        let mut ms: Vec<f64> = times.iter().map(|t| t[k].as_secs_f64() * 1e3).collect();
+    // Minimum and median of one figure's repeats.
+    let row = |name: &str, mut ms: Vec<f64>| {
         ms.sort_by(f64::total_cmp);
         println!("  {name:<15} {:8.2} / {:8.2}", ms[0], ms[ms.len() / 2]);
+    };
+    for (k, name) in names.iter().enumerate() {
+        row(
+            name,
+            times.iter().map(|t| t[k].as_secs_f64() * 1e3).collect(),
+        );
     }
-    let mut total: Vec<f64> = times
+    let sums = times
         .iter()
-        .map(|t| t.iter().map(Duration::as_secs_f64).sum::<f64>() * 1e3)
-        .collect();
-    total.sort_by(f64::total_cmp);
-    println!(
-        "  {:<15} {:8.2} / {:8.2}",
-        "all",
-        total[0],
-        total[total.len() / 2]
-    );
+        .map(|t| t.iter().map(Duration::as_secs_f64).sum::<f64>() * 1e3);
+    row("all", sums.collect());
     // The whole forward + backward, start to end: what the phases leave out (buffers sized,
     // statistics gathered between them) is the difference.
-    walls.sort_by(f64::total_cmp);
-    println!(
-        "  {:<15} {:8.2} / {:8.2}",
-        "wall",
-        walls[0],
-        walls[walls.len() / 2]
-    );
+    row("wall", walls);
     Ok(())
 }
 

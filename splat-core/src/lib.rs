@@ -40,11 +40,13 @@
 //! # Ok::<(), splat_core::Error>(())
 //! ```
 
+mod bins;
 mod camera;
 mod contribution;
 mod disjoint;
 mod error;
 pub mod export;
+mod falloff;
 pub mod frame;
 pub mod glb;
 mod lanes;
@@ -56,6 +58,7 @@ mod rasterize;
 mod rasterize_backward;
 mod render;
 pub mod sh;
+mod spans;
 mod splats;
 pub mod spz;
 mod tiles;

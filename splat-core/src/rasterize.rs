@@ -5,15 +5,16 @@ use std::time::{Duration, Instant};
 use glam::Vec3;
 use rayon::prelude::*;
 
+use crate::bins::Bins;
 use crate::constants::{MAX_ALPHA, MIN_ALPHA, MIN_TRANSMITTANCE};
 use crate::disjoint::DisjointWrites;
+use crate::falloff::Falloff;
 use crate::lanes::WIDTH;
 use crate::prefetch;
 use crate::project::{ChainLanes, Cull, ProjectedGrad, Scratch, ViewConsts, project8};
 use crate::projected::Projected;
-use crate::tiles::{
-    Bins, Falloff, HALF_ROWS, LANES, RowSpans, TILE_PIXELS, TILE_SIZE, evaluated_pixels,
-};
+use crate::spans::RowSpans;
+use crate::tiles::{HALF_ROWS, LANES, TILE_PIXELS, TILE_SIZE, evaluated_pixels};
 use crate::{Error, RenderCamera, RenderOptions, RenderOutput, Splats};
 
 /// The most pixels a view may have, counted after padding to whole 16×16 tiles: 2²⁶, an

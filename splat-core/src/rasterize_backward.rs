@@ -16,6 +16,7 @@ use rayon::prelude::*;
 
 use crate::constants::{MAX_ALPHA, MIN_ALPHA};
 use crate::disjoint::DisjointWrites;
+use crate::falloff::Falloff;
 #[cfg(target_arch = "x86_64")]
 use crate::lanes::transpose8_avx2;
 use crate::lanes::{F8, WIDTH, array};
@@ -24,7 +25,8 @@ use crate::project::{
     ChainView, ProjectedGrad, ProjectedGradLanes, ViewConsts, colour_grad8, project_backward8,
 };
 use crate::rasterize::{DEPTH_MIN_ALPHA, Finish, PREFETCH_AHEAD, tile_extent, tile_major_index};
-use crate::tiles::{Falloff, HALF_ROWS, LANES, RowSpans, TILE_PIXELS, TILE_SIZE, half_row_dx};
+use crate::spans::RowSpans;
+use crate::tiles::{HALF_ROWS, LANES, TILE_PIXELS, TILE_SIZE, half_row_dx};
 use crate::{Rasterizer, RenderCamera, RenderOptions, SplatGrads, SplatGradsMut, Splats, sh};
 
 /// Splats per task of the chain phase.
@@ -355,7 +357,7 @@ impl Rasterizer {
     }
 
     /// The tile walk: per splat, its falloff over the half-rows the forward blended it into (see
-    /// `tiles::Falloff`), then the gradients, all 8 lanes of a half-row, each tested against its
+    /// `falloff::Falloff`), then the gradients, all 8 lanes of a half-row, each tested against its
     /// pixel's limit.
     /// Per-pixel state is kept as one array per component so each lane view is a plain vector.
     #[inline(always)]
