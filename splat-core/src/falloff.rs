@@ -1,9 +1,8 @@
 //! A splat's Gaussian falloff over the half-rows of a tile, computed the same way by both tile
-//! walks: the exponent in base 2 in row form ([`RowExponent`]) and a branch-free 2^t
-//! ([`fast_exp2`]).
+//! walks: 2^t of the exponent in row form ([`RowExponent`]) through a branch-free [`fast_exp2`].
 
 use crate::projected::Projected;
-use crate::spans::RowSpans;
+use crate::spans::{RowExponent, RowSpans};
 use crate::splats::ROUND_TO_INTEGER;
 use crate::tiles::{HALF_ROWS, HalfRowId, LANES, half_row_dx};
 
@@ -172,66 +171,6 @@ impl Falloff {
     }
 }
 
-/// A splat's Gaussian falloff along one pixel row, as the exponent in base 2: for the conic
-/// (a, b, c) and the row's dy = centre − pixel row, log₂e·(−½(a·dx² + c·dy²) − b·dx·dy) at the
-/// offset dx = centre − pixel is dx·(k₁·dx + k₂) + k₃, with k₁ = −½·log₂e·a, k₂ = −log₂e·b·dy
-/// and k₃ = −½·log₂e·c·dy². Per lane that is two multiplications and two additions, against
-/// seven for the symmetric form and the exponential's scaling by log₂e (the tile walks'
-/// compositing 7–10 % faster, the backward walk 2–6 %, on the bench torus). The grouping rounds
-/// differently from the symmetric form's by an ulp of the terms, which the forward and backward
-/// passes share.
-#[derive(Clone, Copy)]
-pub(crate) struct RowExponent {
-    k1: f32,
-    k2: f32,
-    k3: f32,
-}
-
-impl RowExponent {
-    /// The row at `dy` of the splat whose conic is `conic`.
-    #[cfg(test)]
-    pub(crate) fn new(conic: [f32; 3], dy: f32) -> Self {
-        let exponent = RowExponent::coefficients(conic);
-        let (k2, k3) = exponent.row(dy);
-        Self {
-            k1: exponent.k1,
-            k2,
-            k3,
-        }
-    }
-
-    /// The splat's own factors: k₁, and in place of k₂ and k₃ the factors −log₂e·b and
-    /// −½·log₂e·c that [`Self::row`] multiplies by the row's dy.
-    #[inline(always)]
-    pub(crate) fn coefficients([a, b, c]: [f32; 3]) -> Self {
-        use std::f32::consts::LOG2_E;
-        Self {
-            k1: (-0.5 * LOG2_E) * a,
-            k2: -LOG2_E * b,
-            k3: (-0.5 * LOG2_E) * c,
-        }
-    }
-
-    /// The factors of [`Self::coefficients`] that [`Self::row`] multiplies by dy and dy² (for
-    /// callers that make many rows' k₂ and k₃ at once, in lanes).
-    #[inline(always)]
-    pub(crate) fn row_factors(self) -> (f32, f32) {
-        (self.k2, self.k3)
-    }
-
-    /// k₂ and k₃ of the row at `dy`, from [`Self::coefficients`].
-    #[inline(always)]
-    pub(crate) fn row(self, dy: f32) -> (f32, f32) {
-        (self.k2 * dy, self.k3 * dy * dy)
-    }
-
-    /// The exponent at offset `dx`.
-    #[inline(always)]
-    pub(crate) fn at(self, dx: f32) -> f32 {
-        dx * (self.k1 * dx + self.k2) + self.k3
-    }
-}
-
 /// 2^t for the Gaussian falloff, with a degree-3 polynomial for 2^f (relative error below 3.5e-6
 /// for t in [−15, 0], where alphas reach 1/255), written branch-free (no library calls) for the
 /// per-lane loops. Inputs below −126 give 2⁻¹²⁶'s value (about 1.2e-38, far below any alpha
@@ -271,10 +210,9 @@ const EXP2_POLY: [f32; 4] = [9.582_83e-3, 5.590_64e-2, 2.402_41e-1, 6.931_242e-1
 mod tests {
     use rand::{RngExt, SeedableRng};
 
-    use super::{EXP2_MIN, Falloff, RowExponent, fast_exp2};
-    use crate::projected::footprint;
-    use crate::spans::RowSpans;
+    use super::{EXP2_MIN, Falloff, fast_exp2};
     use crate::spans::tests::{RandomPair, random_splat_and_tile};
+    use crate::spans::{RowExponent, RowSpans};
     use crate::tiles::{HALF_ROWS, LANES, TILE_SIZE, evaluated_pixels, half_row_dx, half_row_x};
 
     /// The AVX2 falloff must store the portable one's bits: it takes the lane offsets, k₁·dx
@@ -440,31 +378,5 @@ mod tests {
         }
         assert_eq!(fast_exp2(0.0), 1.0);
         assert_eq!(fast_exp2(-3.0), 0.125);
-    }
-
-    /// The row form of the exponent is the Gaussian's, log₂e·(−½(a·dx² + c·dy²) − b·dx·dy),
-    /// to f32 rounding of its terms, checked in f64 on random conics and offsets.
-    #[test]
-    fn row_exponent_is_the_gaussian_s_in_base_two() {
-        let mut rng = rand_pcg::Pcg64::seed_from_u64(5);
-        for _ in 0..100_000 {
-            let (_, conic64) = footprint(
-                [rng.random_range(0.2..50.0), rng.random_range(0.2..50.0)],
-                rng.random_range(0.0..std::f64::consts::PI),
-            );
-            let conic = conic64.map(|v| v as f32);
-            let (dx, dy): (f32, f32) =
-                (rng.random_range(-40.0..40.0), rng.random_range(-40.0..40.0));
-            let got = f64::from(RowExponent::new(conic, dy).at(dx));
-            let [a, b, c] = conic.map(f64::from);
-            let (dx, dy) = (f64::from(dx), f64::from(dy));
-            let terms = [a * dx * dx, c * dy * dy, 2.0 * (b * dx * dy).abs()];
-            let want = std::f64::consts::LOG2_E * (-0.5 * (terms[0] + terms[1]) - b * dx * dy);
-            let scale = std::f64::consts::LOG2_E * terms.iter().sum::<f64>();
-            assert!(
-                (got - want).abs() <= 4e-7 * scale + 1e-30,
-                "{got} against {want} (terms {scale})"
-            );
-        }
     }
 }

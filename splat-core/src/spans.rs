@@ -1,10 +1,8 @@
 //! Row spans: where one splat can reach alpha ≥ 1/255 in one tile, for all 16 rows at once,
-//! and the half-rows that takes; with each row's terms of the falloff's exponent.
+//! and the half-rows that takes; with each row's terms of the falloff's exponent in row form
+//! ([`RowExponent`]).
 
-use crate::falloff::RowExponent;
 use crate::projected::Projected;
-#[cfg(test)]
-use crate::tiles::LANES;
 use crate::tiles::TILE_SIZE;
 
 /// How far beyond the exact solution of its row a span reaches, in pixels: room for the
@@ -251,11 +249,10 @@ impl RowSpans {
             #[allow(unsafe_code)]
             unsafe {
                 let lane = _mm256_setr_ps(0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0);
-                let (k2_factor, k3_factor) = exponent.row_factors();
                 let (yc, k2c, k3c) = (
                     _mm256_set1_ps(p.xy[1]),
-                    _mm256_set1_ps(k2_factor),
-                    _mm256_set1_ps(k3_factor),
+                    _mm256_set1_ps(exponent.k2),
+                    _mm256_set1_ps(exponent.k3),
                 );
                 for base in [0_usize, 8] {
                     // y0 + r, then the centre minus it, as the portable loop rounds them.
@@ -292,11 +289,64 @@ impl RowSpans {
     }
 }
 
+/// A splat's Gaussian falloff along one pixel row, as the exponent in base 2: for the conic
+/// (a, b, c) and the row's dy = centre − pixel row, log₂e·(−½(a·dx² + c·dy²) − b·dx·dy) at the
+/// offset dx = centre − pixel is dx·(k₁·dx + k₂) + k₃, with k₁ = −½·log₂e·a, k₂ = −log₂e·b·dy
+/// and k₃ = −½·log₂e·c·dy². Per lane that is two multiplications and two additions, against
+/// seven for the symmetric form and the exponential's scaling by log₂e (the tile walks'
+/// compositing 7–10 % faster, the backward walk 2–6 %, on the bench torus). The grouping rounds
+/// differently from the symmetric form's by an ulp of the terms, which the forward and backward
+/// passes share.
+#[derive(Clone, Copy)]
+pub(crate) struct RowExponent {
+    pub(crate) k1: f32,
+    pub(crate) k2: f32,
+    pub(crate) k3: f32,
+}
+
+impl RowExponent {
+    /// The row at `dy` of the splat whose conic is `conic`.
+    #[cfg(test)]
+    pub(crate) fn new(conic: [f32; 3], dy: f32) -> Self {
+        let exponent = RowExponent::coefficients(conic);
+        let (k2, k3) = exponent.row(dy);
+        Self {
+            k1: exponent.k1,
+            k2,
+            k3,
+        }
+    }
+
+    /// The splat's own factors: k₁, and in place of k₂ and k₃ the factors −log₂e·b and
+    /// −½·log₂e·c that [`Self::row`] multiplies by the row's dy.
+    #[inline(always)]
+    pub(crate) fn coefficients([a, b, c]: [f32; 3]) -> Self {
+        use std::f32::consts::LOG2_E;
+        Self {
+            k1: (-0.5 * LOG2_E) * a,
+            k2: -LOG2_E * b,
+            k3: (-0.5 * LOG2_E) * c,
+        }
+    }
+
+    /// k₂ and k₃ of the row at `dy`, from [`Self::coefficients`].
+    #[inline(always)]
+    pub(crate) fn row(self, dy: f32) -> (f32, f32) {
+        (self.k2 * dy, self.k3 * dy * dy)
+    }
+
+    /// The exponent at offset `dx`.
+    #[inline(always)]
+    pub(crate) fn at(self, dx: f32) -> f32 {
+        dx * (self.k1 * dx + self.k2) + self.k3
+    }
+}
+
 /// Bit `2·row + half` set when that half-row of the tile has pixels in the row's span
 /// [`lo`, `hi`] (tile-local pixels).
 #[cfg(test)]
 fn half_row_mask(lo: &[f32; TILE_SIZE as usize], hi: &[f32; TILE_SIZE as usize]) -> u32 {
-    let half = (LANES - 1) as f32;
+    let half = (crate::tiles::LANES - 1) as f32;
     let mut mask = 0_u32;
     for r in 0..TILE_SIZE as usize {
         let first = u32::from((lo[r] <= hi[r]) & (lo[r] <= half));
@@ -316,7 +366,7 @@ fn half_row_mask_avx2(lo: &[f32; TILE_SIZE as usize], hi: &[f32; TILE_SIZE as us
         _CMP_GT_OQ, _CMP_LE_OQ, _mm256_and_ps, _mm256_cmp_ps, _mm256_loadu_ps, _mm256_movemask_ps,
         _mm256_set1_ps,
     };
-    let half = _mm256_set1_ps((LANES - 1) as f32);
+    let half = _mm256_set1_ps((crate::tiles::LANES - 1) as f32);
     let (mut first, mut second) = (0_u32, 0_u32);
     for j in 0..2 {
         // SAFETY: rows 8·j .. 8·j + 8 of 16-element arrays.
@@ -350,10 +400,11 @@ fn spread_bits(x: u32) -> u32 {
 pub(crate) mod tests {
     use rand::{RngExt, SeedableRng};
 
+    use super::RowExponent;
     #[cfg(target_arch = "x86_64")]
     use super::half_row_mask_avx2;
     use super::{RowSpans, half_row_mask};
-    use crate::falloff::{RowExponent, fast_exp2};
+    use crate::falloff::fast_exp2;
     use crate::projected::{Projected, footprint, quad_bound, random_footprint};
     use crate::tiles::{HALF_ROWS, LANES, TILE_SIZE};
 
@@ -584,5 +635,31 @@ pub(crate) mod tests {
         }
         // Every row state occurs: empty, first half, second half, both.
         assert_eq!(seen.len(), 4);
+    }
+
+    /// The row form of the exponent is the Gaussian's, log₂e·(−½(a·dx² + c·dy²) − b·dx·dy),
+    /// to f32 rounding of its terms, checked in f64 on random conics and offsets.
+    #[test]
+    fn row_exponent_is_the_gaussian_s_in_base_two() {
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(5);
+        for _ in 0..100_000 {
+            let (_, conic64) = footprint(
+                [rng.random_range(0.2..50.0), rng.random_range(0.2..50.0)],
+                rng.random_range(0.0..std::f64::consts::PI),
+            );
+            let conic = conic64.map(|v| v as f32);
+            let (dx, dy): (f32, f32) =
+                (rng.random_range(-40.0..40.0), rng.random_range(-40.0..40.0));
+            let got = f64::from(RowExponent::new(conic, dy).at(dx));
+            let [a, b, c] = conic.map(f64::from);
+            let (dx, dy) = (f64::from(dx), f64::from(dy));
+            let terms = [a * dx * dx, c * dy * dy, 2.0 * (b * dx * dy).abs()];
+            let want = std::f64::consts::LOG2_E * (-0.5 * (terms[0] + terms[1]) - b * dx * dy);
+            let scale = std::f64::consts::LOG2_E * terms.iter().sum::<f64>();
+            assert!(
+                (got - want).abs() <= 4e-7 * scale + 1e-30,
+                "{got} against {want} (terms {scale})"
+            );
+        }
     }
 }
