@@ -423,19 +423,8 @@ pub(crate) mod tests {
                 x0 as f32 + rng.random_range(-60.0..76.0),
                 y0 as f32 + rng.random_range(-60.0..76.0),
             ];
-            // Every tenth case is a partial tile at the image's right or bottom edge.
-            let (tw, th) = if case % 10 == 0 {
-                (rng.random_range(1..=ts), rng.random_range(1..=ts))
-            } else {
-                (ts, ts)
-            };
-            let p = Projected {
-                xy: centre,
-                conic: conic.map(|v| v as f32),
-                opacity,
-                q_max: quad_bound(opacity),
-                ..Projected::default()
-            };
+            let (tw, th) = random_tile_size(&mut rng, case);
+            let p = splat_at(centre, conic, opacity);
             let spans = RowSpans::solve::<false>(&p, x0, y0, tw, th);
             let reach = RowSpans::reach::<false>(&p, x0, y0, tw, th).mask;
             for ly in 0..th {
@@ -473,6 +462,29 @@ pub(crate) mod tests {
         );
     }
 
+    /// A tile's real size: every tenth `case` a partial tile at the image's right or bottom
+    /// edge, else a whole one.
+    fn random_tile_size(rng: &mut rand_pcg::Pcg64, case: usize) -> (i32, i32) {
+        let ts = TILE_SIZE as i32;
+        if case.is_multiple_of(10) {
+            (rng.random_range(1..=ts), rng.random_range(1..=ts))
+        } else {
+            (ts, ts)
+        }
+    }
+
+    /// A projected splat at `centre` of f64 conic `conic` (rounded to f32) and opacity
+    /// `opacity`, with its alpha bound.
+    fn splat_at(centre: [f32; 2], conic: [f64; 3], opacity: f32) -> Projected {
+        Projected {
+            xy: centre,
+            conic: conic.map(|v| v as f32),
+            opacity,
+            q_max: quad_bound(opacity),
+            ..Projected::default()
+        }
+    }
+
     /// A splat from a fifth of a pixel to thousands of pixels across (long thin ones at every
     /// angle), of any opacity, and a tile it may reach: centred inside it or far outside, and
     /// every tenth `case` a partial tile at the image's right or bottom edge.
@@ -488,20 +500,9 @@ pub(crate) mod tests {
             x0 as f32 + rng.random_range(-reach..reach + 16.0),
             y0 as f32 + rng.random_range(-reach..reach + 16.0),
         ];
-        let (tw, th) = if case.is_multiple_of(10) {
-            (rng.random_range(1..=ts), rng.random_range(1..=ts))
-        } else {
-            (ts, ts)
-        };
-        let p = Projected {
-            xy: centre,
-            conic: conic64.map(|v| v as f32),
-            opacity,
-            q_max: quad_bound(opacity),
-            ..Projected::default()
-        };
+        let (tw, th) = random_tile_size(rng, case);
         RandomPair {
-            p,
+            p: splat_at(centre, conic64, opacity),
             conic64,
             axes: (s1, s2),
             tile: (x0, y0, tw, th),
