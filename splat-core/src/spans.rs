@@ -83,20 +83,15 @@ impl RowSpans {
             (k2[r], k3[r]) = exponent.row(d);
         }
         #[cfg(target_arch = "x86_64")]
-        if AVX2 {
+        #[allow(unsafe_code)]
+        let mask = if AVX2 {
             // SAFETY: only the AVX2 instantiations of the tile walks ask for `AVX2`, and they
             // run only where `has_avx2()` found the feature.
-            #[allow(unsafe_code)]
-            let mask = unsafe { half_row_mask_avx2(&lo, &hi) };
-            return Self {
-                lo,
-                hi,
-                dy,
-                k2,
-                k3,
-                mask,
-            };
-        }
+            unsafe { half_row_mask_avx2(&lo, &hi) }
+        } else {
+            half_row_mask(&lo, &hi)
+        };
+        #[cfg(not(target_arch = "x86_64"))]
         let mask = half_row_mask(&lo, &hi);
         Self {
             lo,
