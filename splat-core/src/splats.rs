@@ -36,8 +36,9 @@ pub(crate) const ROUND_TO_INTEGER: f32 = 12_582_912.0;
 
 /// e^x within 2 ulp (1.18 at worst in its test; the C library's `expf` is within 0.502),
 /// branch-free and without a library call, so that the projection computes its eight lanes'
-/// opacities and scales as vectors instead of 32 calls a group of eight splats. Below about −87.3 the result is
-/// subnormal or 0 and above about 88.7 infinite, as `expf` gives; NaN stays NaN.
+/// opacities and scales as vectors instead of 32 calls a group of eight splats. Below about
+/// −87.3 the result is subnormal or 0 and above about 88.7 infinite, as `expf` gives; NaN stays
+/// NaN.
 ///
 /// e^x = 2ᵏ·eʳ with k = round(x·log₂e) and r = x − k·ln 2 (ln 2 split in two so that k·ln 2's
 /// high part is exact), eʳ on |r| ≤ ½ln 2 by its Taylor series to r⁷ (truncation 6e-9), and
