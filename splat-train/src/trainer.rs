@@ -512,6 +512,24 @@ impl Trainer {
         }
     }
 
+    /// Whether what is left of the time budget holds `steps` more steps at the run's pace,
+    /// beyond the configured iteration count if need be (always, without a budget): room for
+    /// training a branch that will be thrown away on top of the run's own steps.
+    #[must_use]
+    pub fn time_left_for(&self, steps: u32) -> bool {
+        let c = &self.config;
+        c.time_budget.is_none_or(|b| {
+            let fit = self.run.pace.horizon(
+                u32::MAX,
+                self.run.iteration,
+                self.run.elapsed_s,
+                b.as_secs_f64(),
+                self.warmup_share(),
+            );
+            u64::from(fit) >= u64::from(self.run.iteration) + u64::from(steps)
+        })
+    }
+
     /// Whether the time budget, not the iteration count, ends the run's schedule: under a
     /// budget, its [`Pace`] expects fewer steps to fit than are configured. Where it does not,
     /// the run trains every configured step whatever its speed.

@@ -961,6 +961,7 @@ fn halving_accepted_at_10(cost_db: f64, first_look_db: Option<f64>) -> splat_tra
         out_of_time: false,
         steps_pruned: if first_look_db.is_some() { 30 } else { 10 },
         first_look_db,
+        second_look_db: None,
         seconds: splat_train::RoundSeconds::default(),
     }
 }
@@ -1150,6 +1151,121 @@ fn a_second_look_trains_both_branches_on_and_decides_on_that() {
     });
     assert!(cramped.first_look_db.is_none() && !cramped.accepted);
     assert_eq!(t.iteration(), 30);
+}
+
+/// A round refused again at its second look, near what is left of the tolerance, trains both
+/// branches on to the end of the run and is decided there: refused, the run ends as the control
+/// (bit for bit the run that never branched); accepted, as the merged branch; either way the
+/// search is over. With `final_look_within = 0` the second look decides, as before.
+#[test]
+fn a_second_look_refused_near_the_tolerance_is_decided_at_the_run_end() {
+    let (init, train, held) = budget_scene();
+    // As in `a_second_look_trains_both_branches_on_and_decides_on_that`: one round of 10 steps
+    // from step 20 of a 60-step run, merging four in five splats, its second look ending at 50.
+    let round_at_20 = |cfg: &BudgetConfig| {
+        let mut t = Trainer::new(init.clone(), train.clone(), base_config(60)).unwrap();
+        t.run_until(20, |_| {});
+        let mut search = search_of(20, 10, 3);
+        let round = run_round_scored(&mut search, &mut t, cfg, &held).unwrap();
+        (round, t, search)
+    };
+    let cfg = |tolerance_db: f64, final_look_within: f64| BudgetConfig {
+        tolerance_db,
+        second_look_within: 1e12,
+        final_look_within,
+        end_share: 0.9,
+        keep: 0.2,
+        min_splats: 10,
+        skip_hopeless: false,
+        ..BudgetConfig::default()
+    };
+    let (second, t, _) = round_at_20(&cfg(1e-9, 0.0));
+    assert!(second.first_look_db.is_some() && second.second_look_db.is_none());
+    assert!(!second.accepted && t.iteration() == 50, "{second:?}");
+    let second_cost = second.drop_db().unwrap();
+
+    // Refused at the end too: the run is the control's, which never branched.
+    let (refused, t, search) = round_at_20(&cfg(1e-9, 1e12));
+    assert_eq!(refused.second_look_db, Some(second_cost));
+    assert_eq!(refused.first_look_db, second.first_look_db);
+    let end_cost = refused.drop_db().unwrap();
+    assert!(end_cost > 1e-9 && !refused.accepted, "{refused:?}");
+    assert_eq!((refused.steps_pruned, t.iteration()), (40, 60));
+    assert_eq!(refused.discarded_seconds(), refused.seconds.merged);
+    let mut straight = Trainer::new(init.clone(), train.clone(), base_config(60)).unwrap();
+    straight.run_until(60, |_| {});
+    assert_eq!(t.splats(), straight.splats());
+    assert!(search.finished() && !search.due(60));
+
+    // Which look decides, with the looks' costs set by a scorer that charges the merged
+    // branch (the one with fewer splats) 0.45 dB at the first look, 0.3 at the second and
+    // `at_end` at the end, against a tolerance of 0.25 dB.
+    let scripted = |at_end: f64, final_look_within: f64| {
+        let mut t = Trainer::new(init.clone(), train.clone(), base_config(60)).unwrap();
+        t.run_until(20, |_| {});
+        let mut search = search_of(20, 10, 3);
+        let cfg = BudgetConfig {
+            second_look_within: 2.0,
+            final_look_within,
+            ..cfg(0.25, 0.0)
+        };
+        let mut merged_scores = 0;
+        let mut scorer = |s: &Splats| -> Result<splat_train::HeldoutPsnr, splat_train::RoundError> {
+            let cost = if s.len() < 400 {
+                merged_scores += 1;
+                [0.45, 0.3, at_end][(merged_scores - 1) / 4]
+            } else {
+                0.0
+            };
+            Ok(splat_train::HeldoutPsnr {
+                black: 30.0 - cost,
+                white: 30.0 - cost,
+            })
+        };
+        let round = search
+            .run_round(&mut t, &cfg, &mut scorer, &mut |_| {})
+            .unwrap()
+            .unwrap();
+        (round, t)
+    };
+    let (kept, t) = scripted(0.1, 2.0);
+    assert!(kept.accepted, "{kept:?}");
+    let near = |a: Option<f64>, b: f64| a.is_some_and(|a| (a - b).abs() < 1e-9);
+    assert!(near(kept.first_look_db, 0.45) && near(kept.second_look_db, 0.3));
+    assert!((kept.drop_db().unwrap() - 0.1).abs() < 1e-9);
+    assert_eq!((t.splats().len(), t.iteration()), (kept.candidate, 60));
+    assert_eq!(kept.discarded_seconds(), kept.seconds.control);
+    // Still over at the end: refused, the run ends as the control.
+    let (over, t) = scripted(0.3, 2.0);
+    assert!(!over.accepted && near(over.second_look_db, 0.3));
+    assert_eq!((t.splats().len(), t.iteration()), (400, 60));
+    // A second look's cost (0.3) beyond `final_look_within` (1) times what is left (0.25):
+    // refused there.
+    let (decided, t) = scripted(0.1, 1.0);
+    assert!(!decided.accepted && decided.second_look_db.is_none());
+    assert_eq!((t.splats().len(), t.iteration()), (400, 50));
+}
+
+/// Whether a time budget holds more steps is judged at the run's pace, beyond the configured
+/// iteration count: a second branch's steps come on top of the run's own.
+#[test]
+fn time_left_for_counts_steps_past_the_configured_end() {
+    let (init, train, _) = budget_scene();
+    let config = TrainConfig {
+        time_budget: Some(std::time::Duration::from_secs(100)),
+        ..base_config(60)
+    };
+    let mut t = Trainer::new(init.clone(), train.clone(), config).unwrap();
+    t.run_until(20, |_| {});
+    // One second a step: what is left of the 100 s (less the few milliseconds the 20 steps
+    // took) holds 99 more steps, not 100, and more than the 40 the configuration has left.
+    t.start_pace(splat_train::schedule::Pace {
+        step_s: Some(1.0),
+        coarse_step_s: None,
+    });
+    assert!(t.time_left_for(99) && !t.time_left_for(100));
+    let untimed = Trainer::new(init, train, base_config(60)).unwrap();
+    assert!(untimed.time_left_for(u32::MAX));
 }
 
 /// After a round accepted at its second look, the next merge is first looked at as soon after

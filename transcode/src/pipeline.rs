@@ -1710,9 +1710,15 @@ fn budget_round(
         (Some(p), Some(d)) => format!(
             "costs {d:+.3} dB held-out{}, the worse of black ({p:.2} against {:.2}) and white \
              ({:.2} against {:.2})",
-            round.first_look_db.map_or(String::new(), |f| format!(
-                " after a second trial of both branches (the first {f:+.3})"
-            )),
+            match (round.first_look_db, round.second_look_db) {
+                (Some(f), Some(second)) => format!(
+                    " with both branches trained to the end of the run (the first look \
+                     {f:+.3}, the second {second:+.3})"
+                ),
+                (Some(f), None) =>
+                    format!(" after a second trial of both branches (the first {f:+.3})"),
+                _ => String::new(),
+            },
             round.kept_psnr,
             round.pruned_psnr_white.unwrap_or(f64::NAN),
             round.kept_psnr_white.unwrap_or(f64::NAN),

@@ -165,10 +165,12 @@ fn table(h: &mut String, run: &RunReport, name: &str) {
             r.pruned_psnr.map_or("–".into(), |p| format!("{p:.2}")),
             r.pruned_psnr_white
                 .map_or("–".into(), |p| format!("{p:.2}")),
-            match (r.drop_db(), r.first_look_db) {
-                (Some(d), Some(f)) => format!("{d:+.3} (first look {f:+.3})"),
-                (Some(d), None) => format!("{d:+.3}"),
-                (None, _) => "–".into(),
+            match (r.drop_db(), r.first_look_db, r.second_look_db) {
+                (Some(d), Some(f), Some(second)) =>
+                    format!("{d:+.3} at the run's end (first look {f:+.3}, second {second:+.3})"),
+                (Some(d), Some(f), None) => format!("{d:+.3} (first look {f:+.3})"),
+                (Some(d), None, _) => format!("{d:+.3}"),
+                (None, ..) => "–".into(),
             },
             r.steps_pruned,
             round_seconds(r),
