@@ -141,6 +141,9 @@ pub(crate) struct ChainLanes {
     dir: [F8; 3],
     dir_len: F8,
     color_raw: [F8; 3],
+    /// The colour's Jacobian with respect to `dir` (`sh::dir_jacobian_terms`), so that the
+    /// chain's dL/d(dir) needs neither the SH coefficients nor the basis derivatives.
+    dir_jac: [[F8; 3]; 3],
 }
 
 impl ChainLanes {
@@ -148,6 +151,12 @@ impl ChainLanes {
     #[inline(always)]
     pub(crate) fn dir(&self) -> &[F8; 3] {
         &self.dir
+    }
+
+    /// The colour's Jacobian with respect to [`Self::dir`], row by colour channel.
+    #[inline(always)]
+    pub(crate) fn dir_jac(&self) -> &[[F8; 3]; 3] {
+        &self.dir_jac
     }
 }
 
@@ -550,9 +559,9 @@ pub(crate) fn project8<const AVX2: bool>(
         array(|l| coeffs(l).as_flattened()),
         &mut lane_coeffs[..3 * n_coeffs],
     );
-    let sh = sh::eval_terms(v.degree, n_coeffs, dir, |kk| {
-        array(|ch| lane_coeffs[3 * kk + ch])
-    });
+    let lane_coeff = |kk: usize| array(|ch| lane_coeffs[3 * kk + ch]);
+    let sh = sh::eval_terms(v.degree, n_coeffs, dir, lane_coeff);
+    let dir_jac = sh::dir_jacobian_terms(v.degree, n_coeffs, dir, lane_coeff);
     let (color_raw, color) = if v.linear_colour {
         (sh, sh)
     } else {
@@ -578,6 +587,7 @@ pub(crate) fn project8<const AVX2: bool>(
         dir,
         dir_len,
         color_raw,
+        dir_jac,
     };
     for l in 0..lanes_used {
         if let Some(why) = culls.0[l] {
@@ -725,10 +735,10 @@ pub(crate) fn colour_grad8(v: &ViewConsts, it: &ChainLanes, g: &ProjectedGradLan
 /// Backward of [`project8`] for the splats of one group: chains `g` (summed over pixels) to
 /// their parameters, lane by lane the IEEE operations of the backward one splat at a time
 /// (`reference::project_backward` in the tests, which checks the bits). The SH part is the
-/// caller's, one lane at a time (`sh::eval_backward` of [`colour_grad8`] along
-/// [`ChainLanes::dir`]; in lanes, moving 48 coefficients and their gradients a splat between
-/// lanes and the model's layout cost more than the arithmetic saved), which hands over
-/// dL/d(dir) as `d_dir`.
+/// caller's: dL/d(dir) = Jᵀ·dL/dc from the colour's Jacobian the projection kept
+/// ([`ChainLanes::dir_jac`], in lanes), handed over as `d_dir`, and the coefficients' gradients
+/// basis_k·dL/dc written lane by lane into the model's layout (in lanes, moving 48 gradients a
+/// splat between lanes and that layout cost more than the arithmetic saved).
 #[inline(always)]
 #[allow(clippy::too_many_lines)]
 pub(crate) fn project_backward8(

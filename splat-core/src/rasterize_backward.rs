@@ -106,13 +106,11 @@ impl Rasterizer {
             grads.reset(splats);
         }
         let t2 = Instant::now();
-        let k = splats.coeffs_per_splat();
         let this = &*self;
         grads
             .par_chunks_mut(CHAIN_CHUNK)
-            .zip(splats.sh.par_chunks(CHAIN_CHUNK * k))
             .enumerate()
-            .for_each(|(c, (g, coeffs))| this.chain_into(c * CHAIN_CHUNK, coeffs, g));
+            .for_each(|(c, g)| this.chain_into(c * CHAIN_CHUNK, g));
         self.phases.backward_chain = t2.elapsed();
     }
 
@@ -206,15 +204,17 @@ impl Rasterizer {
     }
 
     /// Adds into `g` the parameter gradients of the splats from `first` on, as many as
-    /// `g.means` holds, whose SH coefficients are `coeffs` (theirs only, splat-major as in
-    /// [`Splats::sh`]): the last phase of [`Rasterizer::backward`] for that range, after
+    /// `g.means` holds (their SH coefficients' gradients splat-major, as [`Splats::sh`]): the
+    /// last phase of [`Rasterizer::backward`] for that range, after
     /// [`Rasterizer::backward_sums`] on the same splats. The ranges may be chained in any order
-    /// and on any threads; each splat's gradients are the same as `backward` gives.
+    /// and on any threads; each splat's gradients are the same as `backward` gives. The
+    /// coefficients themselves are not needed: the forward pass kept what the chain uses of
+    /// them (the colour's Jacobian with respect to the view direction).
     ///
     /// # Panics
     /// If `backward_sums` has not run since the last forward pass, if the range runs past the
-    /// splats it saw, or if `g`'s arrays (or `coeffs`) are not all shaped for the range.
-    pub fn chain_into(&self, first: usize, coeffs: &[[f32; 3]], g: SplatGradsMut<'_>) {
+    /// splats it saw, or if `g`'s arrays are not all shaped for the range.
+    pub fn chain_into(&self, first: usize, g: SplatGradsMut<'_>) {
         let Some(cv) = &self.chain_view else {
             panic!("Rasterizer::chain_into: backward_sums has not run since the last forward pass");
         };
@@ -229,10 +229,9 @@ impl Rasterizer {
                 ]
                 .iter()
                 .all(|&m| m == n)
-                && g.sh.len() == n * k
-                && coeffs.len() == n * k,
-            "Rasterizer::chain_into: gradients or coefficients not shaped for {n} splats from \
-             {first} of {} with {k} SH coefficients each",
+                && g.sh.len() == n * k,
+            "Rasterizer::chain_into: gradients not shaped for {n} splats from {first} of {} \
+             with {k} SH coefficients each",
             cv.splats
         );
         #[cfg(target_arch = "x86_64")]
@@ -240,29 +239,23 @@ impl Rasterizer {
             // SAFETY: `use_avx2` is only true when the CPU reports AVX2 (`has_avx2`).
             #[allow(unsafe_code)]
             unsafe {
-                self.chain_range_avx2(cv, first, coeffs, g);
+                self.chain_range_avx2(cv, first, g);
             }
             return;
         }
-        self.chain_range(cv, first, coeffs, g);
+        self.chain_range(cv, first, g);
     }
 
     /// [`Rasterizer::chain_range`] compiled with AVX2 (eight f32 lanes an instruction).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    fn chain_range_avx2(
-        &self,
-        cv: &ChainView,
-        first: usize,
-        coeffs: &[[f32; 3]],
-        g: SplatGradsMut<'_>,
-    ) {
-        self.chain_range(cv, first, coeffs, g);
+    fn chain_range_avx2(&self, cv: &ChainView, first: usize, g: SplatGradsMut<'_>) {
+        self.chain_range(cv, first, g);
     }
 
     /// The body of [`Rasterizer::chain_into`], its arguments checked.
     #[inline(always)]
-    fn chain_range(&self, cv: &ChainView, first: usize, coeffs: &[[f32; 3]], g: SplatGradsMut<'_>) {
+    fn chain_range(&self, cv: &ChainView, first: usize, g: SplatGradsMut<'_>) {
         let (n, k) = (g.means.len(), cv.coeffs_per_splat);
         // Group by group of the projection's lanes; a range need not start at a group, and its
         // splats outside the range (or with no gradient record: hidden behind others in every
@@ -291,21 +284,20 @@ impl Rasterizer {
             prefetch::chain(&self.chain, group + 2);
             let grads = ProjectedGradLanes::gather(&records);
             let d_colour = colour_grad8(&cv.v, it, &grads);
-            let mut d_dir = [F8::default(); 3];
+            // The coefficients' gradients basis_k·dL/dc, lane by lane into the model's layout;
+            // dL/d(dir) from the colour's Jacobian the projection formed.
+            let mut basis = [F8::default(); 16];
+            sh::basis_terms(cv.v.degree, *it.dir(), &mut basis);
+            let n_coeffs = sh::num_sh_coeffs(cv.v.degree);
             for l in (0..WIDTH).filter(|&l| active[l]) {
                 let j = i0 + l - first;
-                let lane3 = |a: &[F8; 3]| Vec3::new(a[0].0[l], a[1].0[l], a[2].0[l]);
-                let d = sh::eval_backward(
-                    cv.v.degree,
-                    lane3(it.dir()),
-                    &coeffs[j * k..(j + 1) * k],
-                    lane3(&d_colour),
-                    &mut g.sh[j * k..(j + 1) * k],
-                );
-                for c in 0..3 {
-                    d_dir[c].0[l] = d[c];
+                for (d, b) in g.sh[j * k..j * k + n_coeffs].iter_mut().zip(&basis) {
+                    for (dc, c) in d.iter_mut().zip(&d_colour) {
+                        *dc += b.0[l] * c.0[l];
+                    }
                 }
             }
+            let d_dir = sh::dir_grad(it.dir_jac(), d_colour);
             let p = project_backward8(&cv.v, it, &grads, cv.size, d_dir);
             for l in (0..WIDTH).filter(|&l| active[l]) {
                 let j = i0 + l - first;
@@ -770,7 +762,7 @@ mod tests {
                 sh: &mut ranged.sh[a * k..b * k],
                 screen_grad_norm: &mut ranged.screen_grad_norm[a..b],
             };
-            r.chain_into(a, &s.sh[a * k..b * k], g);
+            r.chain_into(a, g);
         }
         let bits = |g: &SplatGrads| -> Vec<u32> {
             g.means
@@ -795,7 +787,7 @@ mod tests {
                 sh: vec![[0.0; 3]; 2 * k],
                 screen_grad_norm: vec![0.0; 2],
             };
-            r.chain_into(s.len() - 1, &s.sh[..2 * k], g.as_mut());
+            r.chain_into(s.len() - 1, g.as_mut());
         }));
         assert!(past.is_err(), "a range past the splats must be refused");
     }

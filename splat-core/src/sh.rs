@@ -205,7 +205,8 @@ pub fn eval_backward(
 
 /// [`eval_backward`] on any [`Real`] whose lanes hold f32, over the first `n` coefficients
 /// (the k-th given by `coeff(k)`): hands `d_coeff` each coefficient's gradient
-/// `basis_k·d_out` and returns dL/d(dir).
+/// `basis_k·d_out` and returns dL/d(dir), through [`dir_jacobian_terms`] and [`dir_grad`] as
+/// the rasteriser's chain computes it.
 #[inline(always)]
 pub(crate) fn eval_backward_terms<T: Real<Scalar = f32>>(
     degree: u32,
@@ -213,21 +214,58 @@ pub(crate) fn eval_backward_terms<T: Real<Scalar = f32>>(
     dir: [T; 3],
     coeff: impl Fn(usize) -> [T; 3],
     d_out: [T; 3],
-    mut d_coeff: impl FnMut(usize, [T; 3]),
+    d_coeff: impl FnMut(usize, [T; 3]),
 ) -> [T; 3] {
+    coeff_grad_terms(degree, n, dir, d_out, d_coeff);
+    dir_grad(&dir_jacobian_terms(degree, n, dir, coeff), d_out)
+}
+
+/// Hands `d_coeff` the gradient `basis_k·d_out` of each of the first `n` coefficients.
+#[inline(always)]
+pub(crate) fn coeff_grad_terms<T: Real<Scalar = f32>>(
+    degree: u32,
+    n: usize,
+    dir: [T; 3],
+    d_out: [T; 3],
+    mut d_coeff: impl FnMut(usize, [T; 3]),
+) {
+    let mut b = [T::splat(0.0); 16];
+    basis_terms(degree, dir, &mut b);
+    for (k, &bk) in b.iter().enumerate().take(n) {
+        d_coeff(k, [bk * d_out[0], bk * d_out[1], bk * d_out[2]]);
+    }
+}
+
+/// The Jacobian of [`eval`]'s colour with respect to the direction: row `ch` is
+/// Σ_k coeff(k)\[ch\]·∂basis_k/∂dir over the first `n` coefficients. It depends on the
+/// coefficients and the direction only, so the projection forms it in its lanes and the
+/// backward needs no coefficients ([`dir_grad`]).
+#[inline(always)]
+pub(crate) fn dir_jacobian_terms<T: Real<Scalar = f32>>(
+    degree: u32,
+    n: usize,
+    dir: [T; 3],
+    coeff: impl Fn(usize) -> [T; 3],
+) -> [[T; 3]; 3] {
     let mut b = [T::splat(0.0); 16];
     let mut g = [[T::splat(0.0); 3]; 16];
     basis_grad_terms(degree, dir, &mut b, &mut g);
-    let mut d_dir = [T::splat(0.0); 3];
-    for k in 0..n {
-        d_coeff(k, [b[k] * d_out[0], b[k] * d_out[1], b[k] * d_out[2]]);
+    let mut j = [[T::splat(0.0); 3]; 3];
+    for (k, gk) in g.iter().enumerate().take(n) {
         let c = coeff(k);
-        let along = c[0] * d_out[0] + c[1] * d_out[1] + c[2] * d_out[2];
-        for a in 0..3 {
-            d_dir[a] = d_dir[a] + g[k][a] * along;
+        for (row, ck) in j.iter_mut().zip(c) {
+            for (e, ga) in row.iter_mut().zip(gk) {
+                *e = *e + ck * *ga;
+            }
         }
     }
-    d_dir
+    j
+}
+
+/// dL/d(dir) = Jᵀ·d_out for the colour Jacobian `j` of [`dir_jacobian_terms`].
+#[inline(always)]
+pub(crate) fn dir_grad<T: Real<Scalar = f32>>(j: &[[T; 3]; 3], d_out: [T; 3]) -> [T; 3] {
+    std::array::from_fn(|a| j[0][a] * d_out[0] + j[1][a] * d_out[1] + j[2][a] * d_out[2])
 }
 
 /// Returns the number of SH coefficients per colour channel for a degree: 1, 4, 9, 16.

@@ -221,11 +221,7 @@ pub(crate) fn update_chained(
                 all_zero(g),
                 "update_chained: a chunk's gradients were left nonzero"
             );
-            raster.chain_into(
-                c * CHUNK_SPLATS,
-                bytemuck::cast_slice(&*groups[4].p),
-                g.as_mut(),
-            );
+            raster.chain_into(c * CHUNK_SPLATS, g.as_mut());
             update_chunk(plan, &widths, &mut paired(groups, g.as_mut()))
         })
         .reduce(UpdateOutcome::default, |a, b| a + b)
