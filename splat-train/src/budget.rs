@@ -30,7 +30,7 @@ use splat_core::Splats;
 
 use crate::init::point_spacing;
 use crate::state::ParamState;
-use crate::trainer::Trainer;
+use crate::trainer::{Snapshot, Trainer};
 
 mod clusters;
 
@@ -605,11 +605,6 @@ impl BudgetSearch {
         // The round's planning and scoring are counted on the trainer's clock as they happen
         // (a time budget is wall time, and a round near its end must not run past it); each
         // branch's time is its steps alone, which is what the branches are matched on.
-        let count_since = |trainer: &mut Trainer, since: Instant| {
-            let took = since.elapsed().as_secs_f64();
-            trainer.count_time_between_steps(took);
-            took
-        };
         let planning = Instant::now();
         let mut seconds = RoundSeconds::default();
         let contributions = trainer.contributions();
@@ -701,37 +696,8 @@ impl BudgetSearch {
         let mut kept = kept;
         if second_look {
             round.first_look_db = round.drop_db();
-            let swapping = Instant::now();
-            let merged = trainer.swap_snapshot(kept).map_err(fail)?;
-            round.seconds.planning += count_since(trainer, swapping);
-            let control = run_branch(
-                trainer,
-                iteration + plan.trial,
-                cfg.second_look_trials * plan.trial,
-                None,
-                heldout_psnr,
-                on_step,
-            )?;
-            round.seconds.control += control.training_s;
-            round.seconds.scoring += control.scoring_s;
-            let swapping = Instant::now();
-            kept = trainer.swap_snapshot(merged).map_err(fail)?;
-            round.seconds.planning += count_since(trainer, swapping);
-            let from = trainer.iteration();
-            let pruned = run_branch(
-                trainer,
-                from,
-                cfg.second_look_trials * plan.trial,
-                Some(&control.times),
-                heldout_psnr,
-                on_step,
-            )?;
-            round.seconds.scoring += pruned.scoring_s;
-            round.seconds.merged += pruned.training_s;
-            round.steps_pruned = pruned.ended_at - iteration;
-            round.out_of_time =
-                control.scores.count < SCORE_POINTS || pruned.scores.count < SCORE_POINTS;
-            round.take_scores(Some(&control.scores), &pruned.scores);
+            let steps = cfg.second_look_trials * plan.trial;
+            kept = look_again(trainer, kept, &|_| steps, &mut round, heldout_psnr, on_step)?;
             round.accepted = within(&round);
         }
         // A second look still refused near what is left: both branches train on to the end of
@@ -749,30 +715,14 @@ impl BudgetSearch {
             && trainer.time_left_for(2 * (end - trainer.iteration()));
         if final_look {
             round.second_look_db = round.drop_db();
-            let from = trainer.iteration();
-            let swapping = Instant::now();
-            let merged = trainer.swap_snapshot(kept).map_err(fail)?;
-            round.seconds.planning += count_since(trainer, swapping);
-            let control = run_branch(trainer, from, end - from, None, heldout_psnr, on_step)?;
-            round.seconds.control += control.training_s;
-            round.seconds.scoring += control.scoring_s;
-            let swapping = Instant::now();
-            kept = trainer.swap_snapshot(merged).map_err(fail)?;
-            round.seconds.planning += count_since(trainer, swapping);
-            let pruned = run_branch(
+            kept = look_again(
                 trainer,
-                from,
-                end - from,
-                Some(&control.times),
+                kept,
+                &|from| end.saturating_sub(from),
+                &mut round,
                 heldout_psnr,
                 on_step,
             )?;
-            round.seconds.scoring += pruned.scoring_s;
-            round.seconds.merged += pruned.training_s;
-            round.steps_pruned = pruned.ended_at - iteration;
-            round.out_of_time =
-                control.scores.count < SCORE_POINTS || pruned.scores.count < SCORE_POINTS;
-            round.take_scores(Some(&control.scores), &pruned.scores);
             round.accepted = within(&round);
         }
         if !round.accepted {
@@ -785,6 +735,56 @@ impl BudgetSearch {
         self.tolerance_spent = spent > 0.0 && cfg.tolerance_db - spent < cfg.least_left_db;
         Ok(Some(round))
     }
+}
+
+/// Counts the wall time since `since` on the trainer's clock, as time spent between its steps
+/// (a time budget is wall time, and a round near its end must not run past it); returns it.
+fn count_since(trainer: &mut Trainer, since: Instant) -> f64 {
+    let took = since.elapsed().as_secs_f64();
+    trainer.count_time_between_steps(took);
+    took
+}
+
+/// Looks at a round again: the control (`kept`), then the merged branch (the trainer's), each
+/// trained on `steps(start)` steps from the step `start` it stands at and scored as a trial's
+/// branches are (the merged branch at the control's training times where a time budget binds).
+/// The round takes this look's scores, step count and out-of-time flag, and adds its times;
+/// the trainer is left holding the merged branch, and the control is returned.
+fn look_again<E: From<RoundError>>(
+    trainer: &mut Trainer,
+    kept: Snapshot,
+    steps: &dyn Fn(u32) -> u32,
+    round: &mut BudgetRound,
+    heldout_psnr: &mut dyn FnMut(&Splats) -> Result<HeldoutPsnr, E>,
+    on_step: &mut dyn FnMut(&crate::Progress),
+) -> Result<Snapshot, E> {
+    let iteration = round.iteration;
+    let fail = |problem: String| E::from(RoundError { iteration, problem });
+    let swapping = Instant::now();
+    let merged = trainer.swap_snapshot(kept).map_err(fail)?;
+    round.seconds.planning += count_since(trainer, swapping);
+    let start = trainer.iteration();
+    let control = run_branch(trainer, start, steps(start), None, heldout_psnr, on_step)?;
+    round.seconds.control += control.training_s;
+    round.seconds.scoring += control.scoring_s;
+    let swapping = Instant::now();
+    let kept = trainer.swap_snapshot(merged).map_err(fail)?;
+    round.seconds.planning += count_since(trainer, swapping);
+    let start = trainer.iteration();
+    let pruned = run_branch(
+        trainer,
+        start,
+        steps(start),
+        Some(&control.times),
+        heldout_psnr,
+        on_step,
+    )?;
+    round.seconds.scoring += pruned.scoring_s;
+    round.seconds.merged += pruned.training_s;
+    round.steps_pruned = pruned.ended_at - iteration;
+    round.out_of_time = control.scores.count < SCORE_POINTS || pruned.scores.count < SCORE_POINTS;
+    round.take_scores(Some(&control.scores), &pruned.scores);
+    Ok(kept)
 }
 
 /// One branch of a round: its held-out scores and what it took.

@@ -1086,6 +1086,21 @@ fn accepted_budget_rounds_shrink_the_model() {
     assert_eq!(report.iterations, 80);
 }
 
+/// One round of 10-step trials at step 20 of a 60-step run on the budget scene, scored on its
+/// held-out views: the round, the trainer after it and the search.
+fn round_at_20_of_60(
+    init: &Splats,
+    train: &[View],
+    held: &[View],
+    cfg: &BudgetConfig,
+) -> (splat_train::BudgetRound, Trainer, BudgetSearch) {
+    let mut t = Trainer::new(init.clone(), train.to_vec(), base_config(60)).unwrap();
+    t.run_until(20, |_| {});
+    let mut search = search_of(20, 10, 3);
+    let round = run_round_scored(&mut search, &mut t, cfg, held).unwrap();
+    (round, t, search)
+}
+
 /// A refused round whose cost is near what is left of the tolerance is looked at again after
 /// both branches train on for `second_look_trials` more trials: its first look measures what a
 /// single look does, the decision is the second look's, a second refusal goes on from the
@@ -1098,10 +1113,7 @@ fn a_second_look_trains_both_branches_on_and_decides_on_that() {
     // which costs. The rounds end by 0.9 of the run (step 54): room for a second look of two
     // more trials (to step 50).
     let round_at_20 = |cfg: &BudgetConfig| {
-        let mut t = Trainer::new(init.clone(), train.clone(), base_config(60)).unwrap();
-        t.run_until(20, |_| {});
-        let mut search = search_of(20, 10, 3);
-        let round = run_round_scored(&mut search, &mut t, cfg, &held).unwrap();
+        let (round, t, _) = round_at_20_of_60(&init, &train, &held, cfg);
         (round, t)
     };
     let cfg = |tolerance_db: f64, second_look_within: f64| BudgetConfig {
@@ -1162,13 +1174,7 @@ fn a_second_look_refused_near_the_tolerance_is_decided_at_the_run_end() {
     let (init, train, held) = budget_scene();
     // As in `a_second_look_trains_both_branches_on_and_decides_on_that`: one round of 10 steps
     // from step 20 of a 60-step run, merging four in five splats, its second look ending at 50.
-    let round_at_20 = |cfg: &BudgetConfig| {
-        let mut t = Trainer::new(init.clone(), train.clone(), base_config(60)).unwrap();
-        t.run_until(20, |_| {});
-        let mut search = search_of(20, 10, 3);
-        let round = run_round_scored(&mut search, &mut t, cfg, &held).unwrap();
-        (round, t, search)
-    };
+    let round_at_20 = |cfg: &BudgetConfig| round_at_20_of_60(&init, &train, &held, cfg);
     let cfg = |tolerance_db: f64, final_look_within: f64| BudgetConfig {
         tolerance_db,
         second_look_within: 1e12,
