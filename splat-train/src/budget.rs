@@ -551,9 +551,9 @@ impl BudgetSearch {
     /// stays within `cfg.tolerance_db`; a round refused near what is left is looked at again
     /// after more training ([`BudgetConfig::second_look_within`]) and, refused again near it,
     /// at the end of the run ([`BudgetConfig::final_look_within`]). `on_step` sees every step
-    /// of both branches. Merges that cannot cost less than what is left of the tolerance are skipped
-    /// first ([`BudgetConfig::skip_hopeless`], recorded in [`BudgetSearch::skipped`]), each
-    /// counting as refused, so the round tries the next, gentler one. Returns the round (also
+    /// of both branches. Merges that cannot cost less than what is left of the tolerance are
+    /// skipped first ([`BudgetConfig::skip_hopeless`], recorded in [`BudgetSearch::skipped`]),
+    /// each counting as refused, so the round tries the next, gentler one. Returns the round (also
     /// recorded), or `None` when nothing is left to merge, when every merge the search could
     /// still try was skipped, or, under a time budget, when the trainer's horizon has no room
     /// for both branches' steps ([`BudgetSearch::no_time_left`]; a round started then could
@@ -1606,14 +1606,12 @@ mod tests {
         let mut search = BudgetSearch::default();
         search.rounds.push(BudgetRound {
             first_look_db: Some(0.34),
-            second_look_db: None,
             ..round(10, true, false, 0.09)
         });
         assert!((search.cost_floor() - 0.09).abs() < 1e-12);
         assert!((search.first_look_floor() - 0.34).abs() < 1e-12);
         search.rounds.push(BudgetRound {
             first_look_db: Some(0.5),
-            second_look_db: None,
             ..round(20, false, false, 0.3)
         });
         assert!((search.cost_floor() - GENTLER_COST_SHARE * 0.3).abs() < 1e-12);
