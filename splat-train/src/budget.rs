@@ -53,7 +53,8 @@ pub struct BudgetConfig {
     pub auto: bool,
     /// The held-out PSNR (dB, as the round's scorer measures it: the pipeline's is
     /// [`crate::Metrics::psnr_both`]) the pruning may cost in all, against the full model
-    /// trained for the same steps.
+    /// trained for the same steps: the accepted rounds' costs summed with their signs
+    /// ([`BudgetSearch::spent_db`]), so a round that gained leaves more to the next.
     pub tolerance_db: f64,
     /// The first round starts after this share of the run's planned steps.
     pub start_share: f64,
@@ -427,14 +428,15 @@ pub struct SkippedRound {
 pub const GENTLER_COST_SHARE: f64 = 0.25;
 
 impl BudgetSearch {
-    /// The total cost of the accepted rounds (dB), each counted as at least 0.
+    /// The total cost of the accepted rounds (dB), gains included: each round is scored
+    /// against its control, the model before it, so the sum is the model's distance from the
+    /// whole one.
     #[must_use]
     pub fn spent_db(&self) -> f64 {
         self.rounds
             .iter()
             .filter(|r| r.accepted)
             .filter_map(|r| r.drop_db())
-            .map(|d| d.max(0.0))
             .sum()
     }
 

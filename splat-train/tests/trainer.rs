@@ -765,9 +765,9 @@ fn three_rounds(least_left_db: f64) -> (BudgetSearch, BudgetConfig) {
 }
 
 /// Once accepted rounds have spent part of the tolerance and less than `least_left_db` is
-/// left, the search ends: here every positive cost leaves too little, so the search runs until
-/// the first round that costs anything and stops after it; with nothing required to be left it
-/// runs all its rounds.
+/// left, the search ends: here every positive total leaves too little, so the search runs
+/// until the rounds' costs, gains included, first add up to more than nothing and stops
+/// there; with nothing required to be left it runs all its rounds.
 #[test]
 fn a_search_ends_when_too_little_tolerance_is_left() {
     let (init, train, held) = budget_scene();
@@ -783,11 +783,18 @@ fn a_search_ends_when_too_little_tolerance_is_left() {
         let costs: Vec<f64> = search.rounds.iter().map(|r| r.drop_db().unwrap()).collect();
         assert!(search.rounds.iter().all(|r| r.accepted), "{costs:?}");
         if least_left_db > 0.0 {
-            let first_cost = costs.iter().position(|&c| c > 0.0);
+            let totals: Vec<f64> = costs
+                .iter()
+                .scan(0.0, |sum, c| {
+                    *sum += c;
+                    Some(*sum)
+                })
+                .collect();
+            let first_cost = totals.iter().position(|&t| t > 0.0);
             assert_eq!(
                 Some(costs.len() - 1),
                 first_cost,
-                "the search goes on to the first round that costs: {costs:?}"
+                "the search goes on to the first round whose total costs: {costs:?}"
             );
             assert!(search.tolerance_spent && search.finished());
         } else {
@@ -1250,6 +1257,62 @@ fn a_second_look_refused_near_the_tolerance_is_decided_at_the_run_end() {
     let (decided, t) = scripted(0.1, 1.0);
     assert!(!decided.accepted && decided.second_look_db.is_none());
     assert_eq!((t.splats().len(), t.iteration()), (400, 50));
+}
+
+/// A round that gained (its merged branch scored above its control) leaves more of the
+/// tolerance to the next: the search's budget is the model's distance from the whole model,
+/// the rounds' costs summed with their signs. A scorer gives the whole model 30 dB, the first
+/// round's halves 30.2 (a gain of 0.2) and the second round's halves 30.2 − `second` dB:
+/// against a tolerance of 0.25, a second round costing 0.4 is accepted (0.2 in all) and one
+/// costing 0.5 is refused (0.3 in all).
+#[test]
+fn a_round_s_gain_is_credited_to_the_next() {
+    let (init, train, _) = budget_scene();
+    let two_rounds = |second: f64| {
+        let mut t = Trainer::new(init.clone(), train.clone(), base_config(60)).unwrap();
+        let mut search = search_of(20, 10, 2);
+        let cfg = BudgetConfig {
+            tolerance_db: 0.25,
+            second_look_within: 0.0,
+            final_look_within: 0.0,
+            least_left_db: 0.0,
+            end_share: 0.9,
+            keep: 0.5,
+            min_splats: 10,
+            skip_hopeless: false,
+            ..BudgetConfig::default()
+        };
+        let mut scorer = |s: &Splats| -> Result<splat_train::HeldoutPsnr, splat_train::RoundError> {
+            let psnr = match s.len() {
+                400.. => 30.0,
+                151..400 => 30.2,
+                _ => 30.2 - second,
+            };
+            Ok(splat_train::HeldoutPsnr {
+                black: psnr,
+                white: psnr,
+            })
+        };
+        while t.iteration() < 60 {
+            while search.due(t.iteration()) {
+                search
+                    .run_round(&mut t, &cfg, &mut scorer, &mut |_| {})
+                    .unwrap();
+            }
+            t.run_until(t.iteration() + 1, |_| {});
+        }
+        search
+    };
+    let near = |a: f64, b: f64| (a - b).abs() < 1e-9;
+    let credited = two_rounds(0.4);
+    let costs: Vec<f64> = credited.rounds.iter().filter_map(|r| r.drop_db()).collect();
+    assert_eq!(costs.len(), 2, "{:?}", credited.rounds);
+    assert!(near(costs[0], -0.2) && near(costs[1], 0.4), "{costs:?}");
+    assert!(credited.rounds.iter().all(|r| r.accepted));
+    assert!(near(credited.spent_db(), 0.2));
+    let over = two_rounds(0.5);
+    assert!(over.rounds[0].accepted && !over.rounds[1].accepted);
+    assert!(near(over.spent_db(), -0.2));
 }
 
 /// Whether a time budget holds more steps is judged at the run's pace, beyond the configured

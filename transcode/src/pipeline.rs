@@ -1725,21 +1725,23 @@ fn budget_round(
         ),
         _ => "not measured".into(),
     };
+    // What the accepted rounds left of the tolerance, gains included.
+    let left = budget.config.tolerance_db - budget.search.spent_db();
     observer(Event::Note(format!(
         "splat budget, step {}: {} → {} splats {cost}; {} ({:.1} s)",
         round.iteration,
         round.splats,
         round.candidate,
         if round.out_of_time {
-            "out of time, kept the whole model"
+            "out of time, kept the whole model".into()
         } else if round.accepted && budget.search.tolerance_spent {
-            "merged; too little of the tolerance is left for another round, the search ends"
+            "merged; too little of the tolerance is left for another round, the search ends".into()
         } else if round.accepted {
-            "merged"
+            format!("merged, {left:.3} dB of the tolerance left")
         } else if budget.search.finished() {
-            "over the tolerance, kept the whole model; the search ends"
+            "over the tolerance, kept the whole model; the search ends".into()
         } else {
-            "over the tolerance, kept the whole model; the next round merges fewer"
+            "over the tolerance, kept the whole model; the next round merges fewer".into()
         },
         round.seconds.total(),
     )));

@@ -109,13 +109,13 @@ fn table(h: &mut String, run: &RunReport, name: &str) {
     let n = run.metrics.splats;
     let _ = write!(
         h,
-        "<h3>{}</h3>\n<p>Initial splats: {}; chosen: {} ({:.1} % of them), costing {:.3} dB of \
-         the {:.2} dB tolerance in the rounds.</p>\n",
+        "<h3>{}</h3>\n<p>Initial splats: {}; chosen: {} ({:.1} % of them), {} in the rounds \
+         (tolerance {:.2} dB).</p>\n",
         esc(name),
         run.init.splats,
         n,
         100.0 * n as f64 / run.init.splats.max(1) as f64,
-        run.budget.spent_db(),
+        spent_words(run.budget.spent_db()),
         run.budget_tolerance_db,
     );
     if let Some(b) = &run.sh_bands {
@@ -251,4 +251,13 @@ fn rounds_time(rounds: &[BudgetRound]) -> Option<String> {
         sum(|r| r.seconds.scoring),
         sum(BudgetRound::discarded_seconds),
     ))
+}
+
+/// The rounds' total cost in words: a search whose rounds gained overall is not said to cost.
+fn spent_words(spent_db: f64) -> String {
+    if spent_db < 0.0 {
+        format!("gaining {:.3} dB", -spent_db)
+    } else {
+        format!("costing {spent_db:.3} dB")
+    }
 }
