@@ -440,6 +440,12 @@ impl BudgetSearch {
             .sum()
     }
 
+    /// What the accepted rounds leave of `tolerance_db` (dB; more than it where they gained).
+    #[must_use]
+    pub fn left_db(&self, tolerance_db: f64) -> f64 {
+        tolerance_db - self.spent_db()
+    }
+
     /// Whether no more rounds will run: no plan, all planned rounds done, nothing left to
     /// merge, too little of the tolerance left, a round ran out of time, had no time left to
     /// start or was decided at the run's end, or [`MAX_REFUSED_ROUNDS`] rounds were refused.
@@ -588,7 +594,7 @@ impl BudgetSearch {
         while cfg.skip_hopeless
             && let floor = self.cost_floor()
             && let first_look_floor = self.first_look_floor()
-            && let left = cfg.tolerance_db - self.spent_db()
+            && let left = self.left_db(cfg.tolerance_db)
             && first_look_floor > 0.0
             && (floor > left || first_look_floor > cfg.second_look_within.max(1.0) * left)
         {
@@ -687,7 +693,7 @@ impl BudgetSearch {
         // (the merged branch is still recovering from its merges, and its cost at the end of
         // the run has been half of this or less), where the rounds' steps leave room: they end
         // by `end_share` of the run's steps (under a time budget, of those it now expects).
-        let left = cfg.tolerance_db - self.spent_db();
+        let left = self.left_db(cfg.tolerance_db);
         let rounds_end = (cfg.end_share * f64::from(trainer.horizon())).round() as u32;
         let second_look = !round.accepted
             && !round.out_of_time
@@ -733,8 +739,8 @@ impl BudgetSearch {
             round.seconds.planning += count_since(trainer, restoring);
         }
         self.rounds.push(round);
-        let spent = self.spent_db();
-        self.tolerance_spent = spent > 0.0 && cfg.tolerance_db - spent < cfg.least_left_db;
+        self.tolerance_spent =
+            self.spent_db() > 0.0 && self.left_db(cfg.tolerance_db) < cfg.least_left_db;
         Ok(Some(round))
     }
 }

@@ -1305,7 +1305,7 @@ fn choose_bands(
     let b = &cfg.budget;
     let tolerance = b
         .bands_tolerance_db
-        .min((b.tolerance_db - search.spent_db()).max(0.0));
+        .min(search.left_db(b.tolerance_db).max(0.0));
     let options = cfg.eval_options();
     // One render a view, as the budget's rounds score: the full evaluation adds a second render,
     // the SSIMs and the error breakdown to each view, none of which the choice reads.
@@ -1725,8 +1725,7 @@ fn budget_round(
         ),
         _ => "not measured".into(),
     };
-    // What the accepted rounds left of the tolerance, gains included.
-    let left = budget.config.tolerance_db - budget.search.spent_db();
+    let left = budget.search.left_db(budget.config.tolerance_db);
     observer(Event::Note(format!(
         "splat budget, step {}: {} → {} splats {cost}; {} ({:.1} s)",
         round.iteration,
