@@ -94,6 +94,17 @@ pub enum Error {
         /// The memory the limit stands for, in MiB.
         limit_mib: u64,
     },
+    /// A model file whose extension names no splat format this crate reads.
+    #[error(
+        "{path}: unknown splat format {extension}; .ply (3DGS), .spz, .splat and .glb are read \
+         and written"
+    )]
+    UnknownFormat {
+        /// The file.
+        path: PathBuf,
+        /// Its extension as written (`` `.obj` ``), or `(no extension)`.
+        extension: String,
+    },
     /// A camera with skew: the 3DGS projection has no skew term.
     #[error(
         "the camera has skew {skew}; 3D Gaussian splats are rendered with skew-free pinhole cameras (resample the image to remove the skew)"

@@ -15,7 +15,9 @@
 //!   splat's summed blending weight over a view (`accumulate_contributions`).
 //! - [`ply`]: the Inria 3DGS PLY, read and write; [`export`]: the antimatter15 `.splat` layout,
 //!   read and write; [`spz`]: Niantic's compressed SPZ, read and write; [`glb`]: binary glTF with
-//!   `KHR_gaussian_splatting`, read and write; [`frame`]: the change to their y-up frame.
+//!   `KHR_gaussian_splatting`, read and write; [`frame`]: the change to their y-up frame;
+//!   [`model_file`]: any of the four by its extension, with whether the file says the model is
+//!   drawn antialiased (a PLY header comment, SPZ's flag).
 //! - [`Error`]: inconsistent models, oversized views and file errors.
 //!
 //! ```
@@ -50,6 +52,7 @@ mod falloff;
 pub mod frame;
 pub mod glb;
 mod lanes;
+pub mod model_file;
 pub mod ply;
 mod prefetch;
 mod project;

@@ -6,6 +6,12 @@
 //! normals, and derives the SH degree from the number of `f_rest` (0/9/24/45), which are
 //! channel-major: `f_rest_{c·K' + j}` is coefficient j + 1 of channel c, K' = (degree + 1)² − 1.
 //! Writing produces exactly Inria's layout: binary little endian, all `float`, normals as zeros.
+//!
+//! How a model is drawn travels in a header comment: a model trained with the antialiased
+//! (Mip-Splatting) opacity compensation is written with Brush's `comment SplatRenderMode: mip`,
+//! which Brush, PlayCanvas (SuperSplat) and splat-transform read and keep; reading also accepts
+//! Postshot's `antialiased 1` and `postshot.anti_aliasing=1`, case-insensitively, the last such
+//! comment deciding ([`PlyModel::antialiased`]).
 
 use std::io::Write;
 use std::path::Path;
@@ -128,18 +134,72 @@ fn find_columns(path: &Path, el: &Element) -> Result<Columns, Error> {
     })
 }
 
-/// Reads a 3DGS PLY file.
+/// The header comment that marks a model trained antialiased: Brush's spelling, the one
+/// splat-transform writes whichever form it read.
+pub const ANTIALIASED_COMMENT: &str = "SplatRenderMode: mip";
+
+/// A model read from a 3DGS PLY, with what its header says of how it is drawn.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlyModel {
+    /// The splats.
+    pub splats: Splats,
+    /// The header says the model was trained with the antialiased opacity compensation
+    /// (`SplatRenderMode: mip`, or Postshot's comments), so it is drawn with it.
+    pub antialiased: bool,
+}
+
+/// How a model is written.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PlyOptions {
+    /// Writes [`ANTIALIASED_COMMENT`] into the header.
+    pub antialiased: bool,
+}
+
+/// Whether a header's comments say the model is drawn antialiased: the last comment that names
+/// a render mode decides (as splat-transform reads them); none: not antialiased.
+fn antialiased_from_comments<'a>(comments: impl Iterator<Item = &'a str>) -> bool {
+    let mut antialiased = false;
+    for c in comments {
+        let c = c.trim().to_ascii_lowercase();
+        let said = if let Some(mode) = c.strip_prefix("splatrendermode:") {
+            Some(mode.trim() == "mip")
+        } else if let Some(flag) = c.strip_prefix("antialiased ") {
+            Some(flag.trim() == "1")
+        } else {
+            c.strip_prefix("postshot.anti_aliasing=")
+                .map(|flag| flag.trim() == "1")
+        };
+        if let Some(said) = said {
+            antialiased = said;
+        }
+    }
+    antialiased
+}
+
+/// Reads a 3DGS PLY file's splats (see [`read_model`] for how they are drawn).
 pub fn read_splats(path: &Path) -> Result<Splats, Error> {
+    read_model(path).map(|m| m.splats)
+}
+
+/// Reads a 3DGS PLY file: its splats and how its header says they are drawn.
+pub fn read_model(path: &Path) -> Result<PlyModel, Error> {
     let data = std::fs::read(path).map_err(|source| Error::Io {
         path: path.to_path_buf(),
         source,
     })?;
-    parse_splats(path, &data)
+    parse_model(path, &data)
 }
 
-/// Parses the bytes of a 3DGS PLY file; `path` is used in error messages.
+/// Parses the bytes of a 3DGS PLY file's splats; `path` is used in error messages.
 pub fn parse_splats(path: &Path, data: &[u8]) -> Result<Splats, Error> {
+    parse_model(path, data).map(|m| m.splats)
+}
+
+/// Parses the bytes of a 3DGS PLY file: its splats and how its header says they are drawn;
+/// `path` is used in error messages.
+pub fn parse_model(path: &Path, data: &[u8]) -> Result<PlyModel, Error> {
     let header = parse_header(path, data)?;
+    let antialiased = antialiased_from_comments(header.comments.iter().map(|(_, c)| c.as_str()));
     let (vi, el) = header
         .element("vertex")
         .ok_or_else(|| header_err(path, 0, "no `vertex` element"))?;
@@ -294,7 +354,10 @@ pub fn parse_splats(path: &Path, data: &[u8]) -> Result<Splats, Error> {
             }
         }
     }
-    Ok(splats)
+    Ok(PlyModel {
+        splats,
+        antialiased,
+    })
 }
 
 /// Skips one element's items in a binary body, returning the offset after it.
@@ -350,13 +413,21 @@ pub fn inria_property_names(degree: u32) -> Vec<String> {
 /// Writes `splats` as an Inria 3DGS PLY, atomically (a temporary file in the same directory,
 /// renamed over `path` once complete).
 pub fn write_splats(path: &Path, splats: &Splats) -> Result<(), Error> {
+    write_model(path, splats, &PlyOptions::default())
+}
+
+/// Writes `splats` as an Inria 3DGS PLY with the header `options` ask for, atomically.
+pub fn write_model(path: &Path, splats: &Splats, options: &PlyOptions) -> Result<(), Error> {
     splats.validate()?;
     atomic_output::write_atomic_with(path, |w| {
         let names = inria_property_names(splats.sh_degree);
-        let mut head = format!(
-            "ply\nformat binary_little_endian 1.0\nelement vertex {}\n",
-            splats.len()
-        );
+        let mut head = String::from("ply\nformat binary_little_endian 1.0\n");
+        if options.antialiased {
+            head.push_str("comment ");
+            head.push_str(ANTIALIASED_COMMENT);
+            head.push('\n');
+        }
+        head.push_str(&format!("element vertex {}\n", splats.len()));
         for n in &names {
             head.push_str("property float ");
             head.push_str(n);

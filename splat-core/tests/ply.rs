@@ -294,3 +294,78 @@ fn splat_export_writes_32_bytes_per_splat_sorted_by_size_times_opacity() {
     });
     assert_eq!(first, &splat_core::export::encode_record(&s, best.unwrap()));
 }
+
+/// `bytes` (a PLY) with `comments` inserted as header lines after its format line.
+fn with_comments(bytes: &[u8], comments: &[&str]) -> Vec<u8> {
+    let format_end = bytes.iter().position(|&b| b == b'\n').unwrap() + 1;
+    let format_end = format_end
+        + bytes[format_end..]
+            .iter()
+            .position(|&b| b == b'\n')
+            .unwrap()
+        + 1;
+    let mut out = bytes[..format_end].to_vec();
+    for c in comments {
+        out.extend_from_slice(format!("comment {c}\n").as_bytes());
+    }
+    out.extend_from_slice(&bytes[format_end..]);
+    out
+}
+
+#[test]
+fn an_antialiased_model_says_so_in_brush_s_header_comment() {
+    let s = ply::read_splats(&gt_path()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let (aa, plain) = (dir.path().join("aa.ply"), dir.path().join("plain.ply"));
+    ply::write_model(&aa, &s, &ply::PlyOptions { antialiased: true }).unwrap();
+    ply::write_model(&plain, &s, &ply::PlyOptions::default()).unwrap();
+    let (aa_bytes, plain_bytes) = (std::fs::read(&aa).unwrap(), std::fs::read(&plain).unwrap());
+    // The tagged file is the plain one with exactly one header line more.
+    assert_eq!(
+        aa_bytes,
+        with_comments(&plain_bytes, &["SplatRenderMode: mip"])
+    );
+    let back = ply::read_model(&aa).unwrap();
+    assert!(back.antialiased);
+    assert_eq!(back.splats, s);
+    assert!(!ply::read_model(&plain).unwrap().antialiased);
+}
+
+#[test]
+fn render_mode_comments_are_read_as_brush_postshot_and_splat_transform_write_them() {
+    let s = ply::read_splats(&gt_path()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("m.ply");
+    ply::write_splats(&p, &s).unwrap();
+    let plain = std::fs::read(&p).unwrap();
+    let cases: [(&[&str], bool); 12] = [
+        (&[], false),
+        (
+            &[
+                "Exported from Brush",
+                "SH degree: 3",
+                "SplatRenderMode: mip",
+            ],
+            true,
+        ),
+        (&["SplatRenderMode: default"], false),
+        (&["SplatRenderMode: 2dgs"], false),
+        (&["  SPLATRENDERMODE:  MIP  "], true),
+        (&["antialiased 1"], true),
+        (&["antialiased 0"], false),
+        (&["postshot.anti_aliasing=1"], true),
+        (&["SplatRenderMode: banana"], false),
+        // The last comment that names a mode decides; others do not reset it.
+        (&["antialiased 1", "SplatRenderMode: default"], false),
+        (
+            &["SplatRenderMode: default", "antialiased 1", "made by hand"],
+            true,
+        ),
+        (&["antialiasedness 1", "SplatRenderMode mip"], false),
+    ];
+    for (comments, want) in cases {
+        let m = ply::parse_model(Path::new("c.ply"), &with_comments(&plain, comments)).unwrap();
+        assert_eq!(m.antialiased, want, "{comments:?}");
+        assert_eq!(m.splats, s);
+    }
+}

@@ -93,11 +93,13 @@ pub struct TrainingConfig {
     pub photometric: splat_train::Photometric,
     /// Weight of the L1 loss of rendered alpha against the reference masks.
     pub alpha_loss: f32,
-    /// Train (and evaluate, and flag in the SPZ) with the antialiased opacity compensation of
-    /// Mip-Splatting's 2-D filter: each splat's opacity is scaled by √(det Σ / det(Σ + 0.3 I)),
-    /// so the dilation blurs without adding coverage. Viewers of plain 3DGS PLY files do not
-    /// compensate, so the default is off (the README demo's model trained so scores 42.55 /
-    /// 38.99 dB held-out where it is compensated, and on its training views 47.2 dB on black
+    /// Train (and evaluate) with the antialiased opacity compensation of Mip-Splatting's 2-D
+    /// filter: each splat's opacity is scaled by √(det Σ / det(Σ + 0.3 I)), so the dilation
+    /// blurs without adding coverage. The PLY says so in a header comment (`SplatRenderMode:
+    /// mip`) and the SPZ in its flag, which our viewer, Brush, PlayCanvas / SuperSplat and
+    /// splat-transform read; a viewer that ignores them draws the model with more coverage than
+    /// it was trained to have, so the default is off (the README demo's model trained so scores
+    /// 42.55 / 38.99 dB held-out drawn as trained, and on its training views 47.2 dB on black
     /// compensated but 36.0 drawn plain: docs/benchmarks/fidelity.md §14).
     pub antialiased: bool,
     /// Coarse-to-fine warm-up: the first `warmup_share` of the steps train on views whose sides

@@ -1361,11 +1361,11 @@ fn export(
 ) -> Result<(), PipelineError> {
     if cfg.training.antialiased {
         observer(Event::Note(
-            "the model was trained antialiased (training.antialiased): the SPZ says so and our \
-             viewer compensates, but a PLY has no place for it, and a viewer of plain 3DGS PLY \
-             files draws it with more coverage than it was trained to have (the README demo's \
-             model on its training views: 47.2 dB on black compensated, 36.0 drawn plain; \
-             docs/benchmarks/fidelity.md section 14)"
+            "the model was trained antialiased (training.antialiased): its PLY says so in a \
+             header comment (SplatRenderMode: mip) and its SPZ in a flag, which our viewer, \
+             Brush, PlayCanvas / SuperSplat and splat-transform read; a viewer that ignores them \
+             draws it with more coverage than it was trained to have, and .splat and .glb files \
+             cannot say it (docs/benchmarks/fidelity.md section 14)"
                 .into(),
         ));
     }
@@ -1456,7 +1456,7 @@ const MODEL_EXTENSIONS: [&str; 4] = ["ply", "splat", "spz", "glb"];
 /// The files written beside a model's PLY.
 #[derive(Clone, Copy, Debug)]
 struct ModelFormats {
-    /// The model was trained antialiased (the SPZ header says so).
+    /// The model was trained antialiased (the PLY's header and the SPZ's flag say so).
     antialiased: bool,
     splat: bool,
     spz: bool,
@@ -1477,7 +1477,10 @@ fn write_model(
             source: Box::new(source),
         }
     };
-    splat_core::ply::write_splats(path, splats).map_err(model_err(path))?;
+    let ply_options = splat_core::ply::PlyOptions {
+        antialiased: formats.antialiased,
+    };
+    splat_core::ply::write_model(path, splats, &ply_options).map_err(model_err(path))?;
     let mut written = Vec::new();
     if formats.splat {
         let p = path.with_extension("splat");
@@ -1873,5 +1876,36 @@ mod tests {
         let fast = Duration::from_millis(1);
         assert_eq!(timed_steps(fast, enough, true), PROBE_MAX_STEPS);
         assert_eq!(timed_steps(fast, enough, false), PROBE_STEPS);
+    }
+
+    #[test]
+    fn every_model_file_that_can_say_the_model_was_trained_antialiased_says_so() {
+        let splats = Splats::from_points(
+            &[glam::Vec3::ZERO, glam::Vec3::X],
+            &[[1.0, 0.5, 0.0], [0.0, 0.5, 1.0]],
+            &[glam::Vec3::splat(0.1); 2],
+            None,
+            0.9,
+            1,
+        )
+        .unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        for antialiased in [false, true] {
+            let path = dir.path().join(format!("splats{antialiased}.ply"));
+            let formats = ModelFormats {
+                antialiased,
+                splat: true,
+                spz: true,
+                glb: true,
+            };
+            let others = write_model(&path, &splats, formats).unwrap();
+            assert_eq!(others.len(), 3);
+            for p in std::iter::once(path).chain(others) {
+                let file = splat_core::model_file::read_model(&p).unwrap();
+                assert_eq!(file.splats.len(), 2);
+                let recorded = antialiased && file.format.records_antialiased();
+                assert_eq!(file.antialiased, recorded, "{}", p.display());
+            }
+        }
     }
 }

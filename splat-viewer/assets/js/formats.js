@@ -180,10 +180,13 @@ function decodePly(bytes) {
     }
     let count = -1;
     let current = null;
+    let antialiased = false;
     const props = [];
     for (const line of header) {
         const w = line.trim().split(/\s+/);
-        if (w[0] === 'element') {
+        if (w[0] === 'comment') {
+            antialiased = antialiasedComment(line.trim().slice('comment'.length), antialiased);
+        } else if (w[0] === 'element') {
             // Only the vertex element is read, so it must be the first (Inria's layout).
             if (current === null && w[1] !== 'vertex') {
                 throw new Error('the vertex element must come first');
@@ -228,6 +231,7 @@ function decodePly(bytes) {
     }
     const view = new DataView(bytes.buffer, bytes.byteOffset + headerEnd, stride * count);
     const model = emptyModel(count, degree);
+    model.antialiased = antialiased;
     const k = shCoefficients(degree);
     const read = (row, name) => {
         const c = column[name];
@@ -253,6 +257,20 @@ function decodePly(bytes) {
         }
     }
     return model;
+}
+
+/// What a PLY header comment says of the render mode (`splat_core::ply`'s reading): Brush's
+/// `SplatRenderMode: mip | default`, Postshot's `antialiased 1 | 0` and
+/// `postshot.anti_aliasing=1 | 0`, case-insensitive; any other comment leaves `before`.
+function antialiasedComment(text, before) {
+    const c = text.trim().toLowerCase();
+    for (const [prefix, on] of [['splatrendermode:', 'mip'], ['antialiased ', '1'],
+        ['postshot.anti_aliasing=', '1']]) {
+        if (c.startsWith(prefix)) {
+            return c.slice(prefix.length).trim() === on;
+        }
+    }
+    return before;
 }
 
 function findHeaderEnd(bytes) {

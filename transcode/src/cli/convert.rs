@@ -5,7 +5,8 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
-use splat_core::{Splats, export, glb, ply, spz};
+use splat_core::model_file::{self, Format};
+use splat_core::spz;
 
 /// Arguments of `transcode convert`.
 #[derive(Debug, clap::Args)]
@@ -22,54 +23,15 @@ pub struct Args {
     pub sh_rest_bits: Option<u8>,
 }
 
-/// The splat formats `convert` reads and writes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Format {
-    Ply,
-    Spz,
-    Splat,
-    Glb,
-}
-
-impl Format {
-    /// The format named by `path`'s extension (case-insensitive).
-    fn of(path: &Path) -> anyhow::Result<Self> {
-        let ext = path
-            .extension()
-            .and_then(|e| e.to_str())
-            .map(str::to_ascii_lowercase);
-        Ok(match ext.as_deref() {
-            Some("ply") => Self::Ply,
-            Some("spz") => Self::Spz,
-            Some("splat") => Self::Splat,
-            Some("glb") => Self::Glb,
-            _ => bail!(
-                "{}: unknown splat format {}; convert reads and writes .ply (3DGS), .spz, .splat \
-                 and .glb",
-                path.display(),
-                ext.map_or_else(|| "(no extension)".to_string(), |e| format!("`.{e}`"))
-            ),
-        })
-    }
-}
-
 /// Converts the input model to the output's format and prints what was written.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let (from, to) = (Format::of(&args.input)?, Format::of(&args.output)?);
+    let to = Format::of(&args.output)?;
+    Format::of(&args.input)?;
     if to != Format::Spz && (args.sh1_bits.is_some() || args.sh_rest_bits.is_some()) {
         bail!("--sh1-bits and --sh-rest-bits apply to .spz output only");
     }
-    let mut antialiased = false;
-    let splats: Splats = match from {
-        Format::Ply => ply::read_splats(&args.input)?,
-        Format::Spz => {
-            let m = spz::read_spz(&args.input)?;
-            antialiased = m.antialiased;
-            m.splats
-        }
-        Format::Splat => export::read_splat(&args.input)?,
-        Format::Glb => glb::read_glb(&args.input)?,
-    };
+    let model = model_file::read_model(&args.input)?;
+    let splats = &model.splats;
     if to == Format::Splat && splats.sh_degree > 0 {
         println!(
             "warning: .splat keeps only the diffuse colour: the SH bands of degree 1–{} (view \
@@ -77,28 +39,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             splats.sh_degree
         );
     }
-    if antialiased && to != Format::Spz {
+    if model.antialiased && !to.records_antialiased() {
         println!(
-            "warning: the SPZ file says the model was trained antialiased; {} has no place for \
-             that flag (render it with --antialiased)",
+            "warning: {} says the model was trained antialiased; {} has no place for that, so \
+             viewers will draw it plain, with more coverage than it was trained to have (keep \
+             it as .ply or .spz, which say so, or render it with --antialiased)",
+            args.input.display(),
             args.output.display()
         );
     }
-    match to {
-        Format::Ply => ply::write_splats(&args.output, &splats)?,
-        Format::Spz => {
-            let defaults = spz::SpzOptions::default();
-            let options = spz::SpzOptions {
-                sh1_bits: args.sh1_bits.unwrap_or(defaults.sh1_bits),
-                sh_rest_bits: args.sh_rest_bits.unwrap_or(defaults.sh_rest_bits),
-                antialiased,
-                ..defaults
-            };
-            spz::write_spz(&args.output, &splats, &options)?;
-        }
-        Format::Splat => export::write_splat(&args.output, &splats)?,
-        Format::Glb => glb::write_glb(&args.output, &splats)?,
-    }
+    let defaults = spz::SpzOptions::default();
+    let spz_options = spz::SpzOptions {
+        sh1_bits: args.sh1_bits.unwrap_or(defaults.sh1_bits),
+        sh_rest_bits: args.sh_rest_bits.unwrap_or(defaults.sh_rest_bits),
+        ..defaults
+    };
+    model_file::write_model(&args.output, splats, model.antialiased, &spz_options)?;
     let size = |p: &Path| {
         std::fs::metadata(p)
             .map(|m| m.len())

@@ -1,4 +1,6 @@
-//! `transcode eval MODEL.ply --reference DIR`: metrics of a 3DGS model against reference views.
+//! `transcode eval MODEL --reference DIR [--antialiased | --plain]`: metrics of a splat model
+//! (.ply, .spz, .splat or .glb) against reference views, the model drawn as its file says it was
+//! trained (or `training.antialiased` in the configuration) unless told otherwise.
 
 use std::path::{Path, PathBuf};
 
@@ -13,7 +15,7 @@ use super::config::{Overrides, flat, require_file};
 /// Arguments of `transcode eval`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// The 3DGS model (Inria PLY).
+    /// The model, by its extension: 3DGS PLY, SPZ, `.splat` or `.glb`.
     model: PathBuf,
     /// Folder of reference views: images/, sparse/0/ (COLMAP cameras) and optionally masks/.
     #[arg(long, value_name = "DIR")]
@@ -25,6 +27,8 @@ pub struct Args {
     #[arg(long, value_name = "FILE")]
     json: Option<PathBuf>,
     #[command(flatten)]
+    drawing: super::render::Drawing,
+    #[command(flatten)]
     overrides: Overrides,
 }
 
@@ -32,7 +36,11 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     require_file(&args.model, "model")?;
     let config = args.overrides.resolve(Config::default())?;
-    let splats = splat_core::ply::read_splats(&args.model).map_err(flat)?;
+    let file = splat_core::model_file::read_model(&args.model).map_err(flat)?;
+    let splats = file.splats;
+    let antialiased = args
+        .drawing
+        .antialiased(file.antialiased || config.training.antialiased);
     let mut views = splat_train::read_dataset(&args.reference, 1.0)
         .map_err(flat)?
         .views;
@@ -56,9 +64,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         None => None,
     };
-    let (metrics, _) = evaluate_views(&splats, &views, surface.as_ref(), &config.eval_options())
+    let options = splat_train::eval::EvalOptions {
+        antialiased,
+        ..config.eval_options()
+    };
+    let (metrics, _) = evaluate_views(&splats, &views, surface.as_ref(), &options)
         .with_context(|| format!("cannot evaluate against {}", args.reference.display()))?;
-    println!("{} views, {} splats", views.len(), metrics.splats);
+    println!(
+        "{} views, {} splats, drawn {}",
+        views.len(),
+        metrics.splats,
+        if antialiased {
+            "antialiased (opacity compensated)"
+        } else {
+            "plain"
+        }
+    );
     println!("view                 PSNR black  PSNR white  SSIM black  SSIM white  alpha IoU");
     for v in &metrics.views {
         if v.covered_pixels == 0 {

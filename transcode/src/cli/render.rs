@@ -1,6 +1,7 @@
-//! `transcode render SPLATS.ply|SPLATS.spz --colmap DIR --out OUTDIR [--background R,G,B]
-//! [--images NAME,...]`: renders a 3DGS PLY or SPZ from the cameras of a COLMAP model to PNG files
-//! named like its images.
+//! `transcode render MODEL --colmap DIR --out OUTDIR [--background R,G,B] [--images NAME,...]
+//! [--antialiased | --plain]`: renders a splat model (.ply, .spz, .splat or .glb) from the
+//! cameras of a COLMAP model to PNG files named like its images, drawn as its file says it was
+//! trained (antialiased or plain) unless told otherwise.
 
 use std::path::{Path, PathBuf};
 
@@ -11,8 +12,8 @@ use splat_core::{Rasterizer, RenderCamera, RenderOptions};
 /// Arguments of `transcode render`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// The model to render: a 3DGS PLY (Inria layout; any property order, float or double) or
-    /// an SPZ file (by its extension).
+    /// The model to render, by its extension: a 3DGS PLY (Inria layout; any property order,
+    /// float or double), SPZ, `.splat` or `.glb`.
     pub splats: PathBuf,
     /// COLMAP model folder (with cameras/images files), or a dataset root holding sparse/0.
     #[arg(long)]
@@ -29,9 +30,29 @@ pub struct Args {
     /// Highest SH degree to evaluate (default: the model's).
     #[arg(long)]
     pub sh_degree: Option<u32>,
-    /// Use gsplat's antialiased mode (opacity compensation).
-    #[arg(long)]
+    #[command(flatten)]
+    pub drawing: Drawing,
+}
+
+/// How a model is drawn: with the antialiased opacity compensation where its file says it was
+/// trained so (a PLY's `SplatRenderMode: mip` comment, SPZ's flag), unless told otherwise.
+#[derive(Debug, Clone, Copy, Default, clap::Args)]
+pub struct Drawing {
+    /// Draw with the antialiased (Mip-Splatting) opacity compensation whatever the file says.
+    #[arg(long, conflicts_with = "plain")]
     pub antialiased: bool,
+    /// Draw without the compensation whatever the file says, as a viewer that ignores a file's
+    /// render mode draws it.
+    #[arg(long)]
+    pub plain: bool,
+}
+
+impl Drawing {
+    /// Whether to draw antialiased a model whose file (or configuration) says `trained`.
+    #[must_use]
+    pub fn antialiased(self, trained: bool) -> bool {
+        self.antialiased || (trained && !self.plain)
+    }
 }
 
 /// The model folder: `DIR` itself if it holds a model, else `DIR/sparse/0`.
@@ -46,7 +67,8 @@ pub(crate) fn model_dir(dir: &Path) -> PathBuf {
 
 /// Renders every selected image of the model and writes it as PNG.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let (splats, antialiased) = read_splats(&args.splats)?;
+    let file = splat_core::model_file::read_model(&args.splats)?;
+    let splats = file.splats;
     let model = model_dir(&args.colmap);
     let rec = colmap_io::read_model(&model)
         .with_context(|| format!("reading the COLMAP model in {}", model.display()))?;
@@ -68,7 +90,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let opts = RenderOptions {
         background: bg,
         active_sh_degree: args.sh_degree.unwrap_or(splats.sh_degree),
-        antialiased: args.antialiased || antialiased,
+        antialiased: args.drawing.antialiased(file.antialiased),
         linear_colour: false,
     };
     std::fs::create_dir_all(&args.out)
@@ -112,18 +134,4 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     bar.finish_with_message(format!("wrote {}", args.out.display()));
     Ok(())
-}
-
-/// Reads a 3DGS PLY, or an SPZ file by its extension; returns the splats and whether the file
-/// says they were trained antialiased (SPZ's flag).
-fn read_splats(path: &Path) -> anyhow::Result<(splat_core::Splats, bool)> {
-    let spz = path
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("spz"));
-    Ok(if spz {
-        let m = splat_core::spz::read_spz(path)?;
-        (m.splats, m.antialiased)
-    } else {
-        (splat_core::ply::read_splats(path)?, false)
-    })
 }

@@ -1,0 +1,80 @@
+//! Model files of any format by extension, and the render mode each can or cannot carry.
+
+use std::path::{Path, PathBuf};
+
+use splat_core::model_file::{Format, read_model, write_model};
+use splat_core::{Error, ply, spz};
+
+fn gt_path() -> PathBuf {
+    PathBuf::from(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../testdata/splat-scene/gt.ply"
+    ))
+}
+
+#[test]
+fn formats_are_named_by_their_extension_in_any_case() {
+    for (name, want) in [
+        ("a.ply", Format::Ply),
+        ("a.PLY", Format::Ply),
+        ("dir.v2/a.Spz", Format::Spz),
+        ("a.splat", Format::Splat),
+        ("a.glb", Format::Glb),
+    ] {
+        assert_eq!(Format::of(Path::new(name)).unwrap(), want, "{name}");
+    }
+    for (name, shown) in [("a.obj", "`.obj`"), ("model", "(no extension)")] {
+        let e = Format::of(Path::new(name)).unwrap_err();
+        assert!(matches!(e, Error::UnknownFormat { .. }), "{e:?}");
+        let text = e.to_string();
+        assert!(
+            text.starts_with(&format!("{name}: unknown splat format {shown}")),
+            "{text}"
+        );
+    }
+}
+
+#[test]
+fn the_render_mode_survives_the_formats_that_can_say_it() {
+    let s = ply::read_splats(&gt_path()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    for antialiased in [false, true] {
+        for ext in ["ply", "spz", "splat", "glb"] {
+            let p = dir.path().join(format!("m{antialiased}.{ext}"));
+            let format = write_model(&p, &s, antialiased, &spz::SpzOptions::default()).unwrap();
+            let back = read_model(&p).unwrap();
+            assert_eq!(back.format, format);
+            assert_eq!(back.splats.len(), s.len(), "{ext}");
+            // The PLY and SPZ readers say what the file says, independently of this module.
+            let recorded = match format {
+                Format::Ply => ply::read_model(&p).unwrap().antialiased,
+                Format::Spz => spz::read_spz(&p).unwrap().antialiased,
+                Format::Splat | Format::Glb => false,
+            };
+            assert_eq!(back.antialiased, recorded, "{ext}");
+            assert_eq!(
+                back.antialiased,
+                antialiased && format.records_antialiased(),
+                "{ext}"
+            );
+        }
+    }
+    // An SPZ's own options' flag gives way to the model's.
+    let p = dir.path().join("flag.spz");
+    let options = spz::SpzOptions {
+        antialiased: true,
+        ..spz::SpzOptions::default()
+    };
+    write_model(&p, &s, false, &options).unwrap();
+    assert!(!read_model(&p).unwrap().antialiased);
+}
+
+#[test]
+fn an_unknown_extension_writes_nothing() {
+    let s = ply::read_splats(&gt_path()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("m.obj");
+    assert!(write_model(&p, &s, false, &spz::SpzOptions::default()).is_err());
+    assert!(read_model(&p).is_err());
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+}
