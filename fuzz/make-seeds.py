@@ -141,6 +141,17 @@ def main():
     v2[4] = 2
     v2 += bytes([127, 127, 127, 200, 90, 30]) + payload[16 + 9 * n + 7 * n + 4 * n:]
     put("splat_spz", "v2-content.bin", b"\x00" + bytes(v2))
+    # Version 4: the same blocks, each in a zstd frame of one raw block (single segment, its
+    # 1-byte content size, no checksum), behind a clear 32-byte header and the table.
+    blocks, at = [], 16
+    for size in (9 * n, n, 3 * n, 3 * n, 4 * n, 9 * n):
+        blocks.append(payload[at:at + size])
+        at += size
+    frames = [struct.pack("<IBB", 0xFD2FB528, 0x20, len(b)) + ((len(b) << 3) | 1).to_bytes(3, "little") + b
+              for b in blocks]
+    v4 = struct.pack("<IIIBBBBI", 0x5053474E, 4, n, 1, 12, 0, len(frames), 32) + bytes(12)
+    v4 += b"".join(struct.pack("<QQ", len(f), len(b)) for f, b in zip(frames, blocks)) + b"".join(frames)
+    put("splat_spz", "v4.spz", b"\x01" + v4)
     # .splat: two 32-byte records (position, linear scale, RGBA, quaternion bytes w x y z).
     put("splat_dotsplat", "two.splat",
         struct.pack("<6f4B4B", 0, 0, 0, 0.1, 0.2, 0.3, 255, 128, 0, 200, 255, 128, 128, 128)

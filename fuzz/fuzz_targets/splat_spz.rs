@@ -1,7 +1,8 @@
-//! splat-core's SPZ reader (`decode_spz`). SPZ is one gzip stream, and random changes to
-//! compressed bytes mostly fail gzip's checksum, so the first byte chooses: odd, the rest is the
-//! file as it is; even, the rest is the stream's content (header and attributes), compressed here
-//! first, so the fuzzer reaches the header checks and the attribute decoding.
+//! splat-core's SPZ reader (`decode_spz`). SPZ versions 2 and 3 are one gzip stream, and random
+//! changes to compressed bytes mostly fail gzip's checksum, so the first byte chooses: odd, the
+//! rest is the file as it is (version 4's clear header and table included); even, the rest is a
+//! gzip stream's content (header and attributes), compressed here first, so the fuzzer reaches
+//! the header checks and the attribute decoding.
 #![no_main]
 
 use std::io::Write;

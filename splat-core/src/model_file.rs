@@ -54,27 +54,31 @@ pub struct ModelFile {
     pub antialiased: bool,
     /// The file's format.
     pub format: Format,
+    /// The file held records this crate skips (a version 4 SPZ's extensions,
+    /// [`spz::SpzModel::skipped_extensions`]).
+    pub skipped_extensions: bool,
 }
 
 /// Reads a model file in the format its extension names.
 pub fn read_model(path: &Path) -> Result<ModelFile, Error> {
     let format = Format::of(path)?;
-    let (splats, antialiased) = match format {
+    let (splats, antialiased, skipped_extensions) = match format {
         Format::Ply => {
             let m = ply::read_model(path)?;
-            (m.splats, m.antialiased)
+            (m.splats, m.antialiased, false)
         }
         Format::Spz => {
             let m = spz::read_spz(path)?;
-            (m.splats, m.antialiased)
+            (m.splats, m.antialiased, m.skipped_extensions)
         }
-        Format::Splat => (export::read_splat(path)?, false),
-        Format::Glb => (glb::read_glb(path)?, false),
+        Format::Splat => (export::read_splat(path)?, false, false),
+        Format::Glb => (glb::read_glb(path)?, false, false),
     };
     Ok(ModelFile {
         splats,
         antialiased,
         format,
+        skipped_extensions,
     })
 }
 

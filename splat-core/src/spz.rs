@@ -1,9 +1,17 @@
-//! Niantic's SPZ (`nianticlabs/spz`, `src/cc/load-spz.cc`), the gzip container of versions 2
-//! and 3: about a tenth of the size of the Inria PLY with small, bounded quantisation errors.
+//! Niantic's SPZ (`nianticlabs/spz`, `src/cc/load-spz.cc`): about a tenth of the size of the
+//! Inria PLY with small, bounded quantisation errors. Versions 2 and 3 are one gzip stream;
+//! version 4 keeps its header in the clear and compresses each attribute block on its own with
+//! zstd. Both are read; version 3 is written by default and version 4 on request
+//! ([`SpzOptions::version`]).
 //!
-//! A file is one gzip stream holding a 16-byte header (magic `NGSP`, version, point count, SH
-//! degree, fractional bits of the positions, flags, a reserved byte) and then one block per
-//! attribute, each over all splats in order: positions (3 × 24-bit signed fixed point), alphas
+//! Versions 2 and 3: one gzip stream holding a 16-byte header (magic `NGSP`, version, point
+//! count, SH degree, fractional bits of the positions, flags, a reserved byte) and then one block
+//! per attribute. Version 4: a 32-byte header (the same fields, then the number of streams, the
+//! byte offset of the table of contents and 12 reserved bytes), optional extension records up to
+//! that offset (skipped here: [`SpzModel::skipped_extensions`]), the table (for each stream its
+//! compressed and uncompressed sizes, two u64), and the streams, one zstd frame per non-empty
+//! block, ending exactly at the end of the file. The blocks, each over all splats in order, are
+//! the same in every version: positions (3 × 24-bit signed fixed point), alphas
 //! (u8 of the activated opacity), colours (u8 of the DC coefficient, ±3.33 full scale), log-scales
 //! (u8, 1/16 steps from −10), rotations (version 3: the smallest three of the unit quaternion,
 //! 9 bits and a sign each, under the 2-bit index of the largest; version 2: x, y, z as u8) and the
@@ -16,7 +24,8 @@
 //! chosen from the largest coordinate) instead of Niantic's fixed 12, since this project's models
 //! are often in voxel units of a 4,096 grid, which 12 fractional bits cannot hold.
 //!
-//! Written by hand: no Rust crate writes SPZ (`docs/reference/crates.md`); `flate2` does the gzip.
+//! Written by hand: no Rust crate writes SPZ (`docs/reference/crates.md`); `flate2` does the gzip
+//! and `zstd` the version 4 streams.
 
 use std::io::{Read, Write};
 use std::path::Path;
@@ -29,10 +38,18 @@ use crate::{Error, Splats, logit, num_sh_coeffs, sigmoid};
 
 /// `NGSP` read as a little-endian u32.
 pub const MAGIC: u32 = 0x5053_474e;
-/// The version written: smallest-three quaternions in a gzip stream.
+/// The version written by default: smallest-three quaternions in a gzip stream.
 pub const VERSION: u32 = 3;
-/// Bytes of the header at the start of the decompressed stream.
+/// The version with a clear header and one zstd stream per attribute block.
+pub const ZSTD_VERSION: u32 = 4;
+/// Bytes of the header at the start of a version 2 or 3 file's decompressed stream.
 const HEADER_BYTES: usize = 16;
+/// Bytes of a version 4 file's clear header.
+const NGSP_HEADER_BYTES: usize = 32;
+/// Header flag: extension records follow the version 4 header.
+const FLAG_HAS_EXTENSIONS: u8 = 0x2;
+/// zstd's compression level for version 4 streams (`load-spz.cc`'s default for `compressZstd`).
+const ZSTD_LEVEL: i32 = 1;
 /// Full scale of the colour byte: u8 = dc·0.15·255 + 127.5 (`load-spz.cc`'s `colorScale`).
 const COLOR_SCALE: f32 = 0.15;
 /// Header flag: the model was trained with the antialiased (Mip-Splatting-style) rasteriser.
@@ -55,6 +72,9 @@ pub struct SpzOptions {
     pub fractional_bits: Option<u8>,
     /// Sets the header's antialiased flag.
     pub antialiased: bool,
+    /// The format version written: [`VERSION`] (3, gzip, the default, which every SPZ reader
+    /// since 2024 reads) or [`ZSTD_VERSION`] (4, zstd streams).
+    pub version: u32,
 }
 
 impl Default for SpzOptions {
@@ -64,6 +84,7 @@ impl Default for SpzOptions {
             sh_rest_bits: 4,
             fractional_bits: None,
             antialiased: false,
+            version: VERSION,
         }
     }
 }
@@ -73,33 +94,74 @@ impl Default for SpzOptions {
 pub struct SpzModel {
     /// The splats, in this crate's frame.
     pub splats: Splats,
-    /// The file's format version (2 or 3).
+    /// The file's format version (2, 3 or 4).
     pub version: u32,
     /// Fractional bits of the stored positions (their step is 2^−bits).
     pub fractional_bits: u8,
     /// The header's antialiased flag.
     pub antialiased: bool,
+    /// A version 4 file held extension records (its flag 0x2), which this reader skips; a
+    /// tool's extension can change how the splats are to be read (Niantic's reader warns the
+    /// same way when built without them).
+    pub skipped_extensions: bool,
 }
 
-/// Returns the SPZ bytes (gzip-compressed) of `splats`.
+/// Returns the SPZ bytes of `splats`: a gzip stream (version 3) or a clear header and zstd
+/// streams (version 4), as `options` ask.
 pub fn encode_spz(splats: &Splats, options: &SpzOptions) -> Result<Vec<u8>, Error> {
-    let raw = pack(splats, options)?;
-    let mut gz = flate2::write::GzEncoder::new(
-        Vec::with_capacity(raw.len() / 2),
-        flate2::Compression::default(),
-    );
-    gz.write_all(&raw)
-        .and_then(|()| gz.finish())
-        .map_err(|e| Error::Inconsistent(format!("gzip: {e}")))
+    let packed = pack(splats, options)?;
+    match options.version {
+        VERSION => {
+            let mut gz = flate2::write::GzEncoder::new(
+                Vec::with_capacity(HEADER_BYTES + packed.body.len() / 2),
+                flate2::Compression::default(),
+            );
+            gz.write_all(&packed.header(VERSION)[..HEADER_BYTES])
+                .and_then(|()| gz.write_all(&packed.body))
+                .and_then(|()| gz.finish())
+                .map_err(|e| Error::Inconsistent(format!("gzip: {e}")))
+        }
+        ZSTD_VERSION => encode_streams(&packed),
+        v => Err(Error::Inconsistent(format!(
+            "SPZ version {v}; {VERSION} (gzip) and {ZSTD_VERSION} (zstd streams) are written"
+        ))),
+    }
 }
 
-/// Writes `splats` as an SPZ file (version 3), atomically.
+/// A version 4 file: the clear header, the table of contents and one zstd frame per non-empty
+/// attribute block.
+fn encode_streams(packed: &Packed) -> Result<Vec<u8>, Error> {
+    let blocks: Vec<&[u8]> = packed
+        .layout
+        .blocks()
+        .map(|r| &packed.body[r])
+        .filter(|b| !b.is_empty())
+        .collect();
+    let frames = blocks
+        .iter()
+        .map(|b| zstd::bulk::compress(b, ZSTD_LEVEL))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| Error::Inconsistent(format!("zstd: {e}")))?;
+    let mut out = packed.header(ZSTD_VERSION);
+    out[15] = blocks.len() as u8;
+    out[16..20].copy_from_slice(&(NGSP_HEADER_BYTES as u32).to_le_bytes());
+    for (block, frame) in blocks.iter().zip(&frames) {
+        out.extend((frame.len() as u64).to_le_bytes());
+        out.extend((block.len() as u64).to_le_bytes());
+    }
+    for frame in &frames {
+        out.extend(frame);
+    }
+    Ok(out)
+}
+
+/// Writes `splats` as an SPZ file (version 3, or as `options` ask), atomically.
 pub fn write_spz(path: &Path, splats: &Splats, options: &SpzOptions) -> Result<(), Error> {
     let bytes = encode_spz(splats, options)?;
     atomic_output::write_atomic(path, &bytes).map_err(|e| Error::io(path, e))
 }
 
-/// Reads an SPZ file (version 2 or 3, gzip container).
+/// Reads an SPZ file (version 2 or 3, gzip container, or version 4, zstd streams).
 pub fn read_spz(path: &Path) -> Result<SpzModel, Error> {
     let data = std::fs::read(path).map_err(|source| Error::Io {
         path: path.to_path_buf(),
@@ -115,45 +177,28 @@ pub fn decode_spz(path: &Path, data: &[u8]) -> Result<SpzModel, Error> {
         message,
     };
     if data.len() >= 4 && u32::from_le_bytes([data[0], data[1], data[2], data[3]]) == MAGIC {
-        return Err(err(
-            "an uncompressed NGSP header: this is SPZ version 4 (zstd streams), which this reader \
-             does not support; versions 2 and 3 (gzip) are read"
-                .into(),
-        ));
+        return decode_streams(path, data);
     }
     let mut gz = flate2::read::GzDecoder::new(data);
     let mut head = [0u8; HEADER_BYTES];
     gz.read_exact(&mut head)
         .map_err(|e| err(format!("not a gzip stream holding an SPZ header: {e}")))?;
-    let word = |o: usize| u32::from_le_bytes([head[o], head[o + 1], head[o + 2], head[o + 3]]);
-    let (magic, version, count) = (word(0), word(4), word(8));
-    let (sh_degree, fractional_bits, flags) = (u32::from(head[12]), head[13], head[14]);
-    if magic != MAGIC {
+    let header = Header::parse(&head).map_err(err)?;
+    if !(2..=3).contains(&header.version) {
         return Err(err(format!(
-            "magic 0x{magic:08x} where an SPZ file has 0x{MAGIC:08x} (`NGSP`)"
+            "version {} in a gzip stream; versions 2 and 3 are gzip streams (4 keeps its header \
+             in the clear)",
+            header.version
         )));
     }
-    if !(2..=3).contains(&version) {
-        return Err(err(format!(
-            "version {version}; this reader reads versions 2 and 3"
-        )));
-    }
-    if sh_degree > 3 {
-        return Err(err(format!(
-            "SH degree {sh_degree}; at most 3 is supported"
-        )));
-    }
-    if fractional_bits > 23 {
-        return Err(err(format!(
-            "{fractional_bits} fractional bits in 24-bit positions (at most 23)"
-        )));
-    }
-    let n = count as usize;
-    if n > MAX_SPLATS {
-        return Err(err(format!(
-            "{n} splats, more than the {MAX_SPLATS} this reader accepts"
-        )));
-    }
+    let Header {
+        version,
+        count: n,
+        sh_degree,
+        fractional_bits,
+        flags,
+        ..
+    } = header;
     let layout = Layout::new(n, sh_degree, version);
     // Read what the stream holds, at most one byte past what the header promises: memory grows
     // with the data that is really there, so a header claiming a huge count costs nothing.
@@ -180,6 +225,157 @@ pub fn decode_spz(path: &Path, data: &[u8]) -> Result<SpzModel, Error> {
         version,
         fractional_bits,
         antialiased: flags & FLAG_ANTIALIASED != 0,
+        skipped_extensions: false,
+    })
+}
+
+/// The fields every SPZ header holds, checked.
+struct Header {
+    version: u32,
+    count: usize,
+    sh_degree: u32,
+    fractional_bits: u8,
+    flags: u8,
+}
+
+impl Header {
+    /// Reads the fields the 16-byte and 32-byte headers share (`head` holds at least 16
+    /// bytes) and checks them: the magic, a version of 2 to 4, SH degree at most 3, fractional
+    /// bits at most 23 and at most [`MAX_SPLATS`] splats.
+    fn parse(head: &[u8]) -> Result<Self, String> {
+        let word = |o: usize| u32::from_le_bytes([head[o], head[o + 1], head[o + 2], head[o + 3]]);
+        let (magic, version, count) = (word(0), word(4), word(8));
+        let (sh_degree, fractional_bits, flags) = (u32::from(head[12]), head[13], head[14]);
+        if magic != MAGIC {
+            return Err(format!(
+                "magic 0x{magic:08x} where an SPZ file has 0x{MAGIC:08x} (`NGSP`)"
+            ));
+        }
+        if !(2..=4).contains(&version) {
+            return Err(format!(
+                "version {version}; this reader reads versions 2, 3 and 4"
+            ));
+        }
+        if sh_degree > 3 {
+            return Err(format!("SH degree {sh_degree}; at most 3 is supported"));
+        }
+        if fractional_bits > 23 {
+            return Err(format!(
+                "{fractional_bits} fractional bits in 24-bit positions (at most 23)"
+            ));
+        }
+        let count = count as usize;
+        if count > MAX_SPLATS {
+            return Err(format!(
+                "{count} splats, more than the {MAX_SPLATS} this reader accepts"
+            ));
+        }
+        Ok(Self {
+            version,
+            count,
+            sh_degree,
+            fractional_bits,
+            flags,
+        })
+    }
+}
+
+/// Decodes a version 4 file: its clear header, table of contents and zstd streams.
+fn decode_streams(path: &Path, data: &[u8]) -> Result<SpzModel, Error> {
+    let err = |message: String| Error::Spz {
+        path: path.to_path_buf(),
+        message,
+    };
+    if data.len() < NGSP_HEADER_BYTES {
+        return Err(err(format!(
+            "{} bytes: shorter than the {NGSP_HEADER_BYTES}-byte header of a version 4 file",
+            data.len()
+        )));
+    }
+    let header = Header::parse(data).map_err(err)?;
+    if header.version != ZSTD_VERSION {
+        return Err(err(format!(
+            "version {} with a clear header; only version {ZSTD_VERSION} keeps its header in the \
+             clear (2 and 3 are gzip streams)",
+            header.version
+        )));
+    }
+    let streams = usize::from(data[15]);
+    let toc = u32::from_le_bytes([data[16], data[17], data[18], data[19]]) as usize;
+    let (n, sh_degree) = (header.count, header.sh_degree);
+    let layout = Layout::new(n, sh_degree, header.version);
+    let blocks: Vec<std::ops::Range<usize>> = layout.blocks().filter(|r| !r.is_empty()).collect();
+    if streams != blocks.len() {
+        return Err(err(format!(
+            "{streams} streams where {n} splats of SH degree {sh_degree} have {} non-empty \
+             attribute blocks",
+            blocks.len()
+        )));
+    }
+    let toc_end = toc.checked_add(16 * streams).filter(|&e| e <= data.len());
+    let Some(toc_end) = toc_end.filter(|_| toc >= NGSP_HEADER_BYTES) else {
+        return Err(err(format!(
+            "the table of contents at byte {toc} ({streams} entries of 16 bytes) is not between \
+             the {NGSP_HEADER_BYTES}-byte header and the end of the {}-byte file",
+            data.len()
+        )));
+    };
+    let skipped_extensions = header.flags & FLAG_HAS_EXTENSIONS != 0 && toc > NGSP_HEADER_BYTES;
+    let u64_at = |o: usize| {
+        let mut b = [0u8; 8];
+        b.copy_from_slice(&data[o..o + 8]);
+        u64::from_le_bytes(b)
+    };
+    let mut body = Vec::new();
+    let mut offset = toc_end;
+    for (i, block) in blocks.iter().enumerate() {
+        let (compressed, uncompressed) = (u64_at(toc + 16 * i), u64_at(toc + 16 * i + 8));
+        if uncompressed != block.len() as u64 {
+            return Err(err(format!(
+                "stream {i} holds {uncompressed} bytes where {n} splats need {}",
+                block.len()
+            )));
+        }
+        let frame = usize::try_from(compressed)
+            .ok()
+            .and_then(|c| offset.checked_add(c))
+            .filter(|&end| end <= data.len())
+            .map(|end| &data[offset..end])
+            .ok_or_else(|| {
+                err(format!(
+                    "stream {i} ({compressed} compressed bytes from byte {offset}) runs past \
+                     the end of the {}-byte file",
+                    data.len()
+                ))
+            })?;
+        offset += frame.len();
+        // Memory grows with what the frame really holds, at most one byte past the table's
+        // size, so a table claiming huge blocks costs nothing.
+        let before = body.len();
+        zstd::stream::read::Decoder::new(frame)
+            .and_then(|d| d.take(uncompressed + 1).read_to_end(&mut body))
+            .map_err(|e| err(format!("stream {i}: corrupt zstd frame: {e}")))?;
+        if body.len() - before != block.len() {
+            return Err(err(format!(
+                "stream {i} decompresses to {} bytes where its table entry and {n} splats say {}",
+                body.len() - before,
+                block.len()
+            )));
+        }
+    }
+    if offset != data.len() {
+        return Err(err(format!(
+            "{} bytes after the last stream (the file should end at byte {offset})",
+            data.len() - offset
+        )));
+    }
+    let splats = unpack(&body, &layout, n, sh_degree, header.fractional_bits);
+    Ok(SpzModel {
+        splats: y_up_frame(&splats),
+        version: header.version,
+        fractional_bits: header.fractional_bits,
+        antialiased: header.flags & FLAG_ANTIALIASED != 0,
+        skipped_extensions,
     })
 }
 
@@ -214,6 +410,48 @@ impl Layout {
             rotation_bytes,
             sh_per_splat,
         }
+    }
+}
+
+impl Layout {
+    /// The attribute blocks' byte ranges in order (positions, alphas, colours, scales,
+    /// rotations, SH), the SH block empty at degree 0.
+    fn blocks(&self) -> impl Iterator<Item = std::ops::Range<usize>> {
+        let starts = [
+            0,
+            self.alphas,
+            self.colors,
+            self.scales,
+            self.rotations,
+            self.sh,
+            self.total,
+        ];
+        (0..6).map(move |k| starts[k]..starts[k + 1])
+    }
+}
+
+/// A model packed into SPZ's blocks, with what its header says.
+struct Packed {
+    count: u32,
+    sh_degree: u8,
+    fractional_bits: u8,
+    flags: u8,
+    /// The attribute blocks after the header, in order.
+    body: Vec<u8>,
+    layout: Layout,
+}
+
+impl Packed {
+    /// The 32-byte header of `version` with the stream count and table offset zero (the
+    /// 16-byte header of versions 2 and 3 is its start).
+    fn header(&self, version: u32) -> Vec<u8> {
+        let mut h = Vec::with_capacity(NGSP_HEADER_BYTES);
+        h.extend(MAGIC.to_le_bytes());
+        h.extend(version.to_le_bytes());
+        h.extend(self.count.to_le_bytes());
+        h.extend([self.sh_degree, self.fractional_bits, self.flags, 0]);
+        h.resize(NGSP_HEADER_BYTES, 0);
+        h
     }
 }
 
@@ -301,8 +539,8 @@ fn unpack_quaternion_v2(b: &[u8]) -> [f32; 4] {
     [w, x, y, z]
 }
 
-/// The header and attribute blocks of `splats` (uncompressed), in SPZ's frame.
-fn pack(splats: &Splats, options: &SpzOptions) -> Result<Vec<u8>, Error> {
+/// The attribute blocks of `splats` (uncompressed), in SPZ's frame, and their header's fields.
+fn pack(splats: &Splats, options: &SpzOptions) -> Result<Packed, Error> {
     splats.validate()?;
     for (name, bits) in [
         ("sh1_bits", options.sh1_bits),
@@ -330,16 +568,12 @@ fn pack(splats: &Splats, options: &SpzOptions) -> Result<Vec<u8>, Error> {
         None => fractional_bits_for(&s)?,
     };
     let layout = Layout::new(n, s.sh_degree, VERSION);
-    let mut out = Vec::with_capacity(HEADER_BYTES + layout.total);
-    out.extend(MAGIC.to_le_bytes());
-    out.extend(VERSION.to_le_bytes());
-    out.extend(count.to_le_bytes());
+    let mut out = Vec::with_capacity(layout.total);
     let flags = if options.antialiased {
         FLAG_ANTIALIASED
     } else {
         0
     };
-    out.extend([s.sh_degree as u8, bits, flags, 0]);
 
     let step = (1_u32 << bits) as f32;
     for (i, m) in s.means.iter().enumerate() {
@@ -376,8 +610,15 @@ fn pack(splats: &Splats, options: &SpzOptions) -> Result<Vec<u8>, Error> {
             out.extend(c.map(|v| quantize_sh(v, bits)));
         }
     }
-    debug_assert_eq!(out.len(), HEADER_BYTES + layout.total);
-    Ok(out)
+    debug_assert_eq!(out.len(), layout.total);
+    Ok(Packed {
+        count,
+        sh_degree: s.sh_degree as u8,
+        fractional_bits: bits,
+        flags,
+        body: out,
+        layout,
+    })
 }
 
 /// Decodes the attribute blocks (in SPZ's frame, not yet turned into this crate's).

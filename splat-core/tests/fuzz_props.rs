@@ -86,6 +86,20 @@ proptest! {
     }
 
     #[test]
+    fn spz_reader_survives_mutated_version_4_files(edits in prop::collection::vec(edit(), 1..8)) {
+        // Version 4 keeps its header and table in the clear: mutate the file itself.
+        let options = splat_core::spz::SpzOptions {
+            version: splat_core::spz::ZSTD_VERSION,
+            ..Default::default()
+        };
+        let splats = ply::parse_splats(Path::new("gt-cut.ply"), &gt_cut(3)).unwrap();
+        let file = splat_core::spz::encode_spz(&splats, &options).unwrap();
+        if let Err(e) = splat_core::spz::decode_spz(Path::new("props-input.spz"), &apply(file, &edits)) {
+            prop_assert!(e.to_string().contains("props-input.spz"), "{e}");
+        }
+    }
+
+    #[test]
     fn spz_reader_survives_arbitrary_bytes(
         header in prop::sample::select(vec![Vec::new(), spz_content(0)]),
         body in prop::collection::vec(any::<u8>(), 0..512),

@@ -262,3 +262,159 @@ fn version_2_files_are_read() {
     assert_eq!(m.splats.means, m3.splats.means);
     assert_eq!(m.splats.sh, m3.splats.sh);
 }
+
+/// Version 4's parts read by hand.
+struct V4Parts<'a> {
+    header: &'a [u8],
+    /// Each table entry: (compressed, uncompressed) sizes.
+    entries: Vec<(u64, u64)>,
+    frames: Vec<&'a [u8]>,
+}
+
+fn v4_parts(bytes: &[u8]) -> V4Parts<'_> {
+    let u32_at = |o: usize| u32::from_le_bytes(bytes[o..o + 4].try_into().unwrap());
+    let u64_at = |o: usize| u64::from_le_bytes(bytes[o..o + 8].try_into().unwrap());
+    let (streams, toc) = (usize::from(bytes[15]), u32_at(16) as usize);
+    let entries: Vec<(u64, u64)> = (0..streams)
+        .map(|i| (u64_at(toc + 16 * i), u64_at(toc + 16 * i + 8)))
+        .collect();
+    let mut at = toc + 16 * streams;
+    let mut frames = Vec::new();
+    for &(c, _) in &entries {
+        frames.push(&bytes[at..at + c as usize]);
+        at += c as usize;
+    }
+    assert_eq!(at, bytes.len(), "the last stream ends the file");
+    V4Parts {
+        header: &bytes[..32],
+        entries,
+        frames,
+    }
+}
+
+fn v4_options() -> SpzOptions {
+    SpzOptions {
+        version: 4,
+        ..SpzOptions::default()
+    }
+}
+
+#[test]
+fn version_4_holds_version_3_s_blocks_in_zstd_streams() {
+    for degree in [3, 0] {
+        let mut s = gt();
+        if degree == 0 {
+            // The DC coefficient alone: no SH block, so no sixth stream.
+            let k = s.coeffs_per_splat();
+            s.sh = (0..s.len()).map(|i| s.sh[i * k]).collect();
+            s.sh_degree = 0;
+        }
+        let opts = SpzOptions {
+            antialiased: true,
+            ..v4_options()
+        };
+        let v4 = encode_spz(&s, &opts).unwrap();
+        let v3 = gunzip(&encode_spz(&s, &SpzOptions { version: 3, ..opts }).unwrap());
+        let V4Parts {
+            header,
+            entries,
+            frames,
+        } = v4_parts(&v4);
+        // The clear header: version 3's 16 bytes with the version changed, the stream count,
+        // the table right after the 32 bytes, and zeros.
+        assert_eq!(&header[..4], b"NGSP");
+        assert_eq!(u32::from_le_bytes(header[4..8].try_into().unwrap()), 4);
+        assert_eq!(&header[8..15], &v3[8..15]);
+        assert_eq!(header[14] & 1, 1, "antialiased flag");
+        assert_eq!(usize::from(header[15]), if degree == 0 { 5 } else { 6 });
+        assert_eq!(u32::from_le_bytes(header[16..20].try_into().unwrap()), 32);
+        assert!(header[20..].iter().all(|&b| b == 0));
+        // Each stream is one zstd frame of the next block of version 3's body, in order.
+        let mut body = Vec::new();
+        for (&(c, u), frame) in entries.iter().zip(&frames) {
+            assert_eq!(c as usize, frame.len());
+            let block = zstd::stream::decode_all(*frame).unwrap();
+            assert_eq!(block.len() as u64, u);
+            body.extend(block);
+        }
+        assert_eq!(body, v3[16..]);
+        // So both read to the same splats.
+        let a = decode_spz(Path::new("v4.spz"), &v4).unwrap();
+        let b = decode_spz(Path::new("v3.spz"), &gzip(&v3)).unwrap();
+        assert_eq!((a.version, b.version), (4, 3));
+        assert_eq!(a.splats, b.splats);
+        assert!(a.antialiased && !a.skipped_extensions);
+    }
+    let e = encode_spz(
+        &gt(),
+        &SpzOptions {
+            version: 5,
+            ..SpzOptions::default()
+        },
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("SPZ version 5"), "{e}");
+}
+
+#[test]
+fn version_4_extension_records_are_skipped_and_said_so() {
+    let s = gt();
+    let v4 = encode_spz(&s, &v4_options()).unwrap();
+    let plain = decode_spz(Path::new("m.spz"), &v4).unwrap();
+    // Eight bytes of extension records between the header and the table, flag 0x2 set.
+    let mut ext = v4[..32].to_vec();
+    ext[14] |= 2;
+    ext[16..20].copy_from_slice(&40_u32.to_le_bytes());
+    ext.extend([7u8; 8]);
+    ext.extend_from_slice(&v4[32..]);
+    let m = decode_spz(Path::new("ext.spz"), &ext).unwrap();
+    assert!(m.skipped_extensions);
+    assert_eq!(m.splats, plain.splats);
+}
+
+#[test]
+fn broken_version_4_files_give_errors_that_say_what_is_wrong() {
+    let good = encode_spz(&gt(), &v4_options()).unwrap();
+    let path = Path::new("bad.spz");
+    let check = |bytes: &[u8], want: &str| {
+        let e = decode_spz(path, bytes).unwrap_err().to_string();
+        assert!(e.starts_with("bad.spz: SPZ: ") && e.contains(want), "{e}");
+    };
+    check(&good[..31], "32-byte header");
+    let mut v = good.clone();
+    v[4] = 3;
+    check(&v, "version 3 with a clear header");
+    let mut v = good.clone();
+    v[15] = 5;
+    check(&v, "5 streams where");
+    let mut v = good.clone();
+    v[16..20].copy_from_slice(&(good.len() as u32).to_le_bytes());
+    check(&v, "table of contents");
+    let mut v = good.clone();
+    v[16..20].copy_from_slice(&8_u32.to_le_bytes());
+    check(&v, "table of contents");
+    // The positions' table entry says one byte more than 4,000 splats need.
+    let mut v = good.clone();
+    v[40..48].copy_from_slice(&36_001_u64.to_le_bytes());
+    check(&v, "stream 0 holds 36001 bytes");
+    // A compressed size past the end of the file.
+    let mut v = good.clone();
+    v[32..40].copy_from_slice(&u64::MAX.to_le_bytes());
+    check(&v, "runs past the end");
+    check(&good[..good.len() - 1], "runs past the end");
+    let mut v = good.clone();
+    v.push(0);
+    check(&v, "1 bytes after the last stream");
+    // A frame's bytes damaged: zstd's own check, or the size it decompresses to.
+    let mut v = good.clone();
+    let first = 32 + 16 * 6;
+    for b in &mut v[first + 4..first + 40] {
+        *b ^= 0x5a;
+    }
+    check(&v, "stream 0");
+    // A header claiming 200 million splats: refused by the table, nothing huge allocated.
+    let mut v = good.clone();
+    v[8..12].copy_from_slice(&200_000_000_u32.to_le_bytes());
+    check(&v, "stream 0 holds 36000 bytes where 200000000 splats need");
+}

@@ -154,8 +154,13 @@ def test_splat_transform_and_we_agree_on_the_mode_both_ways(tmp_path):
         theirs = tmp_path / f"theirs_from_ply.v{version}.spz"
         st(ours_ply, theirs, "--spz-version", version)
         assert spz_flag(theirs) == 1
-    # Their version 3 SPZ read by us.
-    assert ours_say_antialiased(tmp_path / "theirs_from_ply.v3.spz")
+    # Their SPZ read by us, either version; and ours of either version read by them.
+    for version in ("3", "4"):
+        assert ours_say_antialiased(tmp_path / f"theirs_from_ply.v{version}.spz")
+        ours_v = tmp_path / f"ours.v{version}.spz"
+        transcode("convert", src, ours_v, "--spz-version", version)
+        st(ours_v, tmp_path / f"theirs_from_ours.v{version}.ply")
+        assert "SplatRenderMode: mip" in PlyData.read(str(tmp_path / f"theirs_from_ours.v{version}.ply")).comments
     st(ours_spz, tmp_path / "theirs_from_spz.ply")
     assert "SplatRenderMode: mip" in PlyData.read(str(tmp_path / "theirs_from_spz.ply")).comments
     # Theirs to ours: a Postshot-tagged PLY retagged by splat-transform in Brush's spelling.
@@ -163,6 +168,6 @@ def test_splat_transform_and_we_agree_on_the_mode_both_ways(tmp_path):
     st(postshot, tmp_path / "retagged.ply")
     assert ours_say_antialiased(tmp_path / "retagged.ply")
     # And an untagged model stays untagged through them.
-    st(GT, tmp_path / "plain.spz", "--spz-version", "3")
+    st(GT, tmp_path / "plain.spz")
     assert spz_flag(tmp_path / "plain.spz") == 0
     assert not ours_say_antialiased(tmp_path / "plain.spz")

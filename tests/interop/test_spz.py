@@ -59,9 +59,12 @@ def same_rotation(a, b):
     return 2 * np.arccos(np.clip(np.abs(np.sum(a * b, 1)), 0, 1))
 
 
-def test_gsply_reads_our_spz(tmp_path):
+@pytest.mark.parametrize("version", [3, 4])
+def test_gsply_reads_our_spz(tmp_path, version):
     out = tmp_path / "gt.spz"
-    convert(GT, out)
+    convert(GT, out, "--spz-version", version)
+    # Version 4 keeps its header in the clear (gsply reads it with zstandard).
+    assert (out.read_bytes()[:4] == b"NGSP") == (version == 4)
     got = gsply.read_spz(str(out))
     means, scales, quats, opac, dc, rest = gt_arrays()
     means, quats, rest = half_turn_x(means, quats, rest)
@@ -77,11 +80,37 @@ def test_gsply_reads_our_spz(tmp_path):
     assert (np.abs(got.shN - np.clip(rest, -1, 127 / 128)) <= bucket / 2 + 1 / 256 + 1e-5).all()
 
 
-def test_we_read_gsply_spz(tmp_path):
+@pytest.mark.parametrize("version", [3, 4])
+def test_we_read_gsply_spz(tmp_path, version):
     src = tmp_path / "gsply.spz"
-    gsply.write_spz(str(src), gsply.plyread(str(GT)), version=3, fractional_bits=12)
+    gsply.write_spz(str(src), gsply.plyread(str(GT)), version=version, fractional_bits=12)
     stored = gsply.read_spz(str(src))
     out = tmp_path / "back.ply"
+    convert(src, out)
+    v = PlyData.read(str(out))["vertex"]
+    means, quats, rest = half_turn_x(stored.means, stored.quats, stored.shN)
+    np.testing.assert_allclose(np.stack([v["x"], v["y"], v["z"]], 1), means, atol=1e-6)
+    np.testing.assert_allclose(np.stack([v[f"scale_{i}"] for i in range(3)], 1), stored.scales, atol=1e-6)
+    np.testing.assert_allclose(v["opacity"], stored.opacities, atol=1e-4)
+    ours = np.stack([v[f"rot_{i}"] for i in range(4)], 1)
+    assert same_rotation(ours / np.linalg.norm(ours, axis=1, keepdims=True), quats).max() < 1e-3
+    np.testing.assert_allclose(np.stack([v[f"f_dc_{i}"] for i in range(3)], 1), stored.sh0, atol=1e-6)
+    ours_rest = np.stack([v[f"f_rest_{i}"] for i in range(45)], 1).reshape(-1, 3, 15).transpose(0, 2, 1)
+    np.testing.assert_allclose(ours_rest, rest, atol=1e-6)
+
+
+@pytest.mark.parametrize("version", [3, 4])
+def test_we_read_splat_transforms_spz(tmp_path, version):
+    """splat-transform's SPZ (version 4 is its default) holds what gsply reads from it."""
+    node_path = os.environ.get("SPLAT_TRANSFORM_NODE_PATH")
+    if not node_path:
+        pytest.skip("set SPLAT_TRANSFORM_NODE_PATH to a node_modules folder holding @playcanvas/splat-transform")
+    cli = Path(node_path) / "@playcanvas" / "splat-transform" / "bin" / "cli.mjs"
+    src, out = tmp_path / "st.spz", tmp_path / "back.ply"
+    subprocess.run(["node", str(cli), "-q", "-w", str(GT), str(src), "--spz-version", str(version)],
+                   check=True, capture_output=True)
+    assert (src.read_bytes()[:4] == b"NGSP") == (version == 4)
+    stored = gsply.read_spz(str(src))
     convert(src, out)
     v = PlyData.read(str(out))["vertex"]
     means, quats, rest = half_turn_x(stored.means, stored.quats, stored.shN)

@@ -202,6 +202,10 @@ pub struct OutputConfig {
     /// Also write every model as SPZ (`splats.spz`: Niantic's compressed format, about a tenth of
     /// the PLY, read by most web viewers).
     pub spz: bool,
+    /// The SPZ version written: 3 (one gzip stream, which every SPZ reader reads) or 4 (a clear
+    /// header and one zstd stream per attribute, Niantic's latest; older readers refuse it).
+    /// The report's viewer always gets version 3.
+    pub spz_version: u32,
     /// Also write every model as binary glTF with `KHR_gaussian_splatting` (`splats.glb`).
     pub glb: bool,
     /// Also train from the other init mode and compare both in the report.
@@ -218,6 +222,7 @@ impl Default for OutputConfig {
             png16: false,
             splat_file: false,
             spz: true,
+            spz_version: splat_core::spz::VERSION,
             glb: false,
             compare_init: false,
             checkpoint_interval_s: DEFAULT_CHECKPOINT_INTERVAL_S,
@@ -519,6 +524,13 @@ impl Config {
             return bad(
                 "training.warmup_share",
                 format!("must be in [0, 1], got {}", t.warmup_share),
+            );
+        }
+        let spz = self.output.spz_version;
+        if ![splat_core::spz::VERSION, splat_core::spz::ZSTD_VERSION].contains(&spz) {
+            return bad(
+                "output.spz_version",
+                format!("must be 3 (gzip) or 4 (zstd streams), got {spz}"),
             );
         }
         let every = self.output.checkpoint_interval_s;

@@ -1365,7 +1365,7 @@ fn export(
              header comment (SplatRenderMode: mip) and its SPZ in a flag, which our viewer, \
              Brush, PlayCanvas / SuperSplat and splat-transform read; a viewer that ignores them \
              draws it with more coverage than it was trained to have, and .splat and .glb files \
-             cannot say it (docs/benchmarks/fidelity.md section 14)"
+             cannot say it (docs/benchmarks/fidelity.md sections 14 and 15)"
                 .into(),
         ));
     }
@@ -1380,7 +1380,7 @@ fn export(
         let formats = ModelFormats {
             antialiased: cfg.training.antialiased,
             splat: k == 0 && cfg.output.splat_file,
-            spz: cfg.output.spz,
+            spz: cfg.output.spz.then_some(cfg.output.spz_version),
             glb: cfg.output.glb,
         };
         let compact = write_model(&run.model_path, &model.splats, formats)?;
@@ -1459,7 +1459,8 @@ struct ModelFormats {
     /// The model was trained antialiased (the PLY's header and the SPZ's flag say so).
     antialiased: bool,
     splat: bool,
-    spz: bool,
+    /// The SPZ version to write, if any.
+    spz: Option<u32>,
     glb: bool,
 }
 
@@ -1487,10 +1488,11 @@ fn write_model(
         splat_core::export::write_splat(&p, splats).map_err(model_err(&p))?;
         written.push(p);
     }
-    if formats.spz {
+    if let Some(version) = formats.spz {
         let p = path.with_extension("spz");
         let opts = splat_core::spz::SpzOptions {
             antialiased: formats.antialiased,
+            version,
             ..splat_core::spz::SpzOptions::default()
         };
         splat_core::spz::write_spz(&p, splats, &opts).map_err(model_err(&p))?;
@@ -1895,7 +1897,7 @@ mod tests {
             let formats = ModelFormats {
                 antialiased,
                 splat: true,
-                spz: true,
+                spz: Some(if antialiased { 4 } else { 3 }),
                 glb: true,
             };
             let others = write_model(&path, &splats, formats).unwrap();

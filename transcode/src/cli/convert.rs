@@ -1,6 +1,7 @@
-//! `transcode convert IN OUT [--sh1-bits N] [--sh-rest-bits N]`: converts a splat model between
-//! the 3DGS PLY, SPZ, the antimatter15 `.splat` and `.glb` (`KHR_gaussian_splatting`), each
-//! chosen by its file extension, and writes the output atomically.
+//! `transcode convert IN OUT [--sh1-bits N] [--sh-rest-bits N] [--spz-version 3|4]`: converts a
+//! splat model between the 3DGS PLY, SPZ (versions 2–4 read, 3 or 4 written), the antimatter15
+//! `.splat` and `.glb` (`KHR_gaussian_splatting`), each chosen by its file extension, and writes
+//! the output atomically.
 
 use std::path::{Path, PathBuf};
 
@@ -21,17 +22,31 @@ pub struct Args {
     /// SPZ output: bits kept of each degree-2 and degree-3 SH coefficient, 1–8 (default 4).
     #[arg(long, value_parser = clap::value_parser!(u8).range(1..=8))]
     pub sh_rest_bits: Option<u8>,
+    /// SPZ output: format version 3 (one gzip stream, the default, which every SPZ reader
+    /// reads) or 4 (zstd streams, Niantic's latest).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(3..=4))]
+    pub spz_version: Option<u32>,
 }
 
 /// Converts the input model to the output's format and prints what was written.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let to = Format::of(&args.output)?;
     Format::of(&args.input)?;
-    if to != Format::Spz && (args.sh1_bits.is_some() || args.sh_rest_bits.is_some()) {
-        bail!("--sh1-bits and --sh-rest-bits apply to .spz output only");
+    if to != Format::Spz
+        && (args.sh1_bits.is_some() || args.sh_rest_bits.is_some() || args.spz_version.is_some())
+    {
+        bail!("--sh1-bits, --sh-rest-bits and --spz-version apply to .spz output only");
     }
     let model = model_file::read_model(&args.input)?;
     let splats = &model.splats;
+    if model.skipped_extensions {
+        println!(
+            "warning: {} holds SPZ extension records, which are not read (a tool's extension can \
+             change how its splats are meant to be read); they are not written to {}",
+            args.input.display(),
+            args.output.display()
+        );
+    }
     if to == Format::Splat && splats.sh_degree > 0 {
         println!(
             "warning: .splat keeps only the diffuse colour: the SH bands of degree 1–{} (view \
@@ -52,6 +67,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let spz_options = spz::SpzOptions {
         sh1_bits: args.sh1_bits.unwrap_or(defaults.sh1_bits),
         sh_rest_bits: args.sh_rest_bits.unwrap_or(defaults.sh_rest_bits),
+        version: args.spz_version.unwrap_or(defaults.version),
         ..defaults
     };
     model_file::write_model(&args.output, splats, model.antialiased, &spz_options)?;

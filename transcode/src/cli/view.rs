@@ -105,7 +105,10 @@ fn file_site(model: &Path, colmap: Option<&Path>) -> anyhow::Result<Site> {
             model.display()
         );
     }
-    let bytes = std::fs::read(model).with_context(|| format!("reading {}", model.display()))?;
+    let mut bytes = std::fs::read(model).with_context(|| format!("reading {}", model.display()))?;
+    if ext == "spz" && bytes.starts_with(b"NGSP") {
+        bytes = spz_v4_as_v3(model, &bytes)?;
+    }
     let (views, pictures) = match colmap {
         Some(dir) => colmap_views(dir)?,
         None => (Vec::new(), Vec::new()),
@@ -116,6 +119,22 @@ fn file_site(model: &Path, colmap: Option<&Path>) -> anyhow::Result<Site> {
         site.add(&name, bytes);
     }
     Ok(site)
+}
+
+/// A version 4 SPZ (zstd streams, which browsers do not decompress) re-packed as version 3 for
+/// the viewer: the same quantised values (the stored fractional bits, SH bytes kept whole, the
+/// render mode), so it draws as the file does.
+fn spz_v4_as_v3(model: &Path, bytes: &[u8]) -> anyhow::Result<Vec<u8>> {
+    use splat_core::spz;
+    let m = spz::decode_spz(model, bytes)?;
+    let options = spz::SpzOptions {
+        sh1_bits: 8,
+        sh_rest_bits: 8,
+        fractional_bits: Some(m.fractional_bits),
+        antialiased: m.antialiased,
+        version: spz::VERSION,
+    };
+    Ok(spz::encode_spz(&m.splats, &options)?)
 }
 
 /// Files to serve from memory: (path, content).
@@ -171,4 +190,44 @@ fn sanitise(name: &str) -> String {
         })
         .collect();
     s.trim_start_matches('.').to_string()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use splat_core::spz;
+
+    #[test]
+    fn a_version_4_spz_is_served_as_version_3_holding_the_same_values() {
+        let gt = Path::new(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../testdata/splat-scene/gt.ply"
+        ));
+        let splats = splat_core::ply::read_splats(gt).unwrap();
+        let options = spz::SpzOptions {
+            antialiased: true,
+            version: spz::ZSTD_VERSION,
+            ..spz::SpzOptions::default()
+        };
+        let v4 = spz::encode_spz(&splats, &options).unwrap();
+        let v3 = spz_v4_as_v3(Path::new("m.spz"), &v4).unwrap();
+        assert_eq!(&v3[..2], &[0x1f, 0x8b], "a gzip stream");
+        let (a, b) = (
+            spz::decode_spz(Path::new("v4"), &v4).unwrap(),
+            spz::decode_spz(Path::new("v3"), &v3).unwrap(),
+        );
+        assert_eq!((a.version, b.version), (4, 3));
+        assert!(b.antialiased);
+        assert_eq!(a.fractional_bits, b.fractional_bits);
+        let (a, b) = (a.splats, b.splats);
+        assert_eq!(a.means, b.means);
+        assert_eq!(a.log_scales, b.log_scales);
+        assert_eq!(a.sh, b.sh);
+        for i in 0..a.len() {
+            assert!((a.opacity(i) - b.opacity(i)).abs() < 1e-6, "splat {i}");
+            // Re-packing a smallest-three quaternion lands on the same word or its neighbour.
+            let angle = 2.0 * a.rotation(i).dot(b.rotation(i)).abs().min(1.0).acos();
+            assert!(angle < 4e-3, "splat {i}: {angle} rad");
+        }
+    }
 }
