@@ -49,7 +49,7 @@ const NGSP_HEADER_BYTES: usize = 32;
 /// Header flag: extension records follow the version 4 header.
 const FLAG_HAS_EXTENSIONS: u8 = 0x2;
 /// zstd's compression level for version 4 streams (`load-spz.cc`'s default for `compressZstd`).
-const ZSTD_LEVEL: i32 = 1;
+const ZSTD_LEVEL: i32 = 12;
 /// Full scale of the colour byte: u8 = dc·0.15·255 + 127.5 (`load-spz.cc`'s `colorScale`).
 const COLOR_SCALE: f32 = 0.15;
 /// Header flag: the model was trained with the antialiased (Mip-Splatting-style) rasteriser.
@@ -411,9 +411,7 @@ impl Layout {
             sh_per_splat,
         }
     }
-}
 
-impl Layout {
     /// The attribute blocks' byte ranges in order (positions, alphas, colours, scales,
     /// rotations, SH), the SH block empty at degree 0.
     fn blocks(&self) -> impl Iterator<Item = std::ops::Range<usize>> {

@@ -122,3 +122,32 @@ def test_we_read_splat_transforms_spz(tmp_path, version):
     np.testing.assert_allclose(np.stack([v[f"f_dc_{i}"] for i in range(3)], 1), stored.sh0, atol=1e-6)
     ours_rest = np.stack([v[f"f_rest_{i}"] for i in range(45)], 1).reshape(-1, 3, 15).transpose(0, 2, 1)
     np.testing.assert_allclose(ours_rest, rest, atol=1e-6)
+
+
+@pytest.mark.parametrize("version", [3, 4])
+def test_splat_transform_reads_our_spz(tmp_path, version):
+    """splat-transform turns our SPZ back into a PLY holding every splat within the format's
+    quantisation. It keeps SPZ's right-up-back frame in the PLY (no turn), so the comparison is
+    with the ground truth turned half a turn about x, as our writer stores it."""
+    node_path = os.environ.get("SPLAT_TRANSFORM_NODE_PATH")
+    if not node_path:
+        pytest.skip("set SPLAT_TRANSFORM_NODE_PATH to a node_modules folder holding @playcanvas/splat-transform")
+    cli = Path(node_path) / "@playcanvas" / "splat-transform" / "bin" / "cli.mjs"
+    ours, theirs = tmp_path / "gt.spz", tmp_path / "st.ply"
+    convert(GT, ours, "--spz-version", version)
+    subprocess.run(["node", str(cli), "-q", "-w", str(ours), str(theirs)], check=True, capture_output=True)
+    v = PlyData.read(str(theirs))["vertex"]
+    means, scales, quats, opac, dc, rest = gt_arrays()
+    means, quats, rest = half_turn_x(means, quats, rest)
+    assert v.count == len(means)
+    assert np.abs(np.stack([v["x"], v["y"], v["z"]], 1) - means).max() < 2.0**-12
+    got_scales = np.stack([v[f"scale_{i}"] for i in range(3)], 1)
+    assert np.abs(got_scales - np.clip(scales, -10, 255 / 16 - 10)).max() <= 1 / 32 + 1e-5
+    sig = lambda x: 1 / (1 + np.exp(-np.asarray(x, np.float64)))
+    assert np.abs(sig(v["opacity"]) - sig(opac)).max() <= 0.5 / 255 + 1e-4
+    q = np.stack([v[f"rot_{i}"] for i in range(4)], 1)
+    assert same_rotation(q / np.linalg.norm(q, axis=1, keepdims=True), quats).max() < 4e-3
+    assert np.abs(np.stack([v[f"f_dc_{i}"] for i in range(3)], 1) - dc).max() <= 0.5 / (0.15 * 255) + 1e-5
+    got_rest = np.stack([v[f"f_rest_{i}"] for i in range(45)], 1).reshape(-1, 3, 15).transpose(0, 2, 1)
+    bucket = np.where(np.arange(15) < 3, 8 / 128, 16 / 128)[None, :, None]
+    assert (np.abs(got_rest - np.clip(rest, -1, 127 / 128)) <= bucket / 2 + 1 / 256 + 1e-5).all()

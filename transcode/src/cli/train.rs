@@ -8,11 +8,11 @@ use anyhow::{Context, bail};
 use glam::Vec3;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
-use splat_core::Splats;
+use splat_core::{RenderOptions, Splats};
 use splat_train::schedule::next_stop;
 use splat_train::{
     Background, Dataset, DensifyConfig, HistoryEntry, Photometric, TrainConfig, TrainReport,
-    Trainer, View, Warmup, evaluate, read_dataset,
+    Trainer, View, Warmup, evaluate_with, read_dataset,
 };
 
 use atomic_output::write_atomic;
@@ -106,6 +106,11 @@ pub struct Args {
     /// The loss's photometric term beside D-SSIM.
     #[arg(long, value_enum, default_value_t = PhotometricArg::L1)]
     pub photometric: PhotometricArg,
+    /// Train (and evaluate) with the antialiased (Mip-Splatting) opacity compensation; the
+    /// PLY then says so in its header (`comment SplatRenderMode: mip`), which Brush,
+    /// PlayCanvas / SuperSplat, splat-transform and our viewer follow (docs/pipeline.md).
+    #[arg(long)]
+    pub antialiased: bool,
     /// Seed of the run.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -327,7 +332,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         pending_ckpt |= saved_at.elapsed() >= interval;
         let done = it >= args.iterations || r.stopped_by_budget;
         if pending_eval || done {
-            let e = evaluate(trainer.splats(), &eval_views, background)?;
+            let opts = RenderOptions {
+                background,
+                active_sh_degree: trainer.splats().sh_degree,
+                antialiased: args.antialiased,
+                linear_colour: false,
+            };
+            let e = evaluate_with(trainer.splats(), &eval_views, &opts)?;
             let line = format!(
                 "iteration {it}: {:.2} dB PSNR, SSIM {:.4} on {} views after {:.1} s, {} splats",
                 e.psnr,
@@ -363,7 +374,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     bar.finish_and_clear();
 
-    splat_core::ply::write_splats(&ply, trainer.splats())
+    let ply_options = splat_core::ply::PlyOptions {
+        antialiased: args.antialiased,
+    };
+    splat_core::ply::write_model(&ply, trainer.splats(), &ply_options)
         .with_context(|| format!("cannot write {}", ply.display()))?;
     write_history(
         &history_path,
@@ -399,6 +413,9 @@ struct Settings {
     /// Runs started before the setting existed trained with L1.
     #[serde(default = "l1_name")]
     photometric: String,
+    /// Runs started before the setting existed trained plain.
+    #[serde(default)]
+    antialiased: bool,
     seed: u64,
     warmup_factor: u32,
     warmup_steps: u32,
@@ -429,6 +446,7 @@ impl Settings {
             downscale: args.downscale.to_string(),
             background: format!("{:?}", args.background),
             photometric: format!("{:?}", args.photometric),
+            antialiased: args.antialiased,
             seed: args.seed,
             warmup_factor: args.warmup_factor,
             warmup_steps: args.warmup_steps,
@@ -478,6 +496,7 @@ fn train_config(args: &Args) -> TrainConfig {
         },
         time_budget: args.time_budget.map(Duration::from_secs_f64),
         history_every: 10,
+        antialiased: args.antialiased,
         ..TrainConfig::default()
     };
     c.frozen.positions = args.freeze_positions;
@@ -657,6 +676,23 @@ mod tests {
             vec!["photometric: \"L1\" → \"L2\"".to_string()]
         );
         assert_eq!(train_config(&args(&[])).photometric, Photometric::L1);
+        // The same for the antialiased setting: absent, a plain run.
+        let mut saved = serde_json::to_value(&now).expect("settings serialise");
+        if let Some(fields) = saved.as_object_mut() {
+            assert_eq!(
+                fields.remove("antialiased"),
+                Some(serde_json::Value::Bool(false))
+            );
+        }
+        let saved: Settings = serde_json::from_value(saved).expect("old settings read");
+        assert_eq!(saved, now);
+        let aa = Settings::of(&args(&["--antialiased"]));
+        assert_eq!(
+            saved.differences(&aa),
+            vec!["antialiased: false → true".to_string()]
+        );
+        assert!(train_config(&args(&["--antialiased"])).antialiased);
+        assert!(!train_config(&args(&[])).antialiased);
         assert_eq!(
             train_config(&args(&["--photometric", "l2"])).photometric,
             Photometric::L2
