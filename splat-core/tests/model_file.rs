@@ -1,16 +1,12 @@
 //! Model files of any format by extension, and the render mode each can or cannot carry.
 
-use std::path::{Path, PathBuf};
+mod common;
 
+use std::path::Path;
+
+use common::gt_path;
 use splat_core::model_file::{Format, read_model, write_model};
 use splat_core::{Error, ply, spz};
-
-fn gt_path() -> PathBuf {
-    PathBuf::from(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../testdata/splat-scene/gt.ply"
-    ))
-}
 
 #[test]
 fn formats_are_named_by_their_extension_in_any_case() {

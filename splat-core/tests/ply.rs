@@ -3,18 +3,11 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use common::{Rng, random_splats};
+use common::{Rng, gt_path, random_splats};
 use glam::Vec3;
 use splat_core::{Error, Splats, ply};
-
-fn gt_path() -> PathBuf {
-    PathBuf::from(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../testdata/splat-scene/gt.ply"
-    ))
-}
 
 #[test]
 fn writing_gt_ply_reproduces_its_bytes() {

@@ -13,7 +13,6 @@ applied here, written out independently, before comparing.
 """
 
 import os
-import shutil
 import subprocess
 from pathlib import Path
 
@@ -116,18 +115,8 @@ def test_gsply_ply_through_each_format_and_back(tmp_path, middle):
             np.testing.assert_array_equal(brest, rest)
 
 
-def splat_transform():
-    node_path = os.environ.get("SPLAT_TRANSFORM_NODE_PATH")
-    if not node_path:
-        pytest.skip("set SPLAT_TRANSFORM_NODE_PATH to a node_modules folder holding @playcanvas/splat-transform")
-    cli = Path(node_path) / "@playcanvas" / "splat-transform" / "bin" / "cli.mjs"
-    node = shutil.which("node")
-    assert node and cli.is_file(), f"node and {cli} are needed"
-    return lambda *args: subprocess.run([node, str(cli), "-q", "-w", *map(str, args)], check=True, capture_output=True)
-
-
-def test_we_read_splat_transforms_glb(tmp_path):
-    st = splat_transform()
+def test_we_read_splat_transforms_glb(tmp_path, splat_transform):
+    st = splat_transform
     glb, back = tmp_path / "st.glb", tmp_path / "back.ply"
     st(GT, glb)
     convert(glb, back)
@@ -161,8 +150,8 @@ def test_we_read_splat_transforms_glb(tmp_path):
     np.testing.assert_allclose(brest, rest * sign[None, :, None], atol=1e-6)
 
 
-def test_splat_transform_reads_our_splat(tmp_path):
-    st = splat_transform()
+def test_splat_transform_reads_our_splat(tmp_path, splat_transform):
+    st = splat_transform
     ours, theirs = tmp_path / "gt.splat", tmp_path / "st.ply"
     convert(GT, ours)
     st(ours, theirs)

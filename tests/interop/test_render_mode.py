@@ -133,18 +133,8 @@ def test_render_and_eval_draw_the_model_as_its_file_says(tmp_path):
     assert run.returncode != 0 and "cannot be used with" in run.stderr
 
 
-def splat_transform():
-    node_path = os.environ.get("SPLAT_TRANSFORM_NODE_PATH")
-    if not node_path:
-        pytest.skip("set SPLAT_TRANSFORM_NODE_PATH to a node_modules folder holding @playcanvas/splat-transform")
-    cli = Path(node_path) / "@playcanvas" / "splat-transform" / "bin" / "cli.mjs"
-    node = shutil.which("node")
-    assert node and cli.is_file(), f"node and {cli} are needed"
-    return lambda *args: subprocess.run([node, str(cli), "-q", "-w", *map(str, args)], check=True, capture_output=True)
-
-
-def test_splat_transform_and_we_agree_on_the_mode_both_ways(tmp_path):
-    st = splat_transform()
+def test_splat_transform_and_we_agree_on_the_mode_both_ways(tmp_path, splat_transform):
+    st = splat_transform
     # Ours to theirs: our tagged PLY and SPZ, read by splat-transform and written as SPZ / PLY.
     src = tagged(tmp_path / "brush.ply", ["SplatRenderMode: mip"])
     ours_ply, ours_spz = tmp_path / "ours.ply", tmp_path / "ours.spz"

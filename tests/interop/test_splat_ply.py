@@ -5,7 +5,6 @@ with Inria's published layout (formats.md §4.1): binary little endian, all `flo
 x y z nx ny nz f_dc_0..2 f_rest_* opacity scale_0..2 rot_0..3, f_rest channel-major.
 """
 
-import os
 import subprocess
 from pathlib import Path
 

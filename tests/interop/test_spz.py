@@ -59,6 +59,20 @@ def same_rotation(a, b):
     return 2 * np.arccos(np.clip(np.abs(np.sum(a * b, 1)), 0, 1))
 
 
+def assert_ply_holds(ply, stored):
+    """Our PLY `ply` (in our frame) holds what gsply read from an SPZ (`stored`, in SPZ's)."""
+    v = PlyData.read(str(ply))["vertex"]
+    means, quats, rest = half_turn_x(stored.means, stored.quats, stored.shN)
+    np.testing.assert_allclose(np.stack([v["x"], v["y"], v["z"]], 1), means, atol=1e-6)
+    np.testing.assert_allclose(np.stack([v[f"scale_{i}"] for i in range(3)], 1), stored.scales, atol=1e-6)
+    np.testing.assert_allclose(v["opacity"], stored.opacities, atol=1e-4)
+    ours = np.stack([v[f"rot_{i}"] for i in range(4)], 1)
+    assert same_rotation(ours / np.linalg.norm(ours, axis=1, keepdims=True), quats).max() < 1e-3
+    np.testing.assert_allclose(np.stack([v[f"f_dc_{i}"] for i in range(3)], 1), stored.sh0, atol=1e-6)
+    ours_rest = np.stack([v[f"f_rest_{i}"] for i in range(45)], 1).reshape(-1, 3, 15).transpose(0, 2, 1)
+    np.testing.assert_allclose(ours_rest, rest, atol=1e-6)
+
+
 @pytest.mark.parametrize("version", [3, 4])
 def test_gsply_reads_our_spz(tmp_path, version):
     out = tmp_path / "gt.spz"
@@ -87,55 +101,28 @@ def test_we_read_gsply_spz(tmp_path, version):
     stored = gsply.read_spz(str(src))
     out = tmp_path / "back.ply"
     convert(src, out)
-    v = PlyData.read(str(out))["vertex"]
-    means, quats, rest = half_turn_x(stored.means, stored.quats, stored.shN)
-    np.testing.assert_allclose(np.stack([v["x"], v["y"], v["z"]], 1), means, atol=1e-6)
-    np.testing.assert_allclose(np.stack([v[f"scale_{i}"] for i in range(3)], 1), stored.scales, atol=1e-6)
-    np.testing.assert_allclose(v["opacity"], stored.opacities, atol=1e-4)
-    ours = np.stack([v[f"rot_{i}"] for i in range(4)], 1)
-    assert same_rotation(ours / np.linalg.norm(ours, axis=1, keepdims=True), quats).max() < 1e-3
-    np.testing.assert_allclose(np.stack([v[f"f_dc_{i}"] for i in range(3)], 1), stored.sh0, atol=1e-6)
-    ours_rest = np.stack([v[f"f_rest_{i}"] for i in range(45)], 1).reshape(-1, 3, 15).transpose(0, 2, 1)
-    np.testing.assert_allclose(ours_rest, rest, atol=1e-6)
+    assert_ply_holds(out, stored)
 
 
 @pytest.mark.parametrize("version", [3, 4])
-def test_we_read_splat_transforms_spz(tmp_path, version):
+def test_we_read_splat_transforms_spz(tmp_path, splat_transform, version):
     """splat-transform's SPZ (version 4 is its default) holds what gsply reads from it."""
-    node_path = os.environ.get("SPLAT_TRANSFORM_NODE_PATH")
-    if not node_path:
-        pytest.skip("set SPLAT_TRANSFORM_NODE_PATH to a node_modules folder holding @playcanvas/splat-transform")
-    cli = Path(node_path) / "@playcanvas" / "splat-transform" / "bin" / "cli.mjs"
     src, out = tmp_path / "st.spz", tmp_path / "back.ply"
-    subprocess.run(["node", str(cli), "-q", "-w", str(GT), str(src), "--spz-version", str(version)],
-                   check=True, capture_output=True)
+    splat_transform(GT, src, "--spz-version", version)
     assert (src.read_bytes()[:4] == b"NGSP") == (version == 4)
     stored = gsply.read_spz(str(src))
     convert(src, out)
-    v = PlyData.read(str(out))["vertex"]
-    means, quats, rest = half_turn_x(stored.means, stored.quats, stored.shN)
-    np.testing.assert_allclose(np.stack([v["x"], v["y"], v["z"]], 1), means, atol=1e-6)
-    np.testing.assert_allclose(np.stack([v[f"scale_{i}"] for i in range(3)], 1), stored.scales, atol=1e-6)
-    np.testing.assert_allclose(v["opacity"], stored.opacities, atol=1e-4)
-    ours = np.stack([v[f"rot_{i}"] for i in range(4)], 1)
-    assert same_rotation(ours / np.linalg.norm(ours, axis=1, keepdims=True), quats).max() < 1e-3
-    np.testing.assert_allclose(np.stack([v[f"f_dc_{i}"] for i in range(3)], 1), stored.sh0, atol=1e-6)
-    ours_rest = np.stack([v[f"f_rest_{i}"] for i in range(45)], 1).reshape(-1, 3, 15).transpose(0, 2, 1)
-    np.testing.assert_allclose(ours_rest, rest, atol=1e-6)
+    assert_ply_holds(out, stored)
 
 
 @pytest.mark.parametrize("version", [3, 4])
-def test_splat_transform_reads_our_spz(tmp_path, version):
+def test_splat_transform_reads_our_spz(tmp_path, splat_transform, version):
     """splat-transform turns our SPZ back into a PLY holding every splat within the format's
     quantisation. It keeps SPZ's right-up-back frame in the PLY (no turn), so the comparison is
     with the ground truth turned half a turn about x, as our writer stores it."""
-    node_path = os.environ.get("SPLAT_TRANSFORM_NODE_PATH")
-    if not node_path:
-        pytest.skip("set SPLAT_TRANSFORM_NODE_PATH to a node_modules folder holding @playcanvas/splat-transform")
-    cli = Path(node_path) / "@playcanvas" / "splat-transform" / "bin" / "cli.mjs"
     ours, theirs = tmp_path / "gt.spz", tmp_path / "st.ply"
     convert(GT, ours, "--spz-version", version)
-    subprocess.run(["node", str(cli), "-q", "-w", str(ours), str(theirs)], check=True, capture_output=True)
+    splat_transform(ours, theirs)
     v = PlyData.read(str(theirs))["vertex"]
     means, scales, quats, opac, dc, rest = gt_arrays()
     means, quats, rest = half_turn_x(means, quats, rest)

@@ -2,11 +2,21 @@
 //! (per pixel, every splat whose 3σ tile rectangle covers the pixel's tile, sorted by depth),
 //! scene generators and a small deterministic PRNG.
 #![allow(dead_code)]
+// The reference renderer indexes pixels and channels as its maths is written.
+#![allow(clippy::needless_range_loop)]
 
 use glam::{Mat3, Quat, Vec3};
 use splat_core::{RenderCamera, Splats};
 
 pub mod gradcheck;
+
+/// The real 3DGS model of `testdata/splat-scene` (4,000 splats, SH degree 3, Inria's layout).
+pub fn gt_path() -> std::path::PathBuf {
+    std::path::PathBuf::from(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../testdata/splat-scene/gt.ply"
+    ))
+}
 
 /// SplitMix64: a tiny deterministic generator so the tests need no RNG API.
 pub struct Rng(u64);
