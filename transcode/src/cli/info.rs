@@ -1,4 +1,5 @@
-//! `transcode info FILE [--json]`: what a point cloud, plenoptic cloud or mesh file holds.
+//! `transcode info FILE [--json]`: what a point cloud, plenoptic cloud, mesh or 3DGS splat model
+//! file holds.
 
 use std::path::PathBuf;
 use std::time::Duration;
@@ -10,7 +11,7 @@ use plenoptic_io::summary::{Bounds, ColorStats, Summary};
 /// Arguments of `transcode info`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// The file to inspect (.ply, .obj, .gltf, .glb).
+    /// The file to inspect (.ply, .obj, .gltf, .glb, .spz, .splat).
     pub file: PathBuf,
     /// Print one JSON object instead of the human-readable report.
     #[arg(long)]
@@ -19,6 +20,14 @@ pub struct Args {
 
 /// Loads the file and prints its summary.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if let Some(splats) = SplatSummary::of(&args.file)? {
+        if args.json {
+            println!("{}", serde_json::to_value(&splats)?);
+        } else {
+            print!("{}", splats.human());
+        }
+        return Ok(());
+    }
     // Reading is fast (a 200 MB plenoptic frame loads in well under a second); a spinner covers slow disks.
     let spinner = ProgressBar::new_spinner().with_style(
         ProgressStyle::with_template("{spinner} reading {msg} ({elapsed})")
@@ -153,4 +162,178 @@ fn human(file: &str, format: &str, s: &Summary) -> String {
         );
     }
     out
+}
+
+/// What a 3DGS splat model file holds.
+#[derive(Debug, serde::Serialize)]
+struct SplatSummary {
+    file: String,
+    format: String,
+    kind: &'static str,
+    splats: usize,
+    sh_degree: u32,
+    /// How the file says the model is drawn: `antialiased` (opacity compensated) or `plain`.
+    drawn: &'static str,
+    bounds: Option<Bounds>,
+    /// Median activated opacity.
+    opacity_median: f32,
+    /// Medians of each splat's largest and smallest standard deviation.
+    sigma_largest_median: f32,
+    sigma_smallest_median: f32,
+}
+
+impl SplatSummary {
+    /// The summary of `path` if it is a splat model: an SPZ or `.splat` file, a PLY whose vertices
+    /// have 3DGS properties, or a `.glb` with a `KHR_gaussian_splatting` primitive; `None` for
+    /// other files (clouds and meshes).
+    fn of(path: &std::path::Path) -> anyhow::Result<Option<Self>> {
+        use splat_core::model_file::{self, Format};
+        let Ok(format) = Format::of(path) else {
+            return Ok(None);
+        };
+        let splat_ply = |path| {
+            plenoptic_io::ply::read_header(path).is_ok_and(|h| {
+                h.element("vertex").is_some_and(|(_, v)| {
+                    ["f_dc_0", "opacity", "scale_0", "rot_0"]
+                        .iter()
+                        .all(|n| v.properties.iter().any(|p| p.name == *n))
+                })
+            })
+        };
+        let name = match format {
+            Format::Ply if splat_ply(path) => "3DGS PLY".to_string(),
+            Format::Spz => {
+                let version = splat_core::spz::read_spz(path)?.version;
+                format!("SPZ version {version}")
+            }
+            Format::Splat => "antimatter15 .splat".to_string(),
+            Format::Glb if splat_core::glb::read_glb(path).is_ok() => {
+                "GLB with KHR_gaussian_splatting".to_string()
+            }
+            Format::Ply | Format::Glb => return Ok(None),
+        };
+        let file = model_file::read_model(path)?;
+        let s = &file.splats;
+        let median = |mut v: Vec<f32>| {
+            v.sort_by(f32::total_cmp);
+            v.get(v.len() / 2).copied().unwrap_or(f32::NAN)
+        };
+        let bounds = (!s.is_empty()).then(|| {
+            let (lo, hi) = s.means.iter().fold(
+                (
+                    glam::Vec3::splat(f32::INFINITY),
+                    glam::Vec3::splat(f32::NEG_INFINITY),
+                ),
+                |(lo, hi), &m| (lo.min(m), hi.max(m)),
+            );
+            Bounds {
+                min: lo.as_dvec3().to_array(),
+                max: hi.as_dvec3().to_array(),
+            }
+        });
+        Ok(Some(Self {
+            file: path.display().to_string(),
+            format: name,
+            kind: "3DGS splat model",
+            splats: s.len(),
+            sh_degree: s.sh_degree,
+            drawn: if file.antialiased {
+                "antialiased"
+            } else {
+                "plain"
+            },
+            bounds,
+            opacity_median: median((0..s.len()).map(|i| s.opacity(i)).collect()),
+            sigma_largest_median: median((0..s.len()).map(|i| s.scale(i).max_element()).collect()),
+            sigma_smallest_median: median((0..s.len()).map(|i| s.scale(i).min_element()).collect()),
+        }))
+    }
+
+    /// The human-readable report.
+    fn human(&self) -> String {
+        let mut out = String::new();
+        let mut line = |k: &str, v: String| out.push_str(&format!("{k:<18}{v}\n"));
+        line("file", self.file.clone());
+        line("format", self.format.clone());
+        line("kind", self.kind.to_string());
+        line("splats", self.splats.to_string());
+        line("SH degree", self.sh_degree.to_string());
+        line(
+            "drawn",
+            match self.drawn {
+                "antialiased" => "antialiased (the file says it was trained with the opacity \
+                                  compensation)"
+                    .to_string(),
+                _ => "plain".to_string(),
+            },
+        );
+        if let Some(b) = &self.bounds {
+            line("bounds", bounds(b));
+        }
+        line("opacity", format!("median {:.3}", self.opacity_median));
+        line(
+            "sigma",
+            format!(
+                "median of the largest axis {:.6}, of the smallest {:.6}",
+                self.sigma_largest_median, self.sigma_smallest_median
+            ),
+        );
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::Path;
+
+    fn testdata(rel: &str) -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../testdata")
+            .join(rel)
+    }
+
+    #[test]
+    fn splat_models_are_told_from_clouds_and_meshes_with_their_render_mode() {
+        let gt = testdata("splat-scene/gt.ply");
+        let plain = SplatSummary::of(&gt)
+            .unwrap()
+            .expect("gt.ply is a splat model");
+        assert_eq!((plain.splats, plain.sh_degree), (4000, 3));
+        assert_eq!((plain.format.as_str(), plain.drawn), ("3DGS PLY", "plain"));
+        let splats = splat_core::ply::read_splats(&gt).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let tagged = dir.path().join("aa.ply");
+        let options = splat_core::ply::PlyOptions { antialiased: true };
+        splat_core::ply::write_model(&tagged, &splats, &options).unwrap();
+        assert_eq!(
+            SplatSummary::of(&tagged).unwrap().unwrap().drawn,
+            "antialiased"
+        );
+        let spz = dir.path().join("m.spz");
+        let v4 = splat_core::spz::SpzOptions {
+            version: 4,
+            antialiased: true,
+            ..splat_core::spz::SpzOptions::default()
+        };
+        splat_core::spz::write_spz(&spz, &splats, &v4).unwrap();
+        let s = SplatSummary::of(&spz).unwrap().unwrap();
+        assert_eq!(
+            (s.format.as_str(), s.drawn),
+            ("SPZ version 4", "antialiased")
+        );
+        assert!(s.human().contains("antialiased (the file says"));
+        // Clouds and meshes are not splat models, whatever their extension.
+        for other in [
+            "meshes/misc/cube_binary.ply",
+            "meshes/misc/bun_zipper_res4.ply",
+            "meshes/box-textured/BoxTextured.glb",
+            "meshes/spider/spider.obj",
+        ] {
+            assert!(
+                SplatSummary::of(&testdata(other)).unwrap().is_none(),
+                "{other}"
+            );
+        }
+    }
 }
