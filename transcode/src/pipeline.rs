@@ -1478,30 +1478,27 @@ fn write_model(
             source: Box::new(source),
         }
     };
-    let ply_options = splat_core::ply::PlyOptions {
-        antialiased: formats.antialiased,
+    // Each file by its extension, the render mode marked where the format has a place for it.
+    let spz = splat_core::spz::SpzOptions {
+        version: formats.spz.unwrap_or(splat_core::spz::VERSION),
+        ..splat_core::spz::SpzOptions::default()
     };
-    splat_core::ply::write_model(path, splats, &ply_options).map_err(model_err(path))?;
+    let write = |p: &Path| {
+        splat_core::model_file::write_model(p, splats, formats.antialiased, &spz)
+            .map_err(model_err(p))
+    };
+    write(path)?;
     let mut written = Vec::new();
-    if formats.splat {
-        let p = path.with_extension("splat");
-        splat_core::export::write_splat(&p, splats).map_err(model_err(&p))?;
-        written.push(p);
-    }
-    if let Some(version) = formats.spz {
-        let p = path.with_extension("spz");
-        let opts = splat_core::spz::SpzOptions {
-            antialiased: formats.antialiased,
-            version,
-            ..splat_core::spz::SpzOptions::default()
-        };
-        splat_core::spz::write_spz(&p, splats, &opts).map_err(model_err(&p))?;
-        written.push(p);
-    }
-    if formats.glb {
-        let p = path.with_extension("glb");
-        splat_core::glb::write_glb(&p, splats).map_err(model_err(&p))?;
-        written.push(p);
+    for (ext, wanted) in [
+        ("splat", formats.splat),
+        ("spz", formats.spz.is_some()),
+        ("glb", formats.glb),
+    ] {
+        if wanted {
+            let p = path.with_extension(ext);
+            write(&p)?;
+            written.push(p);
+        }
     }
     Ok(written)
 }

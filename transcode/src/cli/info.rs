@@ -187,7 +187,8 @@ impl SplatSummary {
     /// have 3DGS properties, or a `.glb` with a `KHR_gaussian_splatting` primitive; `None` for
     /// other files (clouds and meshes).
     fn of(path: &std::path::Path) -> anyhow::Result<Option<Self>> {
-        use splat_core::model_file::{self, Format};
+        use splat_core::model_file::Format;
+        use splat_core::{export, glb, ply, spz};
         let Ok(format) = Format::of(path) else {
             return Ok(None);
         };
@@ -200,20 +201,33 @@ impl SplatSummary {
                 })
             })
         };
-        let name = match format {
-            Format::Ply if splat_ply(path) => "3DGS PLY".to_string(),
+        // Each file read once, by its own format's reader (the SPZ's version is its alone).
+        let (name, splats, antialiased) = match format {
+            Format::Ply if splat_ply(path) => {
+                let m = ply::read_model(path)?;
+                ("3DGS PLY".to_string(), m.splats, m.antialiased)
+            }
             Format::Spz => {
-                let version = splat_core::spz::read_spz(path)?.version;
-                format!("SPZ version {version}")
+                let m = spz::read_spz(path)?;
+                (
+                    format!("SPZ version {}", m.version),
+                    m.splats,
+                    m.antialiased,
+                )
             }
-            Format::Splat => "antimatter15 .splat".to_string(),
-            Format::Glb if splat_core::glb::read_glb(path).is_ok() => {
-                "GLB with KHR_gaussian_splatting".to_string()
-            }
-            Format::Ply | Format::Glb => return Ok(None),
+            Format::Splat => (
+                "antimatter15 .splat".to_string(),
+                export::read_splat(path)?,
+                false,
+            ),
+            // A .glb without a splat primitive is a mesh.
+            Format::Glb => match glb::read_glb(path) {
+                Ok(s) => ("GLB with KHR_gaussian_splatting".to_string(), s, false),
+                Err(_) => return Ok(None),
+            },
+            Format::Ply => return Ok(None),
         };
-        let file = model_file::read_model(path)?;
-        let s = &file.splats;
+        let s = &splats;
         let median = |mut v: Vec<f32>| {
             v.sort_by(f32::total_cmp);
             v.get(v.len() / 2).copied().unwrap_or(f32::NAN)
@@ -237,11 +251,7 @@ impl SplatSummary {
             kind: "3DGS splat model",
             splats: s.len(),
             sh_degree: s.sh_degree,
-            drawn: if file.antialiased {
-                "antialiased"
-            } else {
-                "plain"
-            },
+            drawn: if antialiased { "antialiased" } else { "plain" },
             bounds,
             opacity_median: median((0..s.len()).map(|i| s.opacity(i)).collect()),
             sigma_largest_median: median((0..s.len()).map(|i| s.scale(i).max_element()).collect()),
