@@ -1,0 +1,114 @@
+//! `--antialiased` on the commands that train is `[training] antialiased = true`: the same model
+//! bit for bit, whose PLY says how it is drawn, and a plain run's PLY says nothing.
+
+use std::path::Path;
+use std::process::Command;
+
+use plenoptic_scenes::{DemoConfig, demo_scene};
+
+const BIN: &str = env!("CARGO_BIN_EXE_transcode");
+
+/// Small views and a short run: only the setting's way through the command is under test.
+const CONFIG: &str = r#"
+[rig]
+cameras = 8
+width = 48
+height = 48
+heldout_cameras = 1
+
+[training]
+iterations = 20
+
+[eval]
+report_views = 1
+"#;
+
+/// Runs `transcode` with `args` and fails the test with what it printed if it fails.
+fn transcode(args: &[&str]) {
+    let output = Command::new(BIN).args(args).output().unwrap();
+    assert!(
+        output.status.success(),
+        "transcode {args:?} failed:\n{}{}",
+        String::from_utf8_lossy(&output.stdout),
+        String::from_utf8_lossy(&output.stderr)
+    );
+}
+
+/// The model a run wrote, and whether its PLY header carries Brush's render-mode comment.
+fn model(out: &Path) -> (Vec<u8>, bool) {
+    let bytes = std::fs::read(out.join("model/splats.ply")).unwrap();
+    let end = bytes
+        .windows(11)
+        .position(|w| w == b"end_header\n")
+        .expect("a PLY header");
+    let header = String::from_utf8_lossy(&bytes[..end]);
+    let tagged = header
+        .lines()
+        .any(|l| l == "comment SplatRenderMode: mip");
+    (bytes, tagged)
+}
+
+#[test]
+fn the_flag_trains_what_the_setting_trains_and_the_file_says_so() {
+    let tmp = tempfile::tempdir().unwrap();
+    let cloud = demo_scene(&DemoConfig {
+        grid: 32,
+        ..DemoConfig::default()
+    })
+    .unwrap();
+    let input = tmp.path().join("demo.ply");
+    plenoptic_io::write_cloud(&input, &cloud).unwrap();
+    let plain_cfg = tmp.path().join("plain.toml");
+    std::fs::write(&plain_cfg, CONFIG).unwrap();
+    let aa_cfg = tmp.path().join("aa.toml");
+    std::fs::write(
+        &aa_cfg,
+        CONFIG.replace("iterations = 20", "iterations = 20\nantialiased = true"),
+    )
+    .unwrap();
+    let run = |name: &str, config: &Path, extra: &[&str]| {
+        let out = tmp.path().join(name);
+        let mut args = vec![
+            "run",
+            input.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--config",
+            config.to_str().unwrap(),
+            "--no-dataset",
+            "--quiet",
+        ];
+        args.extend_from_slice(extra);
+        transcode(&args);
+        model(&out)
+    };
+
+    let (flagged, flagged_tagged) = run("flag", &plain_cfg, &["--antialiased"]);
+    let (keyed, keyed_tagged) = run("key", &aa_cfg, &[]);
+    let (plain, plain_tagged) = run("plain", &plain_cfg, &[]);
+    assert!(flagged_tagged && keyed_tagged, "an antialiased run's PLY is not tagged");
+    assert!(!plain_tagged, "a plain run's PLY is tagged antialiased");
+    assert!(
+        flagged == keyed,
+        "--antialiased and [training] antialiased = true trained different models"
+    );
+    assert!(flagged != plain, "--antialiased changed nothing in the model");
+
+    // The demo takes the same flag.
+    let demo = tmp.path().join("demo");
+    transcode(&[
+        "demo",
+        "--out",
+        demo.to_str().unwrap(),
+        "--grid",
+        "32",
+        "--config",
+        plain_cfg.to_str().unwrap(),
+        "--time-budget",
+        "100000",
+        "--no-dataset",
+        "--quiet",
+        "--antialiased",
+    ]);
+    assert!(model(&demo).1, "demo --antialiased wrote an untagged PLY");
+}
