@@ -42,9 +42,7 @@ fn model(out: &Path) -> (Vec<u8>, bool) {
         .position(|w| w == b"end_header\n")
         .expect("a PLY header");
     let header = String::from_utf8_lossy(&bytes[..end]);
-    let tagged = header
-        .lines()
-        .any(|l| l == "comment SplatRenderMode: mip");
+    let tagged = header.lines().any(|l| l == "comment SplatRenderMode: mip");
     (bytes, tagged)
 }
 
@@ -86,13 +84,19 @@ fn the_flag_trains_what_the_setting_trains_and_the_file_says_so() {
     let (flagged, flagged_tagged) = run("flag", &plain_cfg, &["--antialiased"]);
     let (keyed, keyed_tagged) = run("key", &aa_cfg, &[]);
     let (plain, plain_tagged) = run("plain", &plain_cfg, &[]);
-    assert!(flagged_tagged && keyed_tagged, "an antialiased run's PLY is not tagged");
+    assert!(
+        flagged_tagged && keyed_tagged,
+        "an antialiased run's PLY is not tagged"
+    );
     assert!(!plain_tagged, "a plain run's PLY is tagged antialiased");
     assert!(
         flagged == keyed,
         "--antialiased and [training] antialiased = true trained different models"
     );
-    assert!(flagged != plain, "--antialiased changed nothing in the model");
+    assert!(
+        flagged != plain,
+        "--antialiased changed nothing in the model"
+    );
 
     // The demo takes the same flag.
     let demo = tmp.path().join("demo");
