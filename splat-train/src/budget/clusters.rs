@@ -12,7 +12,7 @@ use glam::{DVec3, Mat3, Vec3};
 use rayon::prelude::*;
 use splat_core::Splats;
 
-use super::symmetric_eigenvalues;
+use super::eigen::symmetric_eigenvalues;
 use crate::init::PointIndex;
 
 /// Nearest neighbours each splat is joined to before any union: enough that a surface's graph
