@@ -8,20 +8,18 @@ use plenoptic_scenes::{DemoConfig, demo_scene};
 
 const BIN: &str = env!("CARGO_BIN_EXE_transcode");
 
-/// Small views and a short run: only the setting's way through the command is under test.
-const CONFIG: &str = r#"
-[rig]
-cameras = 8
-width = 48
-height = 48
-heldout_cameras = 1
-
-[training]
-iterations = 20
-
-[eval]
-report_views = 1
-"#;
+/// Small views and a short run, by flags: only the setting's way through the command is under
+/// test.
+const SMALL: [&str; 8] = [
+    "--cameras",
+    "8",
+    "--resolution",
+    "48",
+    "--heldout",
+    "1",
+    "--iterations",
+    "20",
+];
 
 /// Runs `transcode` with `args` and fails the test with what it printed if it fails.
 fn transcode(args: &[&str]) {
@@ -56,34 +54,27 @@ fn the_flag_trains_what_the_setting_trains_and_the_file_says_so() {
     .unwrap();
     let input = tmp.path().join("demo.ply");
     plenoptic_io::write_cloud(&input, &cloud).unwrap();
-    let plain_cfg = tmp.path().join("plain.toml");
-    std::fs::write(&plain_cfg, CONFIG).unwrap();
     let aa_cfg = tmp.path().join("aa.toml");
-    std::fs::write(
-        &aa_cfg,
-        CONFIG.replace("iterations = 20", "iterations = 20\nantialiased = true"),
-    )
-    .unwrap();
-    let run = |name: &str, config: &Path, extra: &[&str]| {
+    std::fs::write(&aa_cfg, "[training]\nantialiased = true\n").unwrap();
+    let run = |name: &str, extra: &[&str]| {
         let out = tmp.path().join(name);
         let mut args = vec![
             "run",
             input.to_str().unwrap(),
             "--out",
             out.to_str().unwrap(),
-            "--config",
-            config.to_str().unwrap(),
             "--no-dataset",
             "--quiet",
         ];
+        args.extend_from_slice(&SMALL);
         args.extend_from_slice(extra);
         transcode(&args);
         model(&out)
     };
 
-    let (flagged, flagged_tagged) = run("flag", &plain_cfg, &["--antialiased"]);
-    let (keyed, keyed_tagged) = run("key", &aa_cfg, &[]);
-    let (plain, plain_tagged) = run("plain", &plain_cfg, &[]);
+    let (flagged, flagged_tagged) = run("flag", &["--antialiased"]);
+    let (keyed, keyed_tagged) = run("key", &["--config", aa_cfg.to_str().unwrap()]);
+    let (plain, plain_tagged) = run("plain", &[]);
     assert!(
         flagged_tagged && keyed_tagged,
         "an antialiased run's PLY is not tagged"
@@ -100,19 +91,19 @@ fn the_flag_trains_what_the_setting_trains_and_the_file_says_so() {
 
     // The demo takes the same flag.
     let demo = tmp.path().join("demo");
-    transcode(&[
+    let mut args = vec![
         "demo",
         "--out",
         demo.to_str().unwrap(),
         "--grid",
         "32",
-        "--config",
-        plain_cfg.to_str().unwrap(),
         "--time-budget",
         "100000",
         "--no-dataset",
         "--quiet",
         "--antialiased",
-    ]);
+    ];
+    args.extend_from_slice(&SMALL);
+    transcode(&args);
     assert!(model(&demo).1, "demo --antialiased wrote an untagged PLY");
 }
