@@ -20,7 +20,9 @@
 //! What a merge costs is its members' contributions (the blending weight each supplies, summed
 //! over the pixels of every training view: Mini-Splatting's importance) times how far their
 //! colours are from the merged one ([`plan_merges`]), so flat regions end with few large splats
-//! and detailed or glossy ones keep many.
+//! and detailed or glossy ones keep many. The search is here; the merges (which groups, and the
+//! Gaussian that replaces each) are in `budget/merge.rs`, the groups' growth in
+//! `budget/clusters.rs` and the 3 × 3 eigen-decomposition both use in `budget/eigen.rs`.
 
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
