@@ -32,16 +32,12 @@ fn transcode(args: &[&str]) {
     );
 }
 
-/// The model a run wrote, and whether its PLY header carries Brush's render-mode comment.
+/// The model a run wrote, and whether its PLY says it was trained antialiased (read by the
+/// project's PLY reader; the header's exact bytes are `splat-core/tests/ply.rs`'s to check).
 fn model(out: &Path) -> (Vec<u8>, bool) {
-    let bytes = std::fs::read(out.join("model/splats.ply")).unwrap();
-    let end = bytes
-        .windows(11)
-        .position(|w| w == b"end_header\n")
-        .expect("a PLY header");
-    let header = String::from_utf8_lossy(&bytes[..end]);
-    let tagged = header.lines().any(|l| l == "comment SplatRenderMode: mip");
-    (bytes, tagged)
+    let path = out.join("model/splats.ply");
+    let tagged = splat_core::ply::read_model(&path).unwrap().antialiased;
+    (std::fs::read(&path).unwrap(), tagged)
 }
 
 #[test]
