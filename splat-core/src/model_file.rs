@@ -54,6 +54,8 @@ pub struct ModelFile {
     pub antialiased: bool,
     /// The file's format.
     pub format: Format,
+    /// An SPZ file's format version (2, 3 or 4); `None` for the other formats.
+    pub spz_version: Option<u32>,
     /// The file held records this crate skips (a version 4 SPZ's extensions,
     /// [`spz::SpzModel::skipped_extensions`]).
     pub skipped_extensions: bool,
@@ -62,22 +64,28 @@ pub struct ModelFile {
 /// Reads a model file in the format its extension names.
 pub fn read_model(path: &Path) -> Result<ModelFile, Error> {
     let format = Format::of(path)?;
-    let (splats, antialiased, skipped_extensions) = match format {
+    let (splats, antialiased, spz_version, skipped_extensions) = match format {
         Format::Ply => {
             let m = ply::read_model(path)?;
-            (m.splats, m.antialiased, false)
+            (m.splats, m.antialiased, None, false)
         }
         Format::Spz => {
             let m = spz::read_spz(path)?;
-            (m.splats, m.antialiased, m.skipped_extensions)
+            (
+                m.splats,
+                m.antialiased,
+                Some(m.version),
+                m.skipped_extensions,
+            )
         }
-        Format::Splat => (export::read_splat(path)?, false, false),
-        Format::Glb => (glb::read_glb(path)?, false, false),
+        Format::Splat => (export::read_splat(path)?, false, None, false),
+        Format::Glb => (glb::read_glb(path)?, false, None, false),
     };
     Ok(ModelFile {
         splats,
         antialiased,
         format,
+        spz_version,
         skipped_extensions,
     })
 }

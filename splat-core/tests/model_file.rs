@@ -41,6 +41,9 @@ fn the_render_mode_survives_the_formats_that_can_say_it() {
             let back = read_model(&p).unwrap();
             assert_eq!(back.format, format);
             assert_eq!(back.splats.len(), s.len(), "{ext}");
+            // Only an SPZ has a format version, the one it was written with.
+            let version = (format == Format::Spz).then_some(spz::SpzOptions::default().version);
+            assert_eq!(back.spz_version, version, "{ext}");
             // The PLY and SPZ readers say what the file says, independently of this module.
             let recorded = match format {
                 Format::Ply => ply::read_model(&p).unwrap().antialiased,

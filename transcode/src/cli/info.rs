@@ -187,8 +187,7 @@ impl SplatSummary {
     /// have 3DGS properties, or a `.glb` with a `KHR_gaussian_splatting` primitive; `None` for
     /// other files (clouds and meshes).
     fn of(path: &std::path::Path) -> anyhow::Result<Option<Self>> {
-        use splat_core::model_file::Format;
-        use splat_core::{export, glb, ply, spz};
+        use splat_core::model_file::{self, Format};
         let Ok(format) = Format::of(path) else {
             return Ok(None);
         };
@@ -201,32 +200,24 @@ impl SplatSummary {
                 })
             })
         };
-        // Each file read once, by its own format's reader (the SPZ's version is its alone).
-        let (name, splats, antialiased) = match format {
-            Format::Ply if splat_ply(path) => {
-                let m = ply::read_model(path)?;
-                ("3DGS PLY".to_string(), m.splats, m.antialiased)
-            }
-            Format::Spz => {
-                let m = spz::read_spz(path)?;
-                (
-                    format!("SPZ version {}", m.version),
-                    m.splats,
-                    m.antialiased,
-                )
-            }
-            Format::Splat => (
-                "antimatter15 .splat".to_string(),
-                export::read_splat(path)?,
-                false,
-            ),
-            // A .glb without a splat primitive is a mesh.
-            Format::Glb => match glb::read_glb(path) {
-                Ok(s) => ("GLB with KHR_gaussian_splatting".to_string(), s, false),
+        // A PLY without 3DGS properties is a cloud or a mesh, and so is a .glb whose reader
+        // finds no splat primitive.
+        let file = match format {
+            Format::Ply if !splat_ply(path) => return Ok(None),
+            Format::Glb => match model_file::read_model(path) {
+                Ok(file) => file,
                 Err(_) => return Ok(None),
             },
-            Format::Ply => return Ok(None),
+            _ => model_file::read_model(path)?,
         };
+        let name = match (format, file.spz_version) {
+            (Format::Ply, _) => "3DGS PLY".to_string(),
+            (Format::Spz, Some(version)) => format!("SPZ version {version}"),
+            (Format::Spz, None) => "SPZ".to_string(),
+            (Format::Splat, _) => "antimatter15 .splat".to_string(),
+            (Format::Glb, _) => "GLB with KHR_gaussian_splatting".to_string(),
+        };
+        let (splats, antialiased) = (file.splats, file.antialiased);
         let s = &splats;
         let median = |mut v: Vec<f32>| {
             v.sort_by(f32::total_cmp);
