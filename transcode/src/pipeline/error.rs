@@ -1,0 +1,103 @@
+//! The pipeline's error: each variant names the stage, and the file where there is one.
+
+use std::path::{Path, PathBuf};
+
+use plenoptic_render as views;
+use splat_init as init;
+
+use crate::resume::ResumeError;
+
+/// Errors of the pipeline, each naming the stage and the file.
+#[derive(Debug, thiserror::Error)]
+pub enum PipelineError {
+    /// The input could not be read.
+    #[error("cannot load the input: {0}")]
+    Load(Box<plenoptic_io::Error>),
+    /// The input holds nothing to render.
+    #[error("the input {0} holds no points or triangles")]
+    EmptyInput(PathBuf),
+    /// The input cannot make a model (no extent, too few points, no area, nothing visible).
+    #[error("{0}")]
+    Degenerate(#[from] plenoptic_render::degenerate::DegenerateError),
+    /// The configuration is invalid.
+    #[error(transparent)]
+    Config(#[from] crate::config::ConfigError),
+    /// The cameras could not be placed.
+    #[error("cannot place the cameras: {0}")]
+    Rig(#[from] camera_model::Error),
+    /// The reference views could not be rendered or written.
+    #[error("reference views: {0}")]
+    Views(Box<views::Error>),
+    /// The dataset could not be written.
+    #[error("cannot write the COLMAP dataset in {path}: {message}")]
+    Dataset {
+        /// The dataset folder.
+        path: PathBuf,
+        /// The cause.
+        message: String,
+    },
+    /// Initialisation failed.
+    #[error("initialisation: {0}")]
+    Init(Box<init::InitError>),
+    /// The least-squares colour solve refused a training view.
+    #[error("initialisation: {0}")]
+    ColourSolve(#[from] splat_init::SolveError),
+    /// The trainer refused its inputs.
+    #[error("training: {0}")]
+    Train(Box<splat_train::Error>),
+    /// The trained model could not be evaluated (e.g. no held-out view covers a pixel).
+    #[error("evaluation: {0}")]
+    Eval(Box<splat_train::EvalError>),
+    /// The previous frame's model cannot warm-start this one.
+    #[error("warm start from {path}: {problem}")]
+    WarmStart {
+        /// The previous frame's model.
+        path: PathBuf,
+        /// What is wrong.
+        problem: String,
+    },
+    /// The model could not be written.
+    #[error("cannot write the model {path}: {source}")]
+    Model {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        source: Box<splat_core::Error>,
+    },
+    /// A file or folder could not be written or removed.
+    #[error("cannot write {path}: {source}")]
+    Io {
+        /// The file or folder.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// The saved run cannot be resumed, or its state cannot be saved.
+    #[error(transparent)]
+    Resume(#[from] ResumeError),
+    /// A round of the automatic splat budget failed.
+    #[error(transparent)]
+    Budget(#[from] splat_train::RoundError),
+    /// The viewer beside the report could not be written.
+    #[error("cannot write the viewer: {0}")]
+    Viewer(Box<crate::viewer::ViewerError>),
+}
+
+/// Boxes the large error types of the stages into [`PipelineError`].
+macro_rules! boxed_from {
+    ($($variant:ident: $ty:ty),*) => {$(
+        impl From<$ty> for PipelineError {
+            fn from(e: $ty) -> Self {
+                Self::$variant(Box::new(e))
+            }
+        }
+    )*};
+}
+boxed_from!(Load: plenoptic_io::Error, Views: views::Error, Init: init::InitError, Train: splat_train::Error, Eval: splat_train::EvalError, Viewer: crate::viewer::ViewerError);
+
+pub(super) fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> PipelineError + '_ {
+    move |source| PipelineError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}

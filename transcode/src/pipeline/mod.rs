@@ -1,0 +1,358 @@
+//! The whole pipeline, input model to 3DGS model with a report, stage by stage.
+//!
+//! `load → rig → render training and held-out views → COLMAP dataset → initialise → train →
+//! evaluate → model PLY → report`. Every file is written atomically, and the files that mark a
+//! run as finished (the model and the report) are removed before a run starts and written last,
+//! so an interrupted or failed run never leaves output that looks complete.
+//!
+//! A run records its progress in `DIR/state.json` and checkpoints its training at a bounded
+//! interval of wall time ([`crate::resume`]), so [`run_with`] can continue a killed run: the
+//! dataset is reused, training continues from its checkpoint on the schedule chosen before it
+//! began, and what is cheap and deterministic (views in memory, evaluation, report) is redone.
+//!
+//! One module a stage, in the order a run takes them: `input` (1: the file, its surface),
+//! `references` (2: reference views and the COLMAP dataset), `initialise` (3: initial splats;
+//! `schedule` fixes the run's steps before the first one), `train` (4: training, checkpoints, the
+//! held-out curve; `budget` drives the automatic splat budget's rounds in it) and `output` (5
+//! and 6: evaluation, model files, report); `layout` owns the output folder and its saved state,
+//! `error` the error. This file holds the run itself ([`run`], [`run_with`]) and the stages'
+//! order.
+
+mod budget;
+mod error;
+mod initialise;
+mod input;
+mod layout;
+mod output;
+mod references;
+mod schedule;
+mod train;
+
+pub use error::PipelineError;
+pub use input::{Loaded, Surfaces, input_info, load};
+pub use references::{References, training_view};
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use plenoptic_render as views;
+use splat_core::Splats;
+use splat_train::eval::RenderedView;
+
+use crate::config::{Config, InitMode};
+use crate::progress::{Event, Observer};
+use crate::report::{CurvePoint, Report, RunReport, StageTiming};
+use crate::resume::{self, InputStamp, ResumeError, RunState, Status};
+use budget::choose_bands;
+use initialise::{init_modes, initialise};
+use layout::{Layout, open_state, remove_dir_if_present};
+use output::{evaluate, export, report};
+use references::reference_views;
+use train::train;
+
+/// What a finished run produced.
+#[derive(Debug, Clone)]
+pub struct Outcome {
+    /// The report (also written as JSON).
+    pub report: Report,
+    /// `DIR/report/report.html`.
+    pub html: PathBuf,
+    /// `DIR/model/splats.ply`.
+    pub model: PathBuf,
+}
+
+/// How [`run_with`] starts.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct RunOptions {
+    /// Continue the run saved in the output folder, if there is one (else start afresh).
+    pub resume: bool,
+    /// A sequence's warm start: surface init adds the training corrections of the previous
+    /// frame's model ([`splat_init::warm`]).
+    pub warm_start: Option<WarmStart>,
+}
+
+/// The previous frame a warm start takes its training corrections from.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct WarmStart {
+    /// Its input file (its initialisation is reproduced from it, with this run's settings).
+    pub input: PathBuf,
+    /// Its trained model (`splats.ply`).
+    pub model: PathBuf,
+}
+
+/// How [`run_with`] ended.
+#[derive(Debug, Clone)]
+pub enum Finish {
+    /// The run is complete; this call did the rest of its work.
+    Completed(Box<Outcome>),
+    /// Asked to resume a run that had already finished: nothing was redone.
+    AlreadyFinished {
+        /// `DIR/model/splats.ply`.
+        model: PathBuf,
+        /// `DIR/report/report.html`.
+        html: PathBuf,
+    },
+}
+
+/// Runs the whole pipeline on `input` from the start, writing into `out`, reporting progress
+/// to `observer` ([`crate::progress::ignore`] for none).
+pub fn run(
+    input: &Path,
+    out: &Path,
+    cfg: &Config,
+    observer: Observer<'_>,
+) -> Result<Outcome, PipelineError> {
+    execute(input, out, cfg, observer, None, None)
+}
+
+/// Runs the pipeline, or with `opts.resume` continues the run saved in `out`: a run with the same
+/// input and configuration (else [`ResumeError::Mismatch`]) that was interrupted continues from
+/// its last checkpoint, a finished one is left as it is ([`Finish::AlreadyFinished`]), and without
+/// a saved run it starts from the beginning.
+pub fn run_with(
+    input: &Path,
+    out: &Path,
+    cfg: &Config,
+    opts: RunOptions,
+    observer: Observer<'_>,
+) -> Result<Finish, PipelineError> {
+    let saved = if opts.resume {
+        cfg.validate()?;
+        RunState::load(out)?
+    } else {
+        None
+    };
+    if let Some(state) = &saved {
+        let stamp = InputStamp::of(input).map_err(|source| ResumeError::Io {
+            path: input.to_path_buf(),
+            source,
+        })?;
+        state.check_same_run(out, &stamp, cfg)?;
+        if state.status == Status::Finished {
+            let layout = Layout::new(out);
+            let (model, html) = (layout.main_model(), layout.html());
+            if model.is_file() && html.is_file() {
+                return Ok(Finish::AlreadyFinished { model, html });
+            }
+            return Err(ResumeError::Malformed {
+                path: out.join(resume::STATE_FILE),
+                problem: "the run finished but its model or report is gone".into(),
+            }
+            .into());
+        }
+    }
+    execute(input, out, cfg, observer, saved, opts.warm_start.as_ref())
+        .map(|o| Finish::Completed(Box::new(o)))
+}
+
+/// The stages of a run, in order (the numbers in [`Event::Stage`]).
+const STAGES: u32 = 6;
+
+/// The stages, from the beginning or continuing `saved`: load → reference views and dataset →
+/// for each init mode (init → train → evaluate) → export the models → report.
+fn execute(
+    input: &Path,
+    out: &Path,
+    cfg: &Config,
+    observer: Observer<'_>,
+    saved: Option<RunState>,
+    warm_start: Option<&WarmStart>,
+) -> Result<Outcome, PipelineError> {
+    cfg.validate()?;
+    let started = Instant::now();
+    let layout = Layout::new(out);
+    layout.clear_results(saved.is_none())?;
+    let mut clock = StageClock::default();
+
+    let loaded = load(input, observer)?;
+    clock.lap("load");
+    layout.create(cfg.output.dataset)?;
+    let mut state = open_state(input, cfg, &layout, saved, observer)?;
+    let rig = views::build_rig(&loaded.model, &cfg.rig)?;
+    clock.lap("rig");
+    let refs = reference_views(
+        input,
+        &loaded.model,
+        &rig,
+        cfg,
+        &layout,
+        &mut state,
+        observer,
+        &mut clock,
+    )?;
+    // The input is not needed past here: its points move into `surfaces` (a paper-scale cloud
+    // holds 0.6 GB, most of it per-camera colours, that a copy would hold twice).
+    let Loaded { model, info } = loaded;
+    let mut surfaces = Surfaces::of(model, cfg);
+
+    let mut trained = Vec::new();
+    let modes = init_modes(cfg);
+    let count = modes.len();
+    for (k, mode) in modes.into_iter().enumerate() {
+        let run = RunOf {
+            mode,
+            index: k,
+            last: k + 1 == count,
+            model_path: layout.model_path(k, mode),
+            warm_start: warm_start.filter(|_| mode == InitMode::Surface),
+        };
+        let model = init_train_eval(
+            &run,
+            &mut surfaces,
+            &refs,
+            cfg,
+            &layout,
+            &mut state,
+            observer,
+        )?;
+        observer(Event::Note(format!(
+            "{mode} init: held-out PSNR {:.2} dB on black, {:.2} dB on white, {} splats",
+            model.report.metrics.psnr_black,
+            model.report.metrics.psnr_white,
+            model.report.metrics.splats
+        )));
+        trained.push(model);
+    }
+
+    // The models only now that every run is trained and evaluated, the report after them and the
+    // "finished" state last: whatever a kill leaves behind, a model file is the final one.
+    export(&mut trained, cfg, observer)?;
+    let outcome = report(
+        &info, &refs, trained, cfg, &layout, clock, started, observer,
+    )?;
+    state.status = Status::Finished;
+    state.save(out)?;
+    remove_dir_if_present(&layout.checkpoints)?;
+    Ok(outcome)
+}
+
+/// Wall time of each stage, for the report.
+#[derive(Debug)]
+struct StageClock {
+    timings: Vec<StageTiming>,
+    since: Instant,
+}
+
+impl Default for StageClock {
+    fn default() -> Self {
+        Self {
+            timings: Vec::new(),
+            since: Instant::now(),
+        }
+    }
+}
+
+impl StageClock {
+    /// Records the time since the last lap as stage `name`.
+    fn lap(&mut self, name: &str) {
+        self.timings.push(StageTiming {
+            stage: name.to_string(),
+            seconds: self.since.elapsed().as_secs_f64(),
+        });
+        self.since = Instant::now();
+    }
+}
+
+/// Which model of the run: its init mode, its index among the run's modes, its file, and the
+/// previous frame's model a warm start takes its training corrections from.
+#[derive(Debug, Clone)]
+struct RunOf<'a> {
+    mode: InitMode,
+    index: usize,
+    /// Whether no model of the run is initialised after this one.
+    last: bool,
+    model_path: PathBuf,
+    warm_start: Option<&'a WarmStart>,
+}
+
+/// One trained and evaluated model, not yet written.
+#[derive(Debug)]
+pub struct TrainedModel {
+    /// Its part of the report.
+    pub report: RunReport,
+    /// Its renders of the held-out views.
+    pub renders: Vec<RenderedView>,
+    /// The splats.
+    pub splats: Splats,
+}
+
+/// Stages 3–5 for one init mode: initialises (or finds the checkpoint to continue from),
+/// trains and evaluates one model of the run, whose progress `state` records.
+fn init_train_eval(
+    run: &RunOf<'_>,
+    surfaces: &mut Surfaces,
+    refs: &References,
+    cfg: &Config,
+    layout: &Layout,
+    state: &mut RunState,
+    observer: Observer<'_>,
+) -> Result<TrainedModel, PipelineError> {
+    let mut clock = StageClock::default();
+    let init = initialise(run, surfaces, refs, cfg, layout, state, observer)?;
+    // (Already released on a fresh start; a run continued from its checkpoint comes back
+    // before that.)
+    if run.last {
+        surfaces.release_init();
+    }
+    clock.lap("init");
+    let (splats, train_report, heldout_curve, budget) = train(
+        run,
+        init.fresh,
+        &init.schedule,
+        init.summary.sh_degree,
+        refs,
+        cfg,
+        layout,
+        state,
+        observer,
+    )?;
+    clock.lap("train");
+    let (splats, sh_bands) = if budget.plan.is_some() {
+        let (s, choice) = choose_bands(splats, &budget, refs, cfg, observer)?;
+        (s, Some(choice))
+    } else {
+        (splats, None)
+    };
+    let (metrics, renders) = evaluate(run.mode, &splats, refs, surfaces, cfg, observer)?;
+    clock.lap("evaluate");
+    // The probe timed the initialised model; a resumed session's trainer starts from another.
+    let at = train_report.timings.at_initial_size;
+    let probed_size_steps =
+        (init.schedule.pace.is_some() && at.splats == init.summary.splats as u64).then_some(at);
+    let report = RunReport {
+        init: init.summary,
+        iterations: train_report.iterations,
+        train_seconds: train_report.elapsed_s,
+        stopped_by_budget: train_report.stopped_by_budget,
+        step_estimate_s: init.schedule.step_estimate_s,
+        probe_pace: init.schedule.pace,
+        run_pace: train_report.timings.mean_pace(),
+        probed_size_steps,
+        step_zero: init.step_zero,
+        curve: train_report
+            .history
+            .iter()
+            .map(|h| CurvePoint {
+                iteration: h.iteration,
+                elapsed_s: h.elapsed_s,
+                psnr: h.psnr,
+                splats: h.splats,
+            })
+            .collect(),
+        heldout_curve,
+        budget,
+        budget_tolerance_db: cfg.budget.tolerance_db,
+        sh_bands,
+        metrics,
+        model_path: run.model_path.clone(),
+        // Filled in when the model is written, after every run is done.
+        model_bytes: 0,
+        compact_files: Vec::new(),
+        timings: clock.timings,
+    };
+    Ok(TrainedModel {
+        report,
+        renders,
+        splats,
+    })
+}
