@@ -1,5 +1,15 @@
 //! The training loop: one view per step, render, loss, backward, Adam, refinement.
 
+mod finite;
+mod levels;
+mod timings;
+
+pub use timings::{SizedSteps, Timings};
+
+pub(crate) use finite::zero_non_finite_grads;
+use finite::{all_finite, first_non_finite, splat_is_finite};
+use levels::{Level, downsample_view};
+
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -8,7 +18,7 @@ use rand::{RngExt, SeedableRng};
 use rand_pcg::Pcg64;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use splat_core::{Rasterizer, RenderCamera, RenderOptions, SplatGrads, Splats, logit};
+use splat_core::{Rasterizer, RenderOptions, SplatGrads, Splats, logit};
 
 use crate::adam::{AdamStep, Rates};
 use crate::config::{Background, TrainConfig};
@@ -78,101 +88,6 @@ pub struct NonFinite {
     pub reset_splats: u64,
     /// Splats whose parameters became non-finite and were removed.
     pub removed_splats: u64,
-}
-
-/// Wall time spent in each phase, summed over the steps of this session.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
-pub struct Timings {
-    /// Forward rasterisation (projection, sorting, compositing).
-    pub forward: Duration,
-    /// Loss and its image gradient.
-    pub loss: Duration,
-    /// Backward rasterisation; without a densification strategy, up to its per-splat sums
-    /// (the chain to the parameters then runs inside the update, chunk by chunk).
-    pub backward: Duration,
-    /// Adam updates, clamps and the non-finite scan; without a densification strategy, also the
-    /// backward's chain to the parameters.
-    pub adam: Duration,
-    /// Refinement strategy.
-    pub refine: Duration,
-    /// Steps timed.
-    pub steps: u64,
-    /// Wall time of the steps run through [`Trainer::run_until`], each whole (as the time
-    /// budget counts it), including those of branches a splat-budget round threw away.
-    #[serde(default)]
-    pub step_wall: Duration,
-    /// The part of `step_wall` spent in steps of the coarse warm-up.
-    #[serde(default)]
-    pub coarse_wall: Duration,
-    /// Steps of the coarse warm-up counted in `coarse_wall`.
-    #[serde(default)]
-    pub coarse_steps: u64,
-    /// Steps counted in `step_wall`.
-    #[serde(default)]
-    pub walled_steps: u64,
-    /// The part of `step_wall` spent at the model size the trainer was made with: what a probe
-    /// that timed steps on that model is to be compared with, since a budget round or a
-    /// refinement that changes the size changes the step's cost.
-    #[serde(default)]
-    pub at_initial_size: SizedSteps,
-}
-
-/// Wall time of the steps taken at one model size, the full-size and the warm-up's apart.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
-pub struct SizedSteps {
-    /// The model's splat count.
-    pub splats: u64,
-    /// Wall time of the full-size steps at that count.
-    pub full_wall: Duration,
-    /// Full-size steps at that count.
-    pub full_steps: u64,
-    /// Wall time of the warm-up's steps at that count.
-    pub coarse_wall: Duration,
-    /// Warm-up steps at that count.
-    pub coarse_steps: u64,
-}
-
-impl SizedSteps {
-    /// Adds a step's wall time.
-    fn add(&mut self, wall: Duration, coarse: bool) {
-        if coarse {
-            self.coarse_wall += wall;
-            self.coarse_steps += 1;
-        } else {
-            self.full_wall += wall;
-            self.full_steps += 1;
-        }
-    }
-
-    /// The mean wall seconds of each kind of step (`None` for a kind with no steps).
-    #[must_use]
-    pub fn mean_pace(&self) -> Pace {
-        Pace {
-            step_s: mean_seconds(self.full_wall, self.full_steps),
-            coarse_step_s: mean_seconds(self.coarse_wall, self.coarse_steps),
-        }
-    }
-}
-
-/// `wall / steps` in seconds, `None` without steps.
-fn mean_seconds(wall: Duration, steps: u64) -> Option<f64> {
-    (steps > 0).then(|| wall.as_secs_f64() / steps as f64)
-}
-
-impl Timings {
-    /// The mean wall seconds of the full-size steps and of the warm-up's steps run so far, as
-    /// a [`Pace`] (a kind is `None` until one of its steps has run): what a probe's estimate
-    /// is to be compared with.
-    #[must_use]
-    pub fn mean_pace(&self) -> Pace {
-        Pace {
-            step_s: mean_seconds(
-                self.step_wall.saturating_sub(self.coarse_wall),
-                self.walled_steps - self.coarse_steps.min(self.walled_steps),
-            ),
-            coarse_step_s: mean_seconds(self.coarse_wall, self.coarse_steps),
-        }
-    }
 }
 
 /// Progress reported to a callback after each step.
@@ -1079,200 +994,12 @@ impl Trainer {
     }
 }
 
-/// Views at one resolution with their rasteriser cameras.
-#[derive(Debug)]
-struct Level {
-    views: Arc<Vec<View>>,
-    cameras: Vec<RenderCamera>,
-}
-
-impl Level {
-    /// The level of `views` (checked already, so the conversion only fails on a bug).
-    fn new(views: Arc<Vec<View>>) -> Result<Self, Error> {
-        let cameras = views
-            .iter()
-            .enumerate()
-            .map(|(index, v)| {
-                v.render_camera().map_err(|problem| Error::View {
-                    index,
-                    name: v.name.clone(),
-                    problem,
-                })
-            })
-            .collect::<Result<_, _>>()?;
-        Ok(Self { views, cameras })
-    }
-}
-
-/// `view` reduced by an integer `factor`: each output pixel is the mean of a factor × factor
-/// block (a remainder at the right and bottom is dropped), and the intrinsics are divided by the
-/// factor, which keeps pixel centres aligned (centre of block = factor · (i + ½)).
-///
-/// With a mask, the block's colour is its coverage-weighted mean, Σ c·a / Σ a, and its coverage
-/// the mean of a: the reduced view over any background is then the mean of the full view over
-/// it (Σ (c·a + bg·(1 − a)) / n), as a dataset's reduction averages colour on black with its
-/// coverage. A plain mean of straight colour would let a block's uncovered pixels (black) darken
-/// its silhouette. The sums are integers of the 16-bit fractions, rounded once at the end.
-fn downsample_view(view: &View, factor: u32) -> View {
-    let k = view.camera.intrinsics;
-    let f = factor.max(1) as usize;
-    let (w, h) = (k.width as usize, k.height as usize);
-    let (cw, ch) = ((w / f).max(1), (h / f).max(1));
-    let div_round = |num: u64, den: u64| ((num + den / 2) / den.max(1)) as u16;
-    let mut image = vec![0u16; cw * ch * 3];
-    let mut mask = view.mask.as_ref().map(|_| vec![0u16; cw * ch]);
-    for y in 0..ch {
-        for x in 0..cw {
-            // Σ c·a per channel, Σ a, pixel count (a = 65535 without a mask).
-            let (mut sums, mut cover, mut n) = ([0u64; 3], 0u64, 0u64);
-            for yy in y * f..((y + 1) * f).min(h) {
-                for xx in x * f..((x + 1) * f).min(w) {
-                    let i = yy * w + xx;
-                    let a = view.mask.as_ref().map_or(u16::MAX, |m| m[i]);
-                    for (c, s) in sums.iter_mut().enumerate() {
-                        *s += u64::from(view.image[3 * i + c]) * u64::from(a);
-                    }
-                    cover += u64::from(a);
-                    n += 1;
-                }
-            }
-            let o = y * cw + x;
-            for c in 0..3 {
-                image[3 * o + c] = if cover == 0 {
-                    0
-                } else {
-                    div_round(sums[c], cover)
-                };
-            }
-            if let Some(m) = mask.as_mut() {
-                m[o] = div_round(cover, n);
-            }
-        }
-    }
-    let inv = 1.0 / f as f64;
-    let intrinsics = camera_model::Intrinsics {
-        width: cw as u32,
-        height: ch as u32,
-        fx: k.fx * inv,
-        fy: k.fy * inv,
-        cx: k.cx * inv,
-        cy: k.cy * inv,
-        skew: k.skew * inv,
-    };
-    View {
-        name: view.name.clone(),
-        camera: camera_model::Camera::new(intrinsics, view.camera.pose),
-        image,
-        mask,
-    }
-}
-
-/// Whether every parameter of splat `i` is finite.
-fn splat_is_finite(s: &Splats, i: usize) -> bool {
-    let k = s.coeffs_per_splat();
-    s.means[i].is_finite()
-        && s.log_scales[i].is_finite()
-        && s.rotations[i].iter().all(|v| v.is_finite())
-        && s.opacity_logits[i].is_finite()
-        && s.sh[i * k..(i + 1) * k]
-            .iter()
-            .flatten()
-            .all(|v| v.is_finite())
-}
-
-/// Whether every value of the buffers is finite: the check each step makes of all parameters
-/// and gradients before it looks for the splats at fault, which it almost never has to.
-/// [`splat_core::all_finite`] over chunks in parallel (a per-splat test with early exits took
-/// about 4 % of a step at paper scale).
-fn all_finite(buffers: &[&[f32]]) -> bool {
-    buffers
-        .iter()
-        .all(|values| values.par_chunks(1 << 14).all(splat_core::all_finite))
-}
-
-/// Index of the first splat with a non-finite parameter.
-fn first_non_finite(s: &Splats) -> Option<usize> {
-    (0..s.len()).find(|&i| !splat_is_finite(s, i))
-}
-
-/// Zeroes the gradients of splats with any non-finite gradient; returns how many.
-pub(crate) fn zero_non_finite_grads(g: &mut SplatGrads) -> u64 {
-    let n = g.means.len();
-    let k = g.sh.len().checked_div(n).unwrap_or(0);
-    if all_finite(&g.float_arrays()) {
-        return 0;
-    }
-    // The search reads every gradient in parallel; the rare repair is serial.
-    let grads = &*g;
-    let bad: Vec<usize> = (0..n)
-        .into_par_iter()
-        .filter(|&i| {
-            !(grads.means[i].is_finite()
-                && grads.log_scales[i].is_finite()
-                && grads.rotations[i].iter().all(|v| v.is_finite())
-                && grads.opacity_logits[i].is_finite()
-                && grads.sh[i * k..(i + 1) * k]
-                    .iter()
-                    .flatten()
-                    .all(|v| v.is_finite())
-                && grads.screen_grad_norm[i].is_finite())
-        })
-        .collect();
-    let count = bad.len() as u64;
-    for i in bad {
-        g.means[i] = Vec3::ZERO;
-        g.log_scales[i] = Vec3::ZERO;
-        g.rotations[i] = [0.0; 4];
-        g.opacity_logits[i] = 0.0;
-        g.sh[i * k..(i + 1) * k].fill([0.0; 3]);
-        g.screen_grad_norm[i] = 0.0;
-    }
-    count
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::view::to_unorm16;
     use camera_model::{Camera, Intrinsics, Pose};
     use glam::DVec3;
-
-    /// The whole-buffer check must pass finite gradients untouched, and send any non-finite
-    /// value (NaN or ±∞, in any group, in a chunk past the first) to the per-splat repair.
-    #[test]
-    fn non_finite_gradients_are_found_in_every_group_and_zeroed_per_splat() {
-        let n = 40_000;
-        let k = 16;
-        let filled = |n: usize| SplatGrads {
-            means: vec![Vec3::splat(0.5); n],
-            log_scales: vec![Vec3::splat(-0.25); n],
-            rotations: vec![[0.1, 0.2, 0.3, 0.4]; n],
-            opacity_logits: vec![1.5; n],
-            sh: vec![[0.01, 0.02, 0.03]; n * k],
-            screen_grad_norm: vec![2.0; n],
-        };
-        let mut g = filled(n);
-        assert_eq!(zero_non_finite_grads(&mut g), 0);
-        assert_eq!(g, filled(n), "finite gradients are left as they were");
-        g.sh[33_333 * k + 7][2] = f32::NAN;
-        g.rotations[20_001][3] = f32::INFINITY;
-        g.screen_grad_norm[5] = f32::NEG_INFINITY;
-        g.means[39_999].y = f32::NAN;
-        assert_eq!(zero_non_finite_grads(&mut g), 4);
-        for i in [5, 20_001, 33_333, 39_999] {
-            assert_eq!(g.means[i], Vec3::ZERO);
-            assert_eq!(g.rotations[i], [0.0; 4]);
-            assert_eq!(g.opacity_logits[i], 0.0);
-            assert!(g.sh[i * k..(i + 1) * k].iter().all(|c| *c == [0.0; 3]));
-            assert_eq!(g.screen_grad_norm[i], 0.0);
-        }
-        assert_eq!(
-            g.means[6],
-            Vec3::splat(0.5),
-            "other splats keep their gradients"
-        );
-        assert!(all_finite(&[g.sh.as_flattened(), &g.screen_grad_norm]));
-    }
 
     /// Taking the gradients chunk by chunk from the rasteriser's chain into the update
     /// (`update_chained`) trains the same model, bit for bit, parameters and moments, as the
@@ -1367,131 +1094,5 @@ mod tests {
                 .collect()
         };
         assert_eq!(bits(&chained), bits(&whole));
-    }
-
-    #[test]
-    fn downsampling_averages_blocks() {
-        let k = Intrinsics::centered(5, 4, 10.0, 12.0);
-        let pose = Pose::look_at(DVec3::new(0.0, 0.0, -5.0), DVec3::ZERO, DVec3::Y);
-        // Values in 16-bit steps (1000 a pixel index, 10 a channel), so block means are exact.
-        let image: Vec<u16> = (0..3 * 20).map(|i| 1000 * (i / 3) + 10 * (i % 3)).collect();
-        let v = View {
-            name: "v".into(),
-            camera: Camera::new(k, pose),
-            image,
-            mask: None,
-        };
-        let d = downsample_view(&v, 2);
-        assert_eq!(
-            (d.camera.intrinsics.width, d.camera.intrinsics.height),
-            (2, 2)
-        );
-        // Block (0,0) holds pixels 0, 1, 5, 6; block (1,1) pixels 12, 13, 17, 18.
-        assert_eq!(&d.image[..3], &[3000, 3010, 3020]);
-        assert_eq!(&d.image[9..], &[15000, 15010, 15020]);
-        assert!(d.mask.is_none());
-        // Block means round to the nearest step: (1 + 2 + 2 + 2) / 4 = 1.75 → 2.
-        let odd = View {
-            image: vec![1, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2, 2],
-            mask: None,
-            camera: Camera::new(Intrinsics::centered(2, 2, 10.0, 12.0), pose),
-            ..v.clone()
-        };
-        assert_eq!(downsample_view(&odd, 2).image, vec![2, 2, 2]);
-    }
-
-    /// A reduced masked view over any background is the mean of the full view over it (against
-    /// an f64 reference, to a step of rounding), a block with no coverage is black and
-    /// uncovered, and its colour is coverage-weighted (a half-covered block keeps its colour).
-    #[test]
-    fn downsampling_a_masked_view_commutes_with_compositing() {
-        let (w, h) = (12u32, 8u32);
-        let pose = Pose::look_at(DVec3::new(0.0, 0.0, -5.0), DVec3::ZERO, DVec3::Y);
-        let n = (w * h) as usize;
-        let mut state = 0x2545_f491_4f6c_dd1d_u64;
-        let mut r = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 48) as u16
-        };
-        let image: Vec<u16> = (0..3 * n).map(|_| r()).collect();
-        // Coverage: random, but the top-left 3×3 block uncovered and the next one half covered
-        // by full-coverage pixels.
-        let mut mask: Vec<u16> = (0..n).map(|_| r()).collect();
-        for y in 0..3 {
-            for x in 0..6 {
-                mask[y * w as usize + x] = if x < 3 || (x + y) % 2 == 0 {
-                    0
-                } else {
-                    u16::MAX
-                };
-            }
-        }
-        let v = View {
-            name: "v".into(),
-            camera: Camera::new(Intrinsics::centered(w, h, 10.0, 10.0), pose),
-            image,
-            mask: Some(mask),
-        };
-        let d = downsample_view(&v, 3);
-        let (cw, ch) = (4usize, 2usize);
-        assert_eq!(d.image.len(), 3 * cw * ch);
-        for bg in [[0.0, 0.0, 0.0], [1.0, 1.0, 1.0], [0.2, 0.7, 0.4]] {
-            let fine = v.on_background(bg);
-            let coarse = d.on_background(bg);
-            for by in 0..ch {
-                for bx in 0..cw {
-                    for c in 0..3 {
-                        let mut mean = 0.0f64;
-                        for y in 3 * by..3 * by + 3 {
-                            for x in 3 * bx..3 * bx + 3 {
-                                mean += f64::from(fine[3 * (y * w as usize + x) + c]) / 9.0;
-                            }
-                        }
-                        let got = f64::from(coarse[3 * (by * cw + bx) + c]);
-                        assert!(
-                            (got - mean).abs() < 2.0 / 65535.0,
-                            "{bg:?} {bx},{by}: {got} {mean}"
-                        );
-                    }
-                }
-            }
-        }
-        let mask = d.mask.as_ref().unwrap();
-        assert_eq!((mask[0], &d.image[..3]), (0, &[0u16; 3][..]));
-        // The half-covered block: its covered pixels' colour mean, not darkened by the others.
-        let covered: Vec<usize> = (0..3)
-            .flat_map(|y| (3..6).map(move |x| (x, y)))
-            .filter(|&(x, y)| (x + y) % 2 == 1)
-            .map(|(x, y)| y * w as usize + x)
-            .collect();
-        let mean = covered
-            .iter()
-            .map(|&i| u64::from(v.image[3 * i]))
-            .sum::<u64>() as f64
-            / covered.len() as f64;
-        assert!(
-            (f64::from(d.image[3]) - mean).abs() <= 0.5,
-            "{} {mean}",
-            d.image[3]
-        );
-    }
-
-    #[test]
-    fn downsampling_keeps_projection() {
-        let k = Intrinsics::centered(5, 4, 10.0, 12.0);
-        let pose = Pose::look_at(DVec3::new(0.0, 0.0, -5.0), DVec3::ZERO, DVec3::Y);
-        let v = View {
-            name: "v".into(),
-            camera: Camera::new(k, pose),
-            image: vec![0; 60],
-            mask: None,
-        };
-        let d = downsample_view(&v, 2);
-        let p = DVec3::new(0.3, -0.2, 0.4);
-        let fine = v.camera.project(p).unwrap();
-        let coarse = d.camera.project(p).unwrap();
-        assert!((fine / 2.0 - coarse).length() < 1e-12);
     }
 }
