@@ -129,7 +129,7 @@ pub struct Args {
 }
 
 /// One evaluation during the run.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize)]
 struct EvalPoint {
     iteration: u32,
     elapsed_s: f64,
@@ -166,68 +166,20 @@ struct Timings {
     refine: f64,
 }
 
-/// Runs `transcode train`.
+/// Runs `transcode train`: reads the dataset, sets the trainer up (or continues the run saved in
+/// `OUT`), trains to the end with its evaluations and checkpoints, and writes the model and the
+/// history last.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let wall = Instant::now();
-    if !(args.downscale.is_finite() && args.downscale >= 1.0) {
-        bail!("--downscale {} must be at least 1", args.downscale);
-    }
-    if !(args.checkpoint_interval.is_finite() && args.checkpoint_interval >= 0.0) {
-        bail!(
-            "--checkpoint-interval {} must be a number of seconds ≥ 0",
-            args.checkpoint_interval
-        );
-    }
+    check_args(&args)?;
+    let files = RunFiles::new(&args.out);
     let settings = Settings::of(&args);
-    let settings_path = args.out.join(SETTINGS_FILE);
-    let ckpt = args.out.join("checkpoint.bin");
-    // Killed before its first checkpoint, a run has nothing to continue from: it starts again.
-    let resume = args.resume && ckpt.is_file();
-    if args.resume && !resume && !args.quiet {
-        eprintln!(
-            "no checkpoint in {}: starting from the beginning",
-            args.out.display()
-        );
-    }
-    if resume {
-        let saved = std::fs::read(&settings_path).with_context(|| {
-            format!(
-                "cannot read {} (run without --resume to start over)",
-                settings_path.display()
-            )
-        })?;
-        let saved: Settings = serde_json::from_slice(&saved).with_context(|| {
-            format!(
-                "{} is damaged; run without --resume to start over",
-                settings_path.display()
-            )
-        })?;
-        if saved != settings {
-            bail!(
-                "the run in {} was started with other settings ({}); resume it with the same \
-                 ones (only --iterations, --time-budget, --eval-every and the checkpoint flags may \
-                 change), or run without --resume to start over",
-                args.out.display(),
-                saved.differences(&settings).join(", ")
-            );
-        }
-    }
+    let resume = resuming(&args, &files, &settings)?;
     let Dataset {
         views,
         reconstruction: rec,
     } = read_dataset(&args.dataset, args.downscale)?;
-    if args.background != BackgroundArg::Black
-        && let Some(v) = views.iter().find(|v| v.mask.is_none())
-    {
-        anyhow::bail!(
-            "--background {}: {} has no mask in {} and no alpha channel, so its pixels already \
-             hold their own background and another cannot be put behind them; train with \
-             --background black, or add masks/ (coverage images named like the images)",
-            format!("{:?}", args.background).to_lowercase(),
-            v.name,
-            args.dataset.join("masks").display()
-        );
-    }
+    refuse_background_without_masks(&args, &views)?;
     let eval_views = match &args.heldout {
         Some(dir) => read_dataset(dir, args.downscale)?.views,
         None => views.clone(),
@@ -235,13 +187,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
     let config = train_config(&args);
-    let ply = args.out.join("splats.ply");
-    let history_path = args.out.join("history.json");
     let mut trainer = if resume {
-        Trainer::resume(&ckpt, views, config).with_context(|| {
+        Trainer::resume(&files.checkpoint, views, config).with_context(|| {
             format!(
                 "cannot resume from {} (run without --resume to start over)",
-                ckpt.display()
+                files.checkpoint.display()
             )
         })?
     } else {
@@ -251,38 +201,27 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let spent = trainer.report(false).elapsed_s;
     let over =
         trainer.iteration() >= args.iterations || args.time_budget.is_some_and(|b| spent >= b);
-    if resume && over && ply.is_file() && history_path.is_file() {
+    if resume && over && files.ply.is_file() && files.history.is_file() {
         println!(
             "the run in {} is already finished ({} iterations); nothing to resume",
             args.out.display(),
             trainer.iteration()
         );
-        println!("wrote {} and {}", ply.display(), history_path.display());
+        println!(
+            "wrote {} and {}",
+            files.ply.display(),
+            files.history.display()
+        );
         return Ok(());
     }
-    // The files that mark a finished run go before training and come back only at its end, so
-    // an interrupted run never looks finished.
-    // A fresh run also drops an earlier run's checkpoint, which its settings no longer describe.
-    let stale: &[&PathBuf] = if resume {
-        &[&ply, &history_path]
+    files.clear(resume)?;
+    let evaluations = if resume {
+        files.saved_evaluations(trainer.iteration())?
     } else {
-        &[&ply, &history_path, &ckpt]
-    };
-    for marker in stale {
-        match std::fs::remove_file(marker) {
-            Ok(()) => {}
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-            Err(e) => return Err(e).with_context(|| format!("cannot remove {}", marker.display())),
-        }
-    }
-    if !resume {
         let json = serde_json::to_vec_pretty(&settings).context("cannot encode the settings")?;
-        write_atomic(&settings_path, &json)
-            .with_context(|| format!("cannot write {}", settings_path.display()))?;
-    }
-    let background = match args.background {
-        BackgroundArg::White => Vec3::ONE,
-        BackgroundArg::Black | BackgroundArg::Random => Vec3::ZERO,
+        write_atomic(&files.settings, &json)
+            .with_context(|| format!("cannot write {}", files.settings.display()))?;
+        Vec::new()
     };
     if !args.quiet {
         eprintln!(
@@ -294,17 +233,201 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             trainer.extent()
         );
     }
+    let (report, evals) = train_to_end(&args, &files, &mut trainer, &eval_views, evaluations)?;
 
+    let ply_options = splat_core::ply::PlyOptions {
+        antialiased: args.antialiased,
+    };
+    splat_core::ply::write_model(&files.ply, trainer.splats(), &ply_options)
+        .with_context(|| format!("cannot write {}", files.ply.display()))?;
+    write_history(
+        &files.history,
+        &args,
+        &report,
+        &evals,
+        eval_views.len(),
+        trainer.views().len(),
+        wall.elapsed(),
+    )?;
+    summary(
+        &report,
+        evals.last(),
+        &files.ply,
+        &files.history,
+        wall.elapsed(),
+    );
+    Ok(())
+}
+
+/// Refuses numeric flags outside their range.
+fn check_args(args: &Args) -> anyhow::Result<()> {
+    if !(args.downscale.is_finite() && args.downscale >= 1.0) {
+        bail!("--downscale {} must be at least 1", args.downscale);
+    }
+    if !(args.checkpoint_interval.is_finite() && args.checkpoint_interval >= 0.0) {
+        bail!(
+            "--checkpoint-interval {} must be a number of seconds ≥ 0",
+            args.checkpoint_interval
+        );
+    }
+    Ok(())
+}
+
+/// Whether this call continues the run saved in `OUT`: `--resume` and a checkpoint to continue
+/// from, saved with the same settings (else an error naming the ones that differ). Killed before
+/// its first checkpoint, a run has nothing to continue from and starts again.
+fn resuming(args: &Args, files: &RunFiles, settings: &Settings) -> anyhow::Result<bool> {
+    let resume = args.resume && files.checkpoint.is_file();
+    if args.resume && !resume && !args.quiet {
+        eprintln!(
+            "no checkpoint in {}: starting from the beginning",
+            args.out.display()
+        );
+    }
+    if !resume {
+        return Ok(false);
+    }
+    let saved: Settings = read_saved(&files.settings)?;
+    if saved != *settings {
+        bail!(
+            "the run in {} was started with other settings ({}); resume it with the same \
+             ones (only --iterations, --time-budget, --eval-every and the checkpoint flags may \
+             change), or run without --resume to start over",
+            args.out.display(),
+            saved.differences(settings).join(", ")
+        );
+    }
+    Ok(true)
+}
+
+/// A JSON file a run saved for `--resume`.
+fn read_saved<T: serde::de::DeserializeOwned>(path: &Path) -> anyhow::Result<T> {
+    let bytes = std::fs::read(path).with_context(|| {
+        format!(
+            "cannot read {} (run without --resume to start over)",
+            path.display()
+        )
+    })?;
+    serde_json::from_slice(&bytes).with_context(|| {
+        format!(
+            "{} is damaged; run without --resume to start over",
+            path.display()
+        )
+    })
+}
+
+/// Refuses a random or white background on views that hold their own (no mask, no alpha).
+fn refuse_background_without_masks(args: &Args, views: &[View]) -> anyhow::Result<()> {
+    if args.background != BackgroundArg::Black
+        && let Some(v) = views.iter().find(|v| v.mask.is_none())
+    {
+        bail!(
+            "--background {}: {} has no mask in {} and no alpha channel, so its pixels already \
+             hold their own background and another cannot be put behind them; train with \
+             --background black, or add masks/ (coverage images named like the images)",
+            format!("{:?}", args.background).to_lowercase(),
+            v.name,
+            args.dataset.join("masks").display()
+        );
+    }
+    Ok(())
+}
+
+/// The files of a training run in `OUT`.
+struct RunFiles {
+    /// The settings the run was started with ([`SETTINGS_FILE`]).
+    settings: PathBuf,
+    /// The trainer's checkpoint.
+    checkpoint: PathBuf,
+    /// The evaluations taken up to the checkpoint, saved beside it.
+    evaluations: PathBuf,
+    /// The model: with the history, what marks a finished run.
+    ply: PathBuf,
+    history: PathBuf,
+}
+
+impl RunFiles {
+    fn new(out: &Path) -> Self {
+        Self {
+            settings: out.join(SETTINGS_FILE),
+            checkpoint: out.join("checkpoint.bin"),
+            evaluations: out.join("train-evaluations.json"),
+            ply: out.join("splats.ply"),
+            history: out.join("history.json"),
+        }
+    }
+
+    /// Removes the files that mark a finished run, so an interrupted run never looks finished
+    /// (they come back only at its end); a fresh run also drops an earlier run's checkpoint and
+    /// evaluations, which its settings no longer describe.
+    fn clear(&self, resume: bool) -> anyhow::Result<()> {
+        let markers = [&self.ply, &self.history];
+        let earlier = [&self.checkpoint, &self.evaluations];
+        let stale = markers
+            .iter()
+            .chain(if resume { &[][..] } else { &earlier[..] });
+        for path in stale {
+            match std::fs::remove_file(path) {
+                Ok(()) => {}
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+                Err(e) => {
+                    return Err(e).with_context(|| format!("cannot remove {}", path.display()));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The evaluations a resumed run keeps: those saved up to its checkpoint's step (a point
+    /// taken after it is taken again, from the same splats). A run saved before the file existed
+    /// has none.
+    fn saved_evaluations(&self, iteration: u32) -> anyhow::Result<Vec<EvalPoint>> {
+        if !self.evaluations.is_file() {
+            return Ok(Vec::new());
+        }
+        let mut points: Vec<EvalPoint> = read_saved(&self.evaluations)?;
+        points.retain(|p| p.iteration <= iteration);
+        Ok(points)
+    }
+
+    /// Saves the evaluations so far, then the trainer's checkpoint. The evaluations go first: a
+    /// point newer than the checkpoint is dropped and taken again on resume.
+    fn save(&self, trainer: &Trainer, evaluations: &[EvalPoint]) -> anyhow::Result<()> {
+        let json =
+            serde_json::to_vec_pretty(evaluations).context("cannot encode the evaluations")?;
+        write_atomic(&self.evaluations, &json)
+            .with_context(|| format!("cannot write {}", self.evaluations.display()))?;
+        trainer
+            .save_checkpoint(&self.checkpoint)
+            .context("cannot write the checkpoint")
+    }
+}
+
+/// Trains to `--iterations` (or the time budget), evaluating every `--eval-every` steps and at
+/// the end, and checkpointing every `--checkpoint-every` steps, by wall time and at the end.
+/// Returns the trainer's report and every evaluation of the run, `evals` (a resumed run's
+/// earlier ones) first.
+///
+/// The trainer pauses at each evaluation or checkpoint so that both happen outside its timed
+/// steps; it pauses after every step to look at the clock for the wall-time checkpoints
+/// (pausing changes nothing it computes).
+fn train_to_end(
+    args: &Args,
+    files: &RunFiles,
+    trainer: &mut Trainer,
+    eval_views: &[View],
+    mut evals: Vec<EvalPoint>,
+) -> anyhow::Result<(TrainReport, Vec<EvalPoint>)> {
+    let background = match args.background {
+        BackgroundArg::White => Vec3::ONE,
+        BackgroundArg::Black | BackgroundArg::Random => Vec3::ZERO,
+    };
     let bar = progress_bar(args.iterations, trainer.iteration(), args.quiet);
-    let mut evals: Vec<EvalPoint> = Vec::new();
     let mut ema: Option<(f64, f64)> = None;
     let mut pending_eval = false;
     let mut pending_ckpt = false;
     let interval = Duration::from_secs_f64(args.checkpoint_interval);
     let mut saved_at = Instant::now();
-    // The trainer pauses at each evaluation or checkpoint point so that both happen outside its
-    // timed steps; it pauses after every step to look at the clock for the wall-time checkpoints
-    // (pausing changes nothing it computes).
     let report = loop {
         let stop_at = next_stop(
             trainer.iteration(),
@@ -331,14 +454,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         pending_ckpt |= args.checkpoint_every > 0 && it.is_multiple_of(args.checkpoint_every);
         pending_ckpt |= saved_at.elapsed() >= interval;
         let done = it >= args.iterations || r.stopped_by_budget;
-        if pending_eval || done {
+        if (pending_eval || done) && evals.last().is_none_or(|e| e.iteration < it) {
             let opts = RenderOptions {
                 background,
                 active_sh_degree: trainer.splats().sh_degree,
                 antialiased: args.antialiased,
                 linear_colour: false,
             };
-            let e = evaluate_with(trainer.splats(), &eval_views, &opts)?;
+            let e = evaluate_with(trainer.splats(), eval_views, &opts)?;
             let line = format!(
                 "iteration {it}: {:.2} dB PSNR, SSIM {:.4} on {} views after {:.1} s, {} splats",
                 e.psnr,
@@ -359,12 +482,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 psnr: e.psnr,
                 ssim: e.ssim,
             });
-            pending_eval = false;
         }
+        pending_eval = false;
         if pending_ckpt || done {
-            trainer
-                .save_checkpoint(&ckpt)
-                .context("cannot write the checkpoint")?;
+            files.save(trainer, &evals)?;
             pending_ckpt = false;
             saved_at = Instant::now();
         }
@@ -373,24 +494,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     };
     bar.finish_and_clear();
-
-    let ply_options = splat_core::ply::PlyOptions {
-        antialiased: args.antialiased,
-    };
-    splat_core::ply::write_model(&ply, trainer.splats(), &ply_options)
-        .with_context(|| format!("cannot write {}", ply.display()))?;
-    write_history(
-        &history_path,
-        &args,
-        &report,
-        &evals,
-        eval_views.len(),
-        trainer.views().len(),
-        wall.elapsed(),
-    )?;
-    let last: Option<&EvalPoint> = evals.last();
-    summary(&report, last, &ply, &history_path, wall.elapsed());
-    Ok(())
+    Ok((report, evals))
 }
 
 /// Name of the file in `OUT` that records the settings a run was started with.
