@@ -5,15 +5,12 @@
 #![allow(clippy::print_stderr)] // tests report what they measured
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use plenoptic_scenes::{DemoConfig, demo_scene};
 
 mod support;
-use support::SplitMix;
-
-const BIN: &str = env!("CARGO_BIN_EXE_transcode");
+use support::{SplitMix, check, run_or_kill, transcode};
 
 /// A small run that still has every stage: 12 training and 2 held-out views at 64×64, surface
 /// init with the automatic splat budget's rounds (a generous tolerance, so they merge) and
@@ -51,26 +48,10 @@ checkpoint_interval_s = 0.02
 
 const MODELS: [&str; 2] = ["model/splats.ply", "model/splats-sparse.ply"];
 
-fn transcode(args: &[&str]) -> Command {
-    let mut c = Command::new(BIN);
-    c.args(args).stdout(Stdio::piped()).stderr(Stdio::piped());
-    c
-}
-
 fn run_args<'a>(input: &'a str, out: &'a str, config: &'a str) -> Vec<&'a str> {
     vec![
         "run", input, "--out", out, "--config", config, "--quiet", "--resume",
     ]
-}
-
-fn check(out: Output, what: &str) -> String {
-    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
-    assert!(
-        out.status.success(),
-        "{what} failed: {}\n{stdout}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    stdout
 }
 
 /// What `state.json` says, if it is there; it must always parse (it is written atomically).
@@ -129,7 +110,7 @@ fn a_run_killed_at_random_moments_resumes_to_the_same_model() {
     // The reference: one uninterrupted run.
     let t0 = Instant::now();
     check(
-        transcode(&run_args(input, whole_s, config))
+        &transcode(&run_args(input, whole_s, config))
             .output()
             .unwrap(),
         "the uninterrupted run",
@@ -152,23 +133,14 @@ fn a_run_killed_at_random_moments_resumes_to_the_same_model() {
     let mut late = 0;
     for session in 0..40 {
         let m = (f64::from(session % 8) + rng.next_unit()) / 32.0;
-        let mut child = transcode(&run_args(input, killed_s, config))
-            .spawn()
-            .unwrap();
-        let deadline = Instant::now() + full.mul_f64(m);
-        let mut finished = false;
-        while Instant::now() < deadline {
-            if child.try_wait().unwrap().is_some() {
-                finished = true;
-                break;
-            }
-            std::thread::sleep(Duration::from_millis(2));
-        }
+        let (finished, out) = run_or_kill(
+            &mut transcode(&run_args(input, killed_s, config)),
+            full.mul_f64(m),
+        );
         if !finished {
-            child.kill().unwrap(); // SIGKILL
             interrupted += 1;
         }
-        let status = child.wait().unwrap();
+        let status = out.status;
         let state = state_of(&killed);
         eprintln!(
             "at {:.0}% of {:.1} s: {} ({})",
@@ -217,7 +189,7 @@ fn a_run_killed_at_random_moments_resumes_to_the_same_model() {
 
     // Resume until it finishes, then compare byte for byte.
     check(
-        transcode(&run_args(input, killed_s, config))
+        &transcode(&run_args(input, killed_s, config))
             .output()
             .unwrap(),
         "the last resume",
@@ -302,7 +274,7 @@ fn a_run_killed_at_random_moments_resumes_to_the_same_model() {
     let model = killed.join(MODELS[0]);
     let before = std::fs::metadata(&model).unwrap().modified().unwrap();
     let said = check(
-        transcode(&run_args(input, killed_s, config))
+        &transcode(&run_args(input, killed_s, config))
             .output()
             .unwrap(),
         "resuming a finished run",

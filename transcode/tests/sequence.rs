@@ -5,13 +5,10 @@
 #![allow(clippy::print_stderr)] // tests report what they measured
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 mod support;
-use support::SplitMix;
-
-const BIN: &str = env!("CARGO_BIN_EXE_transcode");
+use support::{SplitMix, check, run_or_kill, transcode};
 
 /// Small runs that keep every stage: 10 training and 2 held-out views at 48×48, 80 steps
 /// (20 for a warm start), a checkpoint every 20 ms.
@@ -41,24 +38,6 @@ fn spider() -> String {
         "{}/../testdata/meshes/spider/spider.obj",
         env!("CARGO_MANIFEST_DIR")
     )
-}
-
-fn transcode(args: &[&str]) -> Command {
-    let mut c = Command::new(BIN);
-    c.args(args)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        // A test must not pick up the shard of a Slurm job it happens to run in.
-        .env_remove("SLURM_ARRAY_TASK_ID")
-        .env_remove("SLURM_ARRAY_TASK_COUNT")
-        .env_remove("JOB_COMPLETION_INDEX");
-    c
-}
-
-fn check(out: &Output, what: &str) -> String {
-    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert!(out.status.success(), "{what} failed: {stderr}");
-    stderr
 }
 
 /// `n` frames of the spider turning and moving (`synth --frames`), `cameras` capture cameras.
@@ -193,20 +172,8 @@ fn a_sequence_killed_at_random_moments_resumes_to_the_same_models() {
     let mut interrupted = [0; 3];
     for session in 0..200 {
         let m = (0.02 + 0.005 * f64::from(session)) * (1.0 + 0.1 * rng.next_unit());
-        let mut child = run(&killed).spawn().unwrap();
-        let deadline = Instant::now() + full.mul_f64(m);
-        let mut finished = false;
-        while Instant::now() < deadline {
-            if child.try_wait().unwrap().is_some() {
-                finished = true;
-                break;
-            }
-            std::thread::sleep(Duration::from_millis(2));
-        }
-        if !finished {
-            child.kill().unwrap(); // SIGKILL
-        }
-        let status = child.wait().unwrap();
+        let (finished, out) = run_or_kill(&mut run(&killed), full.mul_f64(m));
+        let status = out.status;
         // The shard manifest, when there, is always whole; a frame it calls finished has its
         // final model; no model file is ever a partial or different one.
         let shard = killed.join("shards/shard-0-of-1.json");

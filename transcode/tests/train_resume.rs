@@ -5,34 +5,15 @@
 #![allow(clippy::print_stderr)] // tests report what they measured
 
 use std::path::Path;
-use std::process::{Command, Output, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use plenoptic_scenes::{DemoConfig, demo_scene};
 
 mod support;
-use support::SplitMix;
-
-const BIN: &str = env!("CARGO_BIN_EXE_transcode");
+use support::{SplitMix, check, run_or_kill, transcode};
 
 /// The files that mark a finished training run.
 const FINISHED: [&str; 2] = ["splats.ply", "history.json"];
-
-fn transcode(args: &[&str]) -> Command {
-    let mut c = Command::new(BIN);
-    c.args(args).stdout(Stdio::piped()).stderr(Stdio::piped());
-    c
-}
-
-fn check(out: &Output, what: &str) -> String {
-    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
-    assert!(
-        out.status.success(),
-        "{what} failed: {}\n{stdout}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    stdout
-}
 
 /// A short run with every kind of pause: evaluations every 40 steps on a held-out dataset, a
 /// checkpoint every 20 ms of wall time, random backgrounds behind the masks.
@@ -132,22 +113,14 @@ fn a_training_run_killed_at_random_moments_resumes_to_the_same_model() {
     let mut finished = false;
     for session in 0..40 {
         let m = (f64::from(session % 8) + rng.next_unit()) / 24.0;
-        let mut child = transcode(&train_args(&train, &heldout, &killed_s))
-            .spawn()
-            .unwrap();
-        let deadline = Instant::now() + full.mul_f64(m);
-        while Instant::now() < deadline {
-            if child.try_wait().unwrap().is_some() {
-                finished = true;
-                break;
-            }
-            std::thread::sleep(Duration::from_millis(2));
-        }
+        let (ended, out) = run_or_kill(
+            &mut transcode(&train_args(&train, &heldout, &killed_s)),
+            full.mul_f64(m),
+        );
+        finished = ended;
         if !finished {
-            child.kill().unwrap(); // SIGKILL
             interrupted += 1;
         }
-        let out = child.wait_with_output().unwrap();
         eprintln!(
             "at {:.0}% of {:.2} s: {}",
             100.0 * m,

@@ -1,4 +1,53 @@
-//! Helpers shared by the kill-and-resume tests (`resume.rs`, `sequence.rs`).
+//! Helpers shared by the kill-and-resume tests (`resume.rs`, `sequence.rs`, `train_resume.rs`):
+//! the binary as a child process, its success checked, a session killed at a chosen moment, and
+//! the generator of those moments.
+
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+/// `transcode ARGS` with its output captured.
+pub fn transcode(args: &[&str]) -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_transcode"));
+    c.args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        // A test must not pick up the shard of a Slurm job it happens to run in.
+        .env_remove("SLURM_ARRAY_TASK_ID")
+        .env_remove("SLURM_ARRAY_TASK_COUNT")
+        .env_remove("JOB_COMPLETION_INDEX");
+    c
+}
+
+/// Asserts that `out` is a success (else fails naming `what`, with what it printed); returns what
+/// it printed, standard output then standard error.
+pub fn check(out: &Output, what: &str) -> String {
+    let said = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(out.status.success(), "{what} failed: {said}");
+    said
+}
+
+/// Runs `command` until it exits or `after` has passed, then kills it with SIGKILL. Returns
+/// whether it exited on its own, and its output.
+pub fn run_or_kill(command: &mut Command, after: Duration) -> (bool, Output) {
+    let mut child = command.spawn().unwrap();
+    let deadline = Instant::now() + after;
+    let mut finished = false;
+    while Instant::now() < deadline {
+        if child.try_wait().unwrap().is_some() {
+            finished = true;
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    if !finished {
+        child.kill().unwrap();
+    }
+    (finished, child.wait_with_output().unwrap())
+}
 
 /// A small, deterministic generator for the kill moments (SplitMix64 with a fixed seed), so a
 /// failing schedule of kills can be replayed.
