@@ -8,14 +8,29 @@ use splat_core::{SplatGrads, Splats};
 /// Whether every parameter of splat `i` is finite.
 pub(super) fn splat_is_finite(s: &Splats, i: usize) -> bool {
     let k = s.coeffs_per_splat();
-    s.means[i].is_finite()
-        && s.log_scales[i].is_finite()
-        && s.rotations[i].iter().all(|v| v.is_finite())
-        && s.opacity_logits[i].is_finite()
-        && s.sh[i * k..(i + 1) * k]
-            .iter()
-            .flatten()
-            .all(|v| v.is_finite())
+    values_finite(
+        s.means[i],
+        s.log_scales[i],
+        &s.rotations[i],
+        s.opacity_logits[i],
+        &s.sh[i * k..(i + 1) * k],
+    )
+}
+
+/// Whether one splat's values are all finite: its parameters, or their gradients (the same
+/// fields in [`Splats`] and [`SplatGrads`]).
+fn values_finite(
+    mean: Vec3,
+    log_scale: Vec3,
+    rotation: &[f32; 4],
+    opacity_logit: f32,
+    sh: &[[f32; 3]],
+) -> bool {
+    mean.is_finite()
+        && log_scale.is_finite()
+        && rotation.iter().all(|v| v.is_finite())
+        && opacity_logit.is_finite()
+        && sh.iter().flatten().all(|v| v.is_finite())
 }
 
 /// Whether every value of the buffers is finite: the check each step makes of all parameters
@@ -45,15 +60,13 @@ pub(crate) fn zero_non_finite_grads(g: &mut SplatGrads) -> u64 {
     let bad: Vec<usize> = (0..n)
         .into_par_iter()
         .filter(|&i| {
-            !(grads.means[i].is_finite()
-                && grads.log_scales[i].is_finite()
-                && grads.rotations[i].iter().all(|v| v.is_finite())
-                && grads.opacity_logits[i].is_finite()
-                && grads.sh[i * k..(i + 1) * k]
-                    .iter()
-                    .flatten()
-                    .all(|v| v.is_finite())
-                && grads.screen_grad_norm[i].is_finite())
+            !(values_finite(
+                grads.means[i],
+                grads.log_scales[i],
+                &grads.rotations[i],
+                grads.opacity_logits[i],
+                &grads.sh[i * k..(i + 1) * k],
+            ) && grads.screen_grad_norm[i].is_finite())
         })
         .collect();
     let count = bad.len() as u64;
