@@ -56,6 +56,7 @@ pub mod model_file;
 pub mod ply;
 mod prefetch;
 mod project;
+mod project_backward;
 mod projected;
 mod rasterize;
 mod rasterize_backward;

@@ -11,7 +11,8 @@ use crate::disjoint::DisjointWrites;
 use crate::falloff::Falloff;
 use crate::lanes::WIDTH;
 use crate::prefetch;
-use crate::project::{ChainLanes, Cull, ProjectedGrad, Scratch, ViewConsts, project8};
+use crate::project::{ChainLanes, Cull, Scratch, ViewConsts, project8};
+use crate::project_backward::ProjectedGrad;
 use crate::projected::Projected;
 use crate::spans::RowSpans;
 use crate::tiles::{HALF_ROWS, LANES, TILE_PIXELS, TILE_SIZE, evaluated_pixels};
@@ -94,7 +95,7 @@ pub struct Rasterizer {
     pub(crate) pair_grads: Vec<ProjectedGrad>,
     pub(crate) splat_grads: Vec<ProjectedGrad>,
     /// The view of the last `backward_sums`, while its sums stand (a forward pass clears it).
-    pub(crate) chain_view: Option<crate::project::ChainView>,
+    pub(crate) chain_view: Option<crate::project_backward::ChainView>,
     /// Per (tile, splat) pair: its summed blending weight (`accumulate_contributions`).
     pub(crate) pair_weights: Vec<f64>,
     /// Run the portable tile loops even where AVX2 is available (tests compare the two).

@@ -21,8 +21,9 @@ use crate::falloff::Falloff;
 use crate::lanes::transpose8_avx2;
 use crate::lanes::{F8, WIDTH, array};
 use crate::prefetch;
-use crate::project::{
-    ChainView, ProjectedGrad, ProjectedGradLanes, ViewConsts, colour_grad8, project_backward8,
+use crate::project::ViewConsts;
+use crate::project_backward::{
+    ChainView, ProjectedGrad, ProjectedGradLanes, colour_grad8, project_backward8,
 };
 use crate::rasterize::{DEPTH_MIN_ALPHA, Finish, PREFETCH_AHEAD, tile_extent, tile_major_index};
 use crate::spans::RowSpans;

@@ -24,7 +24,7 @@ pub struct Timings {
     pub refine: Duration,
     /// Steps timed.
     pub steps: u64,
-    /// Wall time of the steps run through [`Trainer::run_until`], each whole (as the time
+    /// Wall time of the steps run through [`Trainer::run_until`](crate::Trainer::run_until), each whole (as the time
     /// budget counts it), including those of branches a splat-budget round threw away.
     #[serde(default)]
     pub step_wall: Duration,
