@@ -227,24 +227,10 @@ pub fn run_bench(
     opts: &BenchOptions,
     progress: &mut dyn FnMut(&str),
 ) -> Result<BenchReport, BenchError> {
-    let stage = |e: &dyn std::fmt::Display| BenchError::Stage(e.to_string());
     let repeats = opts.repeats.max(1);
     progress("reading the frame");
     let file_bytes = std::fs::metadata(frame).map_or(0, |m| m.len());
-    let mut read_times = Vec::new();
-    let mut model = None;
-    for _ in 0..repeats.min(3) {
-        let t = Instant::now();
-        let m = plenoptic_io::load(frame).map_err(|source| BenchError::Read {
-            path: frame.to_path_buf(),
-            source: Box::new(source),
-        })?;
-        read_times.push(t.elapsed());
-        model = Some(m);
-    }
-    let Some(model) = model else {
-        unreachable!("the read loop runs at least once")
-    };
+    let (model, read_s) = time_read(frame, repeats.min(3))?;
     let (points, capture_cameras) = match &model {
         plenoptic_io::Model::Cloud(c) => (c.len(), c.num_cameras),
         plenoptic_io::Model::Mesh(m) => (m.positions.len(), 0),
@@ -253,7 +239,7 @@ pub fn run_bench(
     let mut cfg = Config::default();
     cfg.rig.width = opts.resolution;
     cfg.rig.height = opts.resolution;
-    let rig = plenoptic_render::build_rig(&model, &cfg.rig).map_err(|e| stage(&e))?;
+    let rig = plenoptic_render::build_rig(&model, &cfg.rig).map_err(stage)?;
     progress(&format!(
         "rendering {} reference views at {}²",
         rig.train.len(),
@@ -271,10 +257,10 @@ pub fn run_bench(
         plenoptic_render::render_views_with(&model, &rig.train, &view_opts, |i, image| {
             training_view(i, format!("view_{i:03}"), rig.train[i], image)
         })
-        .map_err(|e| stage(&e))?
+        .map_err(stage)?
         .into_iter()
         .collect::<Result<Vec<View>, _>>()
-        .map_err(|e| stage(&e))?
+        .map_err(stage)?
         .into();
     let views_s = t.elapsed().as_secs_f64();
 
@@ -287,8 +273,8 @@ pub fn run_bench(
     };
     let surface = SurfacePoints::from_model(&model, init_cfg.mesh_points, init_cfg.mesh_samples, 0);
     drop(model);
-    let (splats, summary) = splat_init::initialise(&surface, &init_cfg, cfg.renderer.exponent, 0)
-        .map_err(|e| stage(&e))?;
+    let (splats, summary) =
+        splat_init::initialise(&surface, &init_cfg, cfg.renderer.exponent, 0).map_err(stage)?;
     drop(surface);
     let init_s = t.elapsed().as_secs_f64();
 
@@ -300,26 +286,132 @@ pub fn run_bench(
     };
     thread_counts.sort_unstable();
     thread_counts.dedup();
-    let camera = RenderCamera::try_from(&rig.train[0]).map_err(|e| stage(&e))?;
-    let mut raster = Vec::new();
-    let mut pixel_evaluations = 0;
-    let mut tile_pairs = 0;
-    let mut avx2 = false;
-    for &threads in &thread_counts {
+    let camera = RenderCamera::try_from(&rig.train[0]).map_err(stage)?;
+    let rasteriser = time_raster_by_threads(&splats, &camera, &thread_counts, repeats, progress)?;
+
+    progress(&format!("timing {} training steps", opts.steps));
+    let tc = cfg.train_config(InitMode::Surface, summary.sh_degree);
+    let warmup_splats = tc.warmup.map(|_| splats.clone());
+    let steps = time_training_steps(splats, &views, &tc, opts, &thread_counts, progress)?;
+    let warmup_step = match (tc.warmup, warmup_splats) {
+        (Some(w), Some(splats)) => {
+            progress(&format!(
+                "timing {} warm-up training steps (views reduced {}-fold)",
+                opts.steps, w.factor
+            ));
+            Some(time_warmup_steps(
+                splats,
+                views,
+                tc,
+                w.factor,
+                opts.steps,
+                cfg.warmup_share(),
+                steps.step.step_ms,
+            )?)
+        }
+        _ => None,
+    };
+
+    Ok(BenchReport {
+        points,
+        capture_cameras,
+        file_bytes,
+        read_s,
+        views: rig.train.len(),
+        point_size: view_opts.point_size,
+        views_s,
+        init_s,
+        splats: steps.trained_splats,
+        pixel_evaluations: rasteriser.pixel_evaluations,
+        tile_pairs: rasteriser.tile_pairs,
+        serial_fraction: rasteriser.serial_fraction(),
+        raster: rasteriser.figures,
+        step: steps.step,
+        warmup_step,
+        step_threads: steps.by_threads,
+        peak_rss_bytes: peak_rss_bytes(),
+        machine_threads,
+        avx2: rasteriser.avx2,
+    })
+}
+
+/// A stage's failure on the frame, as [`BenchError::Stage`].
+fn stage(e: impl std::fmt::Display) -> BenchError {
+    BenchError::Stage(e.to_string())
+}
+
+/// Reads the frame `times` times; returns the model and the median read time, s.
+fn time_read(frame: &Path, times: usize) -> Result<(plenoptic_io::Model, f64), BenchError> {
+    let mut read_times = Vec::new();
+    let mut model = None;
+    for _ in 0..times.max(1) {
+        let t = Instant::now();
+        let m = plenoptic_io::load(frame).map_err(|source| BenchError::Read {
+            path: frame.to_path_buf(),
+            source: Box::new(source),
+        })?;
+        read_times.push(t.elapsed());
+        model = Some(m);
+    }
+    let Some(model) = model else {
+        unreachable!("the read loop runs at least once")
+    };
+    Ok((model, median(&mut read_times).as_secs_f64()))
+}
+
+/// The rasteriser's figures at each thread count, and the forward's counts.
+struct RasterFigures {
+    figures: Vec<RasterFigure>,
+    pixel_evaluations: u64,
+    tile_pairs: u64,
+    avx2: bool,
+}
+
+impl RasterFigures {
+    /// Amdahl's serial fraction of forward + backward from the fewest and the most threads
+    /// timed (`None` with one count).
+    fn serial_fraction(&self) -> Option<f64> {
+        match (self.figures.first(), self.figures.last()) {
+            (Some(a), Some(b)) if b.threads > a.threads => Some(amdahl_serial_fraction(
+                a.threads as f64,
+                b.threads as f64,
+                b.forward_backward_ms / a.forward_backward_ms,
+            )),
+            _ => None,
+        }
+    }
+}
+
+/// Times the rasteriser's forward and forward + backward on one view at each of
+/// `thread_counts` (in a pool of that many threads), `repeats` times each.
+fn time_raster_by_threads(
+    splats: &Splats,
+    camera: &RenderCamera,
+    thread_counts: &[usize],
+    repeats: usize,
+    progress: &mut dyn FnMut(&str),
+) -> Result<RasterFigures, BenchError> {
+    let mut out = RasterFigures {
+        figures: Vec::new(),
+        pixel_evaluations: 0,
+        tile_pairs: 0,
+        avx2: false,
+    };
+    for &threads in thread_counts {
         progress(&format!(
             "timing the rasteriser on {threads} thread(s), {repeats} repeats"
         ));
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads.max(1))
             .build()
-            .map_err(|e| stage(&e))?;
+            .map_err(stage)?;
         let (fwd, fwd_bwd, stats, phases_ms) =
-            pool.install(|| time_raster(&splats, &camera, repeats));
+            pool.install(|| time_raster(splats, camera, repeats));
         let evals = stats.pixel_evaluations;
-        tile_pairs = stats.pairs as u64;
-        pixel_evaluations = evals;
-        avx2 = Rasterizer::new().uses_avx2();
-        raster.push(RasterFigure {
+        out.tile_pairs = stats.pairs as u64;
+        out.pixel_evaluations = evals;
+        out.avx2 = Rasterizer::new().uses_avx2();
+        out.figures.push(RasterFigure {
             threads,
             forward_ms: ms(fwd),
             forward_backward_ms: ms(fwd_bwd),
@@ -327,17 +419,29 @@ pub fn run_bench(
             phases_ms,
         });
     }
-    let serial_fraction = match (raster.first(), raster.last()) {
-        (Some(a), Some(b)) if b.threads > a.threads => Some(amdahl_serial_fraction(
-            a.threads as f64,
-            b.threads as f64,
-            b.forward_backward_ms / a.forward_backward_ms,
-        )),
-        _ => None,
-    };
+    Ok(out)
+}
 
-    progress(&format!("timing {} training steps", opts.steps));
-    let tc = cfg.train_config(InitMode::Surface, summary.sh_degree);
+/// The full-resolution training step: its phases at the machine's thread count, and (with two
+/// or more counts asked for) at each count in turn.
+struct TrainingSteps {
+    step: StepPhases,
+    by_threads: Vec<StepAtThreads>,
+    /// The model's splats after the steps.
+    trained_splats: usize,
+}
+
+/// Times `opts.steps` full-resolution training steps (after one untimed step) from `splats`,
+/// then, with two or more `thread_counts`, rounds of steps at each count in turn.
+fn time_training_steps(
+    splats: Splats,
+    views: &Arc<Vec<View>>,
+    tc: &splat_train::TrainConfig,
+    opts: &BenchOptions,
+    thread_counts: &[usize],
+    progress: &mut dyn FnMut(&str),
+) -> Result<TrainingSteps, BenchError> {
+    let repeats = opts.repeats.max(1);
     // Room for the steps timed at each thread count after the plain figure (`per_round` plus
     // one untimed, per count and round).
     let per_round = (opts.steps / 4).max(3);
@@ -347,9 +451,8 @@ pub fn run_bench(
         0
     };
     // The step is the full-resolution one: a default run trains its first share of steps on
-    // reduced views (the warm-up, timed apart below), and timing those as if they were full
-    // steps made the figure depend on how many steps were asked for.
-    let warmup = tc.warmup;
+    // reduced views (the warm-up, timed apart), and timing those as if they were full steps
+    // made the figure depend on how many steps were asked for.
     let full_tc = splat_train::TrainConfig {
         iterations: opts.steps + 1 + by_threads,
         time_budget: None,
@@ -357,8 +460,7 @@ pub fn run_bench(
         warmup: None,
         ..tc.clone()
     };
-    let warmup_splats = warmup.map(|_| splats.clone());
-    let mut trainer = Trainer::new(splats, Arc::clone(&views), full_tc).map_err(|e| stage(&e))?;
+    let mut trainer = Trainer::new(splats, Arc::clone(views), full_tc).map_err(stage)?;
     trainer.run_until(1, |_| {});
     let before = trainer.report(false).timings;
     let started_s = trainer.report(false).elapsed_s;
@@ -376,76 +478,56 @@ pub fn run_bench(
         step_ms: 1e3 * (report.elapsed_s - started_s) / steps as f64,
         reduced_steps: after.coarse_steps - before.coarse_steps,
     };
-    let step_threads = if thread_counts.len() > 1 {
+    let by_threads = if thread_counts.len() > 1 {
         progress(&format!(
             "timing training steps at {thread_counts:?} threads in turn, {repeats} rounds"
         ));
-        time_steps_by_threads(&mut trainer, &thread_counts, repeats, per_round)
-            .map_err(|e| stage(&e))?
+        time_steps_by_threads(&mut trainer, thread_counts, repeats, per_round).map_err(stage)?
     } else {
         Vec::new()
     };
-    let trained_splats = trainer.splats().len();
-    drop(trainer);
-    let warmup_step = match (warmup, warmup_splats) {
-        (Some(w), Some(splats)) => {
-            progress(&format!(
-                "timing {} warm-up training steps (views reduced {}-fold)",
-                opts.steps, w.factor
-            ));
-            let warm_tc = splat_train::TrainConfig {
-                iterations: opts.steps + 1,
-                time_budget: None,
-                densify: None,
-                warmup: Some(splat_train::Warmup {
-                    factor: w.factor,
-                    until: opts.steps + 1,
-                }),
-                ..tc
-            };
-            let mut trainer = Trainer::new(splats, views, warm_tc).map_err(|e| stage(&e))?;
-            trainer.run_until(1, |_| {});
-            let before = trainer.report(false);
-            let report = trainer.run_until(opts.steps + 1, |_| {});
-            let steps = (report.timings.steps - before.timings.steps).max(1);
-            let step_ms = 1e3 * (report.elapsed_s - before.elapsed_s) / steps as f64;
-            let run_share = cfg.warmup_share();
-            Some(WarmupStep {
-                factor: w.factor,
-                steps,
-                reduced_steps: report.timings.coarse_steps - before.timings.coarse_steps,
-                step_ms,
-                run_share,
-                // Linear in the step times, so milliseconds in, milliseconds out.
-                run_mean_ms: splat_train::schedule::mean_step_s(
-                    step.step_ms,
-                    Some((run_share, step_ms)),
-                ),
-            })
-        }
-        _ => None,
-    };
-
-    Ok(BenchReport {
-        points,
-        capture_cameras,
-        file_bytes,
-        read_s: median(&mut read_times).as_secs_f64(),
-        views: rig.train.len(),
-        point_size: view_opts.point_size,
-        views_s,
-        init_s,
-        splats: trained_splats,
-        pixel_evaluations,
-        tile_pairs,
-        raster,
-        serial_fraction,
+    Ok(TrainingSteps {
         step,
-        warmup_step,
-        step_threads,
-        peak_rss_bytes: peak_rss_bytes(),
-        machine_threads,
-        avx2,
+        by_threads,
+        trained_splats: trainer.splats().len(),
+    })
+}
+
+/// Times `steps` warm-up steps (views reduced `factor`-fold) from `splats`, and a default run's
+/// mean step with `run_share` of its steps such and the rest at `full_step_ms`.
+fn time_warmup_steps(
+    splats: Splats,
+    views: Arc<Vec<View>>,
+    tc: splat_train::TrainConfig,
+    factor: u32,
+    steps: u32,
+    run_share: f64,
+    full_step_ms: f64,
+) -> Result<WarmupStep, BenchError> {
+    let warm_tc = splat_train::TrainConfig {
+        iterations: steps + 1,
+        time_budget: None,
+        densify: None,
+        warmup: Some(splat_train::Warmup {
+            factor,
+            until: steps + 1,
+        }),
+        ..tc
+    };
+    let mut trainer = Trainer::new(splats, views, warm_tc).map_err(stage)?;
+    trainer.run_until(1, |_| {});
+    let before = trainer.report(false);
+    let report = trainer.run_until(steps + 1, |_| {});
+    let timed = (report.timings.steps - before.timings.steps).max(1);
+    let step_ms = 1e3 * (report.elapsed_s - before.elapsed_s) / timed as f64;
+    Ok(WarmupStep {
+        factor,
+        steps: timed,
+        reduced_steps: report.timings.coarse_steps - before.timings.coarse_steps,
+        step_ms,
+        run_share,
+        // Linear in the step times, so milliseconds in, milliseconds out.
+        run_mean_ms: splat_train::schedule::mean_step_s(full_step_ms, Some((run_share, step_ms))),
     })
 }
 
