@@ -591,26 +591,8 @@ impl BudgetSearch {
             self.no_time_left = true;
             return Ok(None);
         }
-        // Merges that cannot cost less than what is left are not tried, nor those whose first
-        // look cannot come near enough to it to be looked at again (`second_look_within`):
-        // each counts as refused, and the next, gentler one is considered in its place.
-        while cfg.skip_hopeless
-            && let floor = self.cost_floor()
-            && let first_look_floor = self.first_look_floor()
-            && let left = self.left_db(cfg.tolerance_db)
-            && first_look_floor > 0.0
-            && (floor > left || first_look_floor > cfg.second_look_within.max(1.0) * left)
-        {
-            self.skipped.push(SkippedRound {
-                iteration,
-                keep: self.next_keep(cfg.keep),
-                floor_db: floor,
-                first_look_floor_db: first_look_floor,
-                left_db: left,
-            });
-            if self.finished() {
-                return Ok(None);
-            }
+        if self.skip_hopeless(cfg, iteration) {
+            return Ok(None);
         }
         let n = trainer.splats().len();
         // The round's planning and scoring are counted on the trainer's clock as they happen
@@ -686,16 +668,75 @@ impl BudgetSearch {
         round.steps_pruned = pruned.ended_at - iteration;
         round.out_of_time = pruned.scores.count < SCORE_POINTS;
         round.take_scores(None, &pruned.scores);
-        let within = |round: &BudgetRound| {
-            !round.out_of_time
-                && self.spent_db() + round.drop_db().unwrap_or(f64::INFINITY).max(0.0)
-                    <= cfg.tolerance_db
-        };
-        round.accepted = within(&round);
-        // A cost near what is left is looked at again after more training of both branches
-        // (the merged branch is still recovering from its merges, and its cost at the end of
-        // the run has been half of this or less), where the rounds' steps leave room: they end
-        // by `end_share` of the run's steps (under a time budget, of those it now expects).
+        round.accepted = self.within_tolerance(cfg, &round);
+        let kept =
+            self.look_further(trainer, cfg, plan, kept, &mut round, heldout_psnr, on_step)?;
+        if !round.accepted {
+            let restoring = Instant::now();
+            trainer.restore_snapshot(kept).map_err(fail)?;
+            round.seconds.planning += count_since(trainer, restoring);
+        }
+        self.rounds.push(round);
+        self.tolerance_spent =
+            self.spent_db() > 0.0 && self.left_db(cfg.tolerance_db) < cfg.least_left_db;
+        Ok(Some(round))
+    }
+
+    /// Whether `round`'s cost (the worse background), added to what the accepted rounds spent,
+    /// stays within the tolerance (a round that ran out of time never does).
+    fn within_tolerance(&self, cfg: &BudgetConfig, round: &BudgetRound) -> bool {
+        !round.out_of_time
+            && self.spent_db() + round.drop_db().unwrap_or(f64::INFINITY).max(0.0)
+                <= cfg.tolerance_db
+    }
+
+    /// Skips the merges that cannot cost less than what is left of the tolerance, and those
+    /// whose first look cannot come near enough to it to be looked at again
+    /// ([`BudgetConfig::second_look_within`]): each counts as refused and is recorded in
+    /// [`Self::skipped`], and the next, gentler merge is considered in its place. Returns whether
+    /// that ended the search.
+    fn skip_hopeless(&mut self, cfg: &BudgetConfig, iteration: u32) -> bool {
+        while cfg.skip_hopeless
+            && let floor = self.cost_floor()
+            && let first_look_floor = self.first_look_floor()
+            && let left = self.left_db(cfg.tolerance_db)
+            && first_look_floor > 0.0
+            && (floor > left || first_look_floor > cfg.second_look_within.max(1.0) * left)
+        {
+            self.skipped.push(SkippedRound {
+                iteration,
+                keep: self.next_keep(cfg.keep),
+                floor_db: floor,
+                first_look_floor_db: first_look_floor,
+                left_db: left,
+            });
+            if self.finished() {
+                return true;
+            }
+        }
+        false
+    }
+
+    /// Looks again at a round refused near what is left of the tolerance: a cost within
+    /// [`BudgetConfig::second_look_within`] of it is looked at after more training of both
+    /// branches (the merged branch is still recovering from its merges, and its cost at the end
+    /// of the run has been half of this or less), where the rounds' steps leave room (they end
+    /// by `end_share` of the run's steps; under a time budget, of those it now expects); a
+    /// second look still refused within [`BudgetConfig::final_look_within`] trains both branches
+    /// on to the end of the run, where the merged branch has finished recovering, and the round
+    /// is decided on the models the run would end with. Updates `round` (its looks and its
+    /// decision) and returns the control's snapshot as it then stands.
+    #[allow(clippy::too_many_arguments)]
+    fn look_further<E: From<RoundError>>(
+        &self,
+        trainer: &mut Trainer,
+        cfg: &BudgetConfig,
+        plan: BudgetPlan,
+        mut kept: Snapshot,
+        round: &mut BudgetRound,
+        heldout_psnr: &mut dyn FnMut(&Splats) -> Result<HeldoutPsnr, E>,
+        on_step: &mut dyn FnMut(&crate::Progress),
+    ) -> Result<Snapshot, E> {
         let left = self.left_db(cfg.tolerance_db);
         let rounds_end = (cfg.end_share * f64::from(trainer.horizon())).round() as u32;
         let second_look = !round.accepted
@@ -703,17 +744,13 @@ impl BudgetSearch {
             && round
                 .drop_db()
                 .is_some_and(|d| d <= cfg.second_look_within * left)
-            && iteration + (1 + cfg.second_look_trials) * plan.trial <= rounds_end;
-        let mut kept = kept;
+            && round.iteration + (1 + cfg.second_look_trials) * plan.trial <= rounds_end;
         if second_look {
             round.first_look_db = round.drop_db();
             let steps = cfg.second_look_trials * plan.trial;
-            kept = look_again(trainer, kept, &|_| steps, &mut round, heldout_psnr, on_step)?;
-            round.accepted = within(&round);
+            kept = look_again(trainer, kept, &|_| steps, round, heldout_psnr, on_step)?;
+            round.accepted = self.within_tolerance(cfg, round);
         }
-        // A second look still refused near what is left: both branches train on to the end of
-        // the run, where the merged branch has finished recovering, and the round is decided
-        // on the models the run would end with.
         let end = trainer.config().iterations;
         let final_look = second_look
             && !round.accepted
@@ -730,21 +767,13 @@ impl BudgetSearch {
                 trainer,
                 kept,
                 &|from| end.saturating_sub(from),
-                &mut round,
+                round,
                 heldout_psnr,
                 on_step,
             )?;
-            round.accepted = within(&round);
+            round.accepted = self.within_tolerance(cfg, round);
         }
-        if !round.accepted {
-            let restoring = Instant::now();
-            trainer.restore_snapshot(kept).map_err(fail)?;
-            round.seconds.planning += count_since(trainer, restoring);
-        }
-        self.rounds.push(round);
-        self.tolerance_spent =
-            self.spent_db() > 0.0 && self.left_db(cfg.tolerance_db) < cfg.least_left_db;
-        Ok(Some(round))
+        Ok(kept)
     }
 }
 
