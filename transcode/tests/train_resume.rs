@@ -1,7 +1,8 @@
 //! `transcode train --resume`: a training run killed with SIGKILL at any moment and resumed
 //! until it finishes writes the same model, byte for byte, and the same evaluation points as a
-//! run that was never interrupted; what a killed run leaves never looks finished; a finished run
-//! is not redone; other settings are refused.
+//! run that was never interrupted (also when killed between its last checkpoint and its model);
+//! what a killed run leaves never looks finished; a finished run is not redone; other settings
+//! are refused.
 #![allow(clippy::print_stderr)] // tests report what they measured
 
 use std::path::Path;
@@ -131,13 +132,13 @@ fn a_training_run_killed_at_random_moments_resumes_to_the_same_model() {
             check(&out, "a resumed run");
             break;
         }
-        // Whatever a kill leaves, a model file, if any, is the final one.
-        for f in FINISHED {
-            if f == "splats.ply"
-                && let Ok(bytes) = std::fs::read(killed.join(f))
-            {
-                assert!(bytes == reference, "{f} exists but is not the final model");
-            }
+        // Whatever a kill leaves, a model file, if any, is the final one, and a history only
+        // comes with it.
+        if let Ok(bytes) = std::fs::read(killed.join("splats.ply")) {
+            assert!(bytes == reference, "splats.ply exists but is not the final model");
+        }
+        if killed.join("history.json").exists() {
+            assert!(killed.join("splats.ply").is_file());
         }
     }
     assert!(
@@ -165,6 +166,18 @@ fn a_training_run_killed_at_random_moments_resumes_to_the_same_model() {
     let said = check(&out, "resuming a finished run");
     assert!(said.contains("already finished"), "{said}");
     assert!(std::fs::read(killed.join("splats.ply")).unwrap() == reference);
+
+    // Killed after its last checkpoint but before the model and history were written, a run
+    // resumes to them without training or evaluating a step twice.
+    for f in FINISHED {
+        std::fs::remove_file(killed.join(f)).unwrap();
+    }
+    let out = transcode(&train_args(&train, &heldout, &killed_s))
+        .output()
+        .unwrap();
+    check(&out, "resuming after the last checkpoint");
+    assert!(std::fs::read(killed.join("splats.ply")).unwrap() == reference);
+    assert_eq!(evaluations(&killed), reference_evaluations);
 
     // Other settings are refused, naming what changed.
     let mut other = train_args(&train, &heldout, &killed_s);
