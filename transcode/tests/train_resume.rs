@@ -135,7 +135,10 @@ fn a_training_run_killed_at_random_moments_resumes_to_the_same_model() {
         // Whatever a kill leaves, a model file, if any, is the final one, and a history only
         // comes with it.
         if let Ok(bytes) = std::fs::read(killed.join("splats.ply")) {
-            assert!(bytes == reference, "splats.ply exists but is not the final model");
+            assert!(
+                bytes == reference,
+                "splats.ply exists but is not the final model"
+            );
         }
         if killed.join("history.json").exists() {
             assert!(killed.join("splats.ply").is_file());
