@@ -232,6 +232,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             trainer.splats().len(),
             trainer.extent()
         );
+        if resume {
+            eprintln!(
+                "continuing from step {} of {} ({}, {} evaluation(s) kept)",
+                trainer.iteration(),
+                args.iterations,
+                files.checkpoint.display(),
+                evaluations.len()
+            );
+        }
     }
     let (report, evals) = train_to_end(&args, &files, &mut trainer, &eval_views, evaluations)?;
 
