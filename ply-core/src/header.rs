@@ -135,46 +135,30 @@ impl Header {
 /// longer than [`MAX_HEADER_BYTES`] or without `end_header`, an unknown format, version, type
 /// or keyword, and elements or properties that are malformed or declared twice.
 pub fn parse_header(bytes: &[u8]) -> Result<Header, HeaderError> {
-    let err = |line: usize, problem: HeaderProblem| HeaderError { line, problem };
     if bytes.is_empty() {
-        return Err(err(1, HeaderProblem::Empty));
+        return Err(HeaderError {
+            line: 1,
+            problem: HeaderProblem::Empty,
+        });
     }
-    let mut pos = 0usize;
-    let mut line_no = 0usize;
+    let mut lines = HeaderLines {
+        bytes,
+        pos: 0,
+        line: 0,
+    };
     let mut format = None;
     let mut elements: Vec<Element> = Vec::new();
     let mut comments = Vec::new();
     let mut obj_info = Vec::new();
     loop {
-        if pos >= bytes.len() {
-            return Err(err(line_no, HeaderProblem::NoEndHeader));
-        }
-        if pos > MAX_HEADER_BYTES {
-            return Err(err(
-                line_no,
-                HeaderProblem::TooLong {
-                    limit: MAX_HEADER_BYTES,
-                },
-            ));
-        }
-        let end = bytes[pos..]
-            .iter()
-            .position(|&b| b == b'\n')
-            .map_or(bytes.len(), |i| pos + i);
-        line_no += 1;
-        let raw = &bytes[pos..end];
-        pos = (end + 1).min(bytes.len());
-        let text = std::str::from_utf8(raw).map_err(|_| err(line_no, HeaderProblem::NotUtf8))?;
-        // Accept CRLF headers (written by some Windows tools); the body is unaffected.
-        let text = text.strip_suffix('\r').unwrap_or(text);
-        if line_no == 1 {
+        let text = lines.next_line()?;
+        let line = lines.line;
+        let at = |problem| HeaderError { line, problem };
+        if line == 1 {
             if text.trim_end() != "ply" {
-                return Err(err(
-                    1,
-                    HeaderProblem::NotPly {
-                        found: text.to_string(),
-                    },
-                ));
+                return Err(at(HeaderProblem::NotPly {
+                    found: text.to_string(),
+                }));
             }
             continue;
         }
@@ -185,144 +169,168 @@ pub fn parse_header(bytes: &[u8]) -> Result<Header, HeaderError> {
         match keyword {
             "format" => {
                 if format.is_some() {
-                    return Err(err(line_no, HeaderProblem::SecondFormat));
+                    return Err(at(HeaderProblem::SecondFormat));
                 }
-                let kind = words.next().unwrap_or("");
-                format = Some(match kind {
-                    "ascii" => PlyFormat::Ascii,
-                    "binary_little_endian" => PlyFormat::BinaryLittleEndian,
-                    "binary_big_endian" => PlyFormat::BinaryBigEndian,
-                    _ => {
-                        return Err(err(
-                            line_no,
-                            HeaderProblem::UnknownFormat {
-                                found: kind.to_string(),
-                            },
-                        ));
-                    }
-                });
-                match words.next() {
-                    Some("1.0" | "1") => {}
-                    v => {
-                        return Err(err(
-                            line_no,
-                            HeaderProblem::UnsupportedVersion {
-                                found: v.unwrap_or("").to_string(),
-                            },
-                        ));
-                    }
-                }
+                format = Some(format_line(words).map_err(at)?);
             }
-            "comment" => {
-                let rest = text.trim_start()["comment".len()..].trim();
-                comments.push((line_no, rest.to_string()));
-            }
-            "obj_info" => {
-                obj_info.push(text.trim_start()["obj_info".len()..].trim().to_string());
-            }
+            "comment" => comments.push((line, text_after(text, "comment"))),
+            "obj_info" => obj_info.push(text_after(text, "obj_info")),
             "element" => {
-                let (Some(name), Some(count)) = (words.next(), words.next()) else {
-                    return Err(err(line_no, HeaderProblem::MalformedElement));
-                };
-                let count: u64 = count.parse().map_err(|_| {
-                    err(
-                        line_no,
-                        HeaderProblem::BadElementCount {
-                            found: count.to_string(),
-                        },
-                    )
-                })?;
-                if elements.iter().any(|e| e.name == name) {
-                    return Err(err(
-                        line_no,
-                        HeaderProblem::DuplicateElement {
-                            name: name.to_string(),
-                        },
-                    ));
+                let element = element_line(words).map_err(at)?;
+                if elements.iter().any(|e| e.name == element.name) {
+                    return Err(at(HeaderProblem::DuplicateElement { name: element.name }));
                 }
-                elements.push(Element {
-                    name: name.to_string(),
-                    count,
-                    properties: Vec::new(),
-                });
+                elements.push(element);
             }
             "property" => {
                 let Some(element) = elements.last_mut() else {
-                    return Err(err(line_no, HeaderProblem::PropertyBeforeElement));
+                    return Err(at(HeaderProblem::PropertyBeforeElement));
                 };
-                let parts: Vec<&str> = words.collect();
-                let ty = |s: &str| {
-                    ScalarType::parse(s).ok_or_else(|| {
-                        err(
-                            line_no,
-                            HeaderProblem::UnknownType {
-                                found: s.to_string(),
-                            },
-                        )
-                    })
-                };
-                let property = match parts.as_slice() {
-                    ["list", count, item, name] => {
-                        let count = ty(count)?;
-                        if count.is_float() {
-                            return Err(err(
-                                line_no,
-                                HeaderProblem::FloatListCount { found: count },
-                            ));
-                        }
-                        Property {
-                            name: (*name).to_string(),
-                            kind: PropertyKind::List {
-                                count,
-                                item: ty(item)?,
-                            },
-                        }
-                    }
-                    [t, name] => Property {
-                        name: (*name).to_string(),
-                        kind: PropertyKind::Scalar(ty(t)?),
-                    },
-                    _ => {
-                        return Err(err(
-                            line_no,
-                            HeaderProblem::MalformedProperty {
-                                found: text.to_string(),
-                            },
-                        ));
-                    }
-                };
+                let property = property_line(words, text).map_err(at)?;
                 if element.property_index(&property.name).is_some() {
-                    return Err(err(
-                        line_no,
-                        HeaderProblem::DuplicateProperty {
-                            element: element.name.clone(),
-                            property: property.name,
-                        },
-                    ));
+                    return Err(at(HeaderProblem::DuplicateProperty {
+                        element: element.name.clone(),
+                        property: property.name,
+                    }));
                 }
                 element.properties.push(property);
             }
             "end_header" => break,
             other => {
-                return Err(err(
-                    line_no,
-                    HeaderProblem::UnknownKeyword {
-                        found: other.to_string(),
-                    },
-                ));
+                return Err(at(HeaderProblem::UnknownKeyword {
+                    found: other.to_string(),
+                }));
             }
         }
     }
     let Some(format) = format else {
-        return Err(err(2, HeaderProblem::NoFormat));
+        return Err(HeaderError {
+            line: 2,
+            problem: HeaderProblem::NoFormat,
+        });
     };
     Ok(Header {
         format,
         elements,
         comments,
         obj_info,
-        body_offset: pos,
+        body_offset: lines.pos,
     })
+}
+
+/// The header's lines one by one, numbered from 1, within [`MAX_HEADER_BYTES`].
+struct HeaderLines<'a> {
+    bytes: &'a [u8],
+    /// Byte offset of the next line.
+    pos: usize,
+    /// 1-based number of the line last returned.
+    line: usize,
+}
+
+impl<'a> HeaderLines<'a> {
+    /// The next line's text, without its line ending (LF, or CRLF as some Windows tools write
+    /// headers; the body is unaffected).
+    fn next_line(&mut self) -> Result<&'a str, HeaderError> {
+        let (bytes, pos) = (self.bytes, self.pos);
+        let at = |line, problem| HeaderError { line, problem };
+        if pos >= bytes.len() {
+            return Err(at(self.line, HeaderProblem::NoEndHeader));
+        }
+        if pos > MAX_HEADER_BYTES {
+            return Err(at(
+                self.line,
+                HeaderProblem::TooLong {
+                    limit: MAX_HEADER_BYTES,
+                },
+            ));
+        }
+        let end = bytes[pos..]
+            .iter()
+            .position(|&b| b == b'\n')
+            .map_or(bytes.len(), |i| pos + i);
+        self.line += 1;
+        self.pos = (end + 1).min(bytes.len());
+        let text = std::str::from_utf8(&bytes[pos..end])
+            .map_err(|_| at(self.line, HeaderProblem::NotUtf8))?;
+        Ok(text.strip_suffix('\r').unwrap_or(text))
+    }
+}
+
+/// The text of a `comment` or `obj_info` line after its keyword, trimmed.
+fn text_after(text: &str, keyword: &str) -> String {
+    text.trim_start()[keyword.len()..].trim().to_string()
+}
+
+/// The words after `format`: the body's encoding and version 1.0.
+fn format_line<'a>(mut words: impl Iterator<Item = &'a str>) -> Result<PlyFormat, HeaderProblem> {
+    let kind = words.next().unwrap_or("");
+    let format = match kind {
+        "ascii" => PlyFormat::Ascii,
+        "binary_little_endian" => PlyFormat::BinaryLittleEndian,
+        "binary_big_endian" => PlyFormat::BinaryBigEndian,
+        _ => {
+            return Err(HeaderProblem::UnknownFormat {
+                found: kind.to_string(),
+            });
+        }
+    };
+    match words.next() {
+        Some("1.0" | "1") => Ok(format),
+        v => Err(HeaderProblem::UnsupportedVersion {
+            found: v.unwrap_or("").to_string(),
+        }),
+    }
+}
+
+/// The words after `element`: its name and row count, with no properties yet.
+fn element_line<'a>(mut words: impl Iterator<Item = &'a str>) -> Result<Element, HeaderProblem> {
+    let (Some(name), Some(count)) = (words.next(), words.next()) else {
+        return Err(HeaderProblem::MalformedElement);
+    };
+    let count: u64 = count.parse().map_err(|_| HeaderProblem::BadElementCount {
+        found: count.to_string(),
+    })?;
+    Ok(Element {
+        name: name.to_string(),
+        count,
+        properties: Vec::new(),
+    })
+}
+
+/// The words after `property` (`TYPE name` or `list COUNT_TYPE ITEM_TYPE name`); `text` is the
+/// whole line, for the error.
+fn property_line<'a>(
+    words: impl Iterator<Item = &'a str>,
+    text: &str,
+) -> Result<Property, HeaderProblem> {
+    let ty = |s: &str| {
+        ScalarType::parse(s).ok_or_else(|| HeaderProblem::UnknownType {
+            found: s.to_string(),
+        })
+    };
+    let parts: Vec<&str> = words.collect();
+    match parts.as_slice() {
+        ["list", count, item, name] => {
+            let count = ty(count)?;
+            if count.is_float() {
+                return Err(HeaderProblem::FloatListCount { found: count });
+            }
+            Ok(Property {
+                name: (*name).to_string(),
+                kind: PropertyKind::List {
+                    count,
+                    item: ty(item)?,
+                },
+            })
+        }
+        [t, name] => Ok(Property {
+            name: (*name).to_string(),
+            kind: PropertyKind::Scalar(ty(t)?),
+        }),
+        _ => Err(HeaderProblem::MalformedProperty {
+            found: text.to_string(),
+        }),
+    }
 }
 
 #[cfg(test)]
