@@ -63,6 +63,66 @@ impl FramingSphere {
     }
 }
 
+impl RigConfig {
+    /// Checks the ranges: cameras and a size, a field of view in (0°, 170°), a margin in
+    /// [0, 0.9), held-out distances (when there are held-out cameras) and a framing sphere that
+    /// are usable.
+    ///
+    /// # Errors
+    /// The offending key (`rig.…`, as the transcode configuration names it) and what is wrong
+    /// with it.
+    pub fn validate(&self) -> Result<(), (String, String)> {
+        let bad = |key: &str, problem: String| Err((format!("rig.{key}"), problem));
+        if self.cameras == 0 {
+            return bad("cameras", "must be at least 1".into());
+        }
+        if !((1..=16_384).contains(&self.width) && (1..=16_384).contains(&self.height)) {
+            return bad(
+                "width/rig.height",
+                format!("must be in 1..=16384, got {}×{}", self.width, self.height),
+            );
+        }
+        if !(self.fov_y_deg > 0.0 && self.fov_y_deg < 170.0) {
+            return bad(
+                "fov_y_deg",
+                format!("must be in (0, 170), got {}", self.fov_y_deg),
+            );
+        }
+        if !(0.0..0.9).contains(&self.margin) {
+            return bad(
+                "margin",
+                format!("must be in [0, 0.9), got {}", self.margin),
+            );
+        }
+        if self.heldout_cameras > 0
+            && (self.heldout_distances.is_empty()
+                || self
+                    .heldout_distances
+                    .iter()
+                    .any(|d| !(*d > 0.3 && *d < 100.0)))
+        {
+            return bad(
+                "heldout_distances",
+                format!(
+                    "must be a non-empty list of factors in (0.3, 100), got {:?}",
+                    self.heldout_distances
+                ),
+            );
+        }
+        if let Some(sphere) = self.sphere
+            && !(sphere.center.iter().all(|c| c.is_finite())
+                && sphere.radius.is_finite()
+                && sphere.radius > 0.0)
+        {
+            return bad(
+                "sphere",
+                format!("needs a finite centre and a positive radius, got {sphere:?}"),
+            );
+        }
+        Ok(())
+    }
+}
+
 impl Default for RigConfig {
     fn default() -> Self {
         Self {
@@ -96,6 +156,7 @@ pub struct Rig {
 /// the up axis (so they fall between the training ones), at the configured multiples of the
 /// training distance.
 pub fn build_rig(model: &Model, cfg: &RigConfig) -> Result<Rig, Error> {
+    cfg.validate().map_err(invalid_rig)?;
     let (center, radius) = match cfg.sphere {
         Some(s) => (DVec3::from(s.center), s.radius),
         None => bounding_sphere(model)?,
@@ -157,18 +218,7 @@ pub fn bounding_sphere(model: &Model) -> Result<(DVec3, f64), Error> {
 /// centre with +y up, with `rig.fov_y_deg` over `rig.height` rows, at the distance where the
 /// sphere fills the image up to `rig.margin`.
 pub fn fibonacci_rig(center: DVec3, radius: f64, rig: &RigConfig) -> Result<Vec<Camera>, Error> {
-    if rig.cameras == 0 || rig.width == 0 || rig.height == 0 {
-        return Err(Error::InvalidOption(format!(
-            "a rig needs cameras and a size, got {} cameras of {}×{}",
-            rig.cameras, rig.width, rig.height
-        )));
-    }
-    if !(rig.fov_y_deg > 0.0 && rig.fov_y_deg < 180.0) {
-        return Err(Error::InvalidOption(format!(
-            "fov_y_deg must be in (0, 180), got {}",
-            rig.fov_y_deg
-        )));
-    }
+    rig.validate().map_err(invalid_rig)?;
     let intrinsics = Intrinsics::from_fov_y(rig.width, rig.height, rig.fov_y_deg);
     let distance = framing_distance(radius, &intrinsics, rig.margin)
         .map_err(|e| Error::InvalidOption(e.to_string()))?;
@@ -179,6 +229,11 @@ pub fn fibonacci_rig(center: DVec3, radius: f64, rig: &RigConfig) -> Result<Vec<
         intrinsics,
         WORLD_UP,
     ))
+}
+
+/// A [`RigConfig::validate`] refusal as the renderer's error.
+fn invalid_rig((key, problem): (String, String)) -> Error {
+    Error::InvalidOption(format!("`{key}` {problem}"))
 }
 
 #[cfg(test)]
@@ -229,6 +284,50 @@ mod tests {
             (rig.center, rig.radius),
             (DVec3::new(10.0, 20.0, 30.0), 5.0)
         );
+    }
+
+    /// A library caller's rig settings are checked where they are used: held-out cameras with
+    /// no distances to put them at were an index out of bounds in `build_rig`.
+    #[test]
+    fn bad_rig_settings_are_refused_naming_the_key() {
+        let cloud = PlenopticCloud {
+            positions: vec![Vec3::ZERO, Vec3::ONE],
+            colors: vec![[0.0; 3]; 2],
+            ..Default::default()
+        };
+        let model = Model::Cloud(cloud);
+        let cases = [
+            (
+                RigConfig {
+                    heldout_distances: Vec::new(),
+                    ..RigConfig::default()
+                },
+                "`rig.heldout_distances` must be a non-empty list",
+            ),
+            (
+                RigConfig {
+                    cameras: 0,
+                    ..RigConfig::default()
+                },
+                "`rig.cameras` must be at least 1",
+            ),
+            (
+                RigConfig {
+                    fov_y_deg: 175.0,
+                    ..RigConfig::default()
+                },
+                "`rig.fov_y_deg` must be in (0, 170), got 175",
+            ),
+        ];
+        for (cfg, expected) in cases {
+            let e = build_rig(&model, &cfg).unwrap_err().to_string();
+            assert!(e.contains(expected), "{e}");
+            let e = fibonacci_rig(DVec3::ZERO, 1.0, &cfg)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(expected), "{e}");
+        }
+        assert!(build_rig(&model, &RigConfig::default()).is_ok());
     }
 
     #[test]

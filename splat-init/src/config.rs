@@ -166,6 +166,72 @@ pub struct InitConfig {
     pub colour_solve_iterations: u32,
 }
 
+impl InitConfig {
+    /// Checks the ranges the types do not.
+    ///
+    /// # Errors
+    /// The offending key (`init.…`, as the transcode configuration names it) and what is wrong
+    /// with it.
+    pub fn validate(&self) -> Result<(), (String, String)> {
+        let bad = |key: &str, problem: String| Err((format!("init.{key}"), problem));
+        if self.splats == Some(0) {
+            return bad("splats", "must be at least 1".into());
+        }
+        if self.fit_directions < 16 {
+            return bad(
+                "fit_directions",
+                format!(
+                    "must be at least 16 (degree 3 has 16 coefficients), got {}",
+                    self.fit_directions
+                ),
+            );
+        }
+        if !(self.ridge >= 0.0 && self.ridge.is_finite()) {
+            return bad("ridge", format!("must be ≥ 0, got {}", self.ridge));
+        }
+        if !(self.sh_tolerance >= 0.0 && self.sh_tolerance.is_finite()) {
+            return bad(
+                "sh_tolerance",
+                format!("must be ≥ 0, got {}", self.sh_tolerance),
+            );
+        }
+        if self.normal_neighbours < 3 {
+            return bad(
+                "normal_neighbours",
+                format!("must be at least 3, got {}", self.normal_neighbours),
+            );
+        }
+        for (key, r) in [
+            ("scale_ratio", self.scale_ratio),
+            ("edge_scale_ratio", self.edge_scale_ratio),
+        ] {
+            if !(r > 0.0 && r <= 10.0) {
+                return bad(key, format!("must be in (0, 10], got {r}"));
+            }
+        }
+        for (key, share) in [
+            ("edge_contrast", self.edge_contrast),
+            ("thin_ratio", self.thin_ratio),
+        ] {
+            if !(share > 0.0 && share <= 1.0) {
+                return bad(key, format!("must be in (0, 1], got {share}"));
+            }
+        }
+        for (key, o) in [
+            ("surface_opacity", self.surface_opacity),
+            ("sparse_opacity", self.sparse_opacity),
+        ] {
+            if !(o > 0.0 && o < 1.0) {
+                return bad(key, format!("must be in (0, 1), got {o}"));
+            }
+        }
+        if self.mode == InitMode::Sparse && self.points3d.is_none() && self.random_points == 0 {
+            return bad("random_points", "must be at least 1".into());
+        }
+        Ok(())
+    }
+}
+
 impl Default for InitConfig {
     fn default() -> Self {
         Self {

@@ -67,6 +67,14 @@ pub use warm::{CarriedTraining, RigidMotion, WarmStartError, carry_training, rig
 /// Errors of initialisation.
 #[derive(Debug, thiserror::Error)]
 pub enum InitError {
+    /// A setting is out of its range ([`InitConfig::validate`]).
+    #[error("invalid init setting: `{key}` {problem}")]
+    InvalidConfig {
+        /// The offending key (`init.…`).
+        key: String,
+        /// What is wrong with it.
+        problem: String,
+    },
     /// The input has no points to put splats on.
     #[error("the input has no points to initialise splats from")]
     Empty,
@@ -116,6 +124,8 @@ pub fn initialise(
     exponent: i32,
     seed: u64,
 ) -> Result<(Splats, InitSummary), InitError> {
+    cfg.validate()
+        .map_err(|(key, problem)| InitError::InvalidConfig { key, problem })?;
     let (splats, summary) = match cfg.mode {
         InitMode::Surface => surface_init(&choose_points(input, cfg), cfg, exponent),
         InitMode::Sparse => sparse_init(input, cfg, exponent, seed),

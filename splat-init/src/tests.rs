@@ -423,6 +423,68 @@ fn sparse_init_reads_colmap_points3d() {
     assert!(e.contains("/nonexistent/sparse/0"), "{e}");
 }
 
+/// A library caller's settings are checked before any work: each bad value is refused naming
+/// its key, and a sparse init with nothing to seed it is refused rather than left empty.
+#[test]
+fn bad_init_settings_are_refused_naming_the_key() {
+    let sp = SurfacePoints {
+        positions: grid(10),
+        colors: vec![[0.5; 3]; 100],
+        ..SurfacePoints::default()
+    };
+    let base = InitConfig::default();
+    let cases = [
+        (
+            InitConfig {
+                fit_directions: 15,
+                ..base.clone()
+            },
+            "`init.fit_directions` must be at least 16",
+        ),
+        (
+            InitConfig {
+                splats: Some(0),
+                ..base.clone()
+            },
+            "`init.splats` must be at least 1",
+        ),
+        (
+            InitConfig {
+                thin_ratio: 0.0,
+                ..base.clone()
+            },
+            "`init.thin_ratio` must be in (0, 1], got 0",
+        ),
+        (
+            InitConfig {
+                surface_opacity: 1.0,
+                ..base.clone()
+            },
+            "`init.surface_opacity` must be in (0, 1), got 1",
+        ),
+        (
+            InitConfig {
+                ridge: f64::NAN,
+                ..base.clone()
+            },
+            "`init.ridge` must be ≥ 0, got NaN",
+        ),
+        (
+            InitConfig {
+                mode: InitMode::Sparse,
+                random_points: 0,
+                ..base.clone()
+            },
+            "`init.random_points` must be at least 1",
+        ),
+    ];
+    for (cfg, expected) in cases {
+        let e = initialise(&sp, &cfg, 10, 0).unwrap_err().to_string();
+        assert!(e.contains(expected), "{e}");
+    }
+    assert!(initialise(&sp, &base, 10, 0).is_ok());
+}
+
 #[test]
 fn sparse_random_init_fills_the_bounds() {
     let sp = SurfacePoints {

@@ -373,137 +373,40 @@ impl Config {
         toml::to_string_pretty(self).unwrap_or_default()
     }
 
-    /// Checks value ranges that the types do not.
+    /// Checks value ranges that the types do not, section by section.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        let bad = |key: &str, problem: String| {
-            Err(ConfigError::Invalid {
-                path: None,
-                key: key.to_string(),
-                problem,
-            })
+        let invalid = |(key, problem): (String, String)| ConfigError::Invalid {
+            path: None,
+            key,
+            problem,
         };
-        let r = &self.rig;
-        if r.cameras == 0 {
-            return bad("rig.cameras", "must be at least 1".into());
+        self.rig.validate().map_err(invalid)?;
+        self.sequence.validate().map_err(invalid)?;
+        self.renderer
+            .validate()
+            .map_err(|e| invalid(("renderer".into(), e.to_string())))?;
+        self.budget.validate().map_err(invalid)?;
+        self.init.validate().map_err(invalid)?;
+        self.training.validate().map_err(invalid)?;
+        self.output.validate().map_err(invalid)
+    }
+}
+
+/// A section's refusal: the offending key and what is wrong with it.
+fn bad(key: &str, problem: impl Into<String>) -> Result<(), (String, String)> {
+    Err((key.to_string(), problem.into()))
+}
+
+impl TrainingConfig {
+    /// Checks the ranges.
+    ///
+    /// # Errors
+    /// The offending key (`training.…`) and what is wrong with it.
+    pub fn validate(&self) -> Result<(), (String, String)> {
+        if self.iterations == 0 {
+            return bad("training.iterations", "must be at least 1");
         }
-        if r.width == 0 || r.height == 0 || r.width > 16_384 || r.height > 16_384 {
-            return bad(
-                "rig.width/rig.height",
-                format!("must be in 1..=16384, got {}×{}", r.width, r.height),
-            );
-        }
-        if !(r.fov_y_deg > 0.0 && r.fov_y_deg < 170.0) {
-            return bad(
-                "rig.fov_y_deg",
-                format!("must be in (0, 170), got {}", r.fov_y_deg),
-            );
-        }
-        if !(0.0..0.9).contains(&r.margin) {
-            return bad(
-                "rig.margin",
-                format!("must be in [0, 0.9), got {}", r.margin),
-            );
-        }
-        if r.heldout_cameras > 0
-            && (r.heldout_distances.is_empty()
-                || r.heldout_distances
-                    .iter()
-                    .any(|d| !(*d > 0.3 && *d < 100.0)))
-        {
-            return bad(
-                "rig.heldout_distances",
-                format!(
-                    "must be a non-empty list of factors in (0.3, 100), got {:?}",
-                    r.heldout_distances
-                ),
-            );
-        }
-        if let Some(sphere) = r.sphere
-            && !(sphere.center.iter().all(|c| c.is_finite())
-                && sphere.radius.is_finite()
-                && sphere.radius > 0.0)
-        {
-            return bad(
-                "rig.sphere",
-                format!("needs a finite centre and a positive radius, got {sphere:?}"),
-            );
-        }
-        if !(self.sequence.warm_share > 0.0 && self.sequence.warm_share <= 1.0) {
-            return bad(
-                "sequence.warm_share",
-                format!("must be in (0, 1], got {}", self.sequence.warm_share),
-            );
-        }
-        if let Err(e) = self.renderer.validate() {
-            return bad("renderer", e.to_string());
-        }
-        if let Err((key, problem)) = self.budget.validate() {
-            return bad(&key, problem);
-        }
-        let i = &self.init;
-        if i.splats == Some(0) {
-            return bad("init.splats", "must be at least 1".into());
-        }
-        if i.fit_directions < 16 {
-            return bad(
-                "init.fit_directions",
-                format!(
-                    "must be at least 16 (degree 3 has 16 coefficients), got {}",
-                    i.fit_directions
-                ),
-            );
-        }
-        if !(i.ridge >= 0.0 && i.ridge.is_finite()) {
-            return bad("init.ridge", format!("must be ≥ 0, got {}", i.ridge));
-        }
-        if !(i.sh_tolerance >= 0.0 && i.sh_tolerance.is_finite()) {
-            return bad(
-                "init.sh_tolerance",
-                format!("must be ≥ 0, got {}", i.sh_tolerance),
-            );
-        }
-        if i.normal_neighbours < 3 {
-            return bad(
-                "init.normal_neighbours",
-                format!("must be at least 3, got {}", i.normal_neighbours),
-            );
-        }
-        for (key, r) in [
-            ("init.scale_ratio", i.scale_ratio),
-            ("init.edge_scale_ratio", i.edge_scale_ratio),
-        ] {
-            if !(r > 0.0 && r <= 10.0) {
-                return bad(key, format!("must be in (0, 10], got {r}"));
-            }
-        }
-        if !(i.edge_contrast > 0.0 && i.edge_contrast <= 1.0) {
-            return bad(
-                "init.edge_contrast",
-                format!("must be in (0, 1], got {}", i.edge_contrast),
-            );
-        }
-        if !(i.thin_ratio > 0.0 && i.thin_ratio <= 1.0) {
-            return bad(
-                "init.thin_ratio",
-                format!("must be in (0, 1], got {}", i.thin_ratio),
-            );
-        }
-        for (key, o) in [
-            ("init.surface_opacity", i.surface_opacity),
-            ("init.sparse_opacity", i.sparse_opacity),
-        ] {
-            if !(o > 0.0 && o < 1.0) {
-                return bad(key, format!("must be in (0, 1), got {o}"));
-            }
-        }
-        if i.mode == InitMode::Sparse && i.points3d.is_none() && i.random_points == 0 {
-            return bad("init.random_points", "must be at least 1".into());
-        }
-        let t = &self.training;
-        if t.iterations == 0 {
-            return bad("training.iterations", "must be at least 1".into());
-        }
-        if let Some(b) = t.time_budget_s
+        if let Some(b) = self.time_budget_s
             && !(b > 0.0 && b.is_finite())
         {
             return bad(
@@ -511,33 +414,59 @@ impl Config {
                 format!("must be positive, got {b}"),
             );
         }
-        if t.history_every == 0 {
-            return bad("training.history_every", "must be at least 1".into());
+        if self.history_every == 0 {
+            return bad("training.history_every", "must be at least 1");
         }
-        if t.warmup_factor == 0 {
+        if self.warmup_factor == 0 {
             return bad(
                 "training.warmup_factor",
-                "must be at least 1 (1 = no warm-up)".into(),
+                "must be at least 1 (1 = no warm-up)",
             );
         }
-        if !(0.0..=1.0).contains(&t.warmup_share) {
+        if !(0.0..=1.0).contains(&self.warmup_share) {
             return bad(
                 "training.warmup_share",
-                format!("must be in [0, 1], got {}", t.warmup_share),
+                format!("must be in [0, 1], got {}", self.warmup_share),
             );
         }
-        let spz = self.output.spz_version;
+        Ok(())
+    }
+}
+
+impl OutputConfig {
+    /// Checks the ranges.
+    ///
+    /// # Errors
+    /// The offending key (`output.…`) and what is wrong with it.
+    pub fn validate(&self) -> Result<(), (String, String)> {
+        let spz = self.spz_version;
         if ![splat_core::spz::VERSION, splat_core::spz::ZSTD_VERSION].contains(&spz) {
             return bad(
                 "output.spz_version",
                 format!("must be 3 (gzip) or 4 (zstd streams), got {spz}"),
             );
         }
-        let every = self.output.checkpoint_interval_s;
+        let every = self.checkpoint_interval_s;
         if !(every >= 0.0 && every.is_finite()) {
             return bad(
                 "output.checkpoint_interval_s",
                 format!("must be a number of seconds ≥ 0, got {every}"),
+            );
+        }
+        Ok(())
+    }
+}
+
+impl SequenceConfig {
+    /// Checks the ranges.
+    ///
+    /// # Errors
+    /// The offending key (`sequence.…`) and what is wrong with it.
+    pub fn validate(&self) -> Result<(), (String, String)> {
+        if !(self.warm_share > 0.0 && self.warm_share <= 1.0) {
+            return bad(
+                "sequence.warm_share",
+                format!("must be in (0, 1], got {}", self.warm_share),
             );
         }
         Ok(())
@@ -647,6 +576,36 @@ mod tests {
             until("[training]\nwarmup_factor = 1\nwarmup_share = 0.5\n"),
             None
         );
+    }
+
+    /// Each section's own check runs for the whole configuration and names its key.
+    #[test]
+    fn every_section_is_checked_naming_its_key() {
+        for (text, key) in [
+            ("[rig]\ncameras = 0\n", "`rig.cameras`"),
+            ("[rig]\nheldout_distances = []\n", "`rig.heldout_distances`"),
+            ("[sequence]\nwarm_share = 0.0\n", "`sequence.warm_share`"),
+            ("[renderer]\nsupersample = 9\n", "`renderer`"),
+            ("[budget]\nkeep = 1.0\n", "`budget.keep`"),
+            (
+                "[init]\nnormal_neighbours = 2\n",
+                "`init.normal_neighbours`",
+            ),
+            (
+                "[training]\nhistory_every = 0\n",
+                "`training.history_every`",
+            ),
+            ("[output]\nspz_version = 2\n", "`output.spz_version`"),
+            (
+                "[output]\ncheckpoint_interval_s = -1.0\n",
+                "`output.checkpoint_interval_s`",
+            ),
+        ] {
+            let c = Config::from_toml(text).unwrap();
+            let e = c.validate().unwrap_err().to_string();
+            assert!(e.contains(key), "{text}: {e}");
+        }
+        Config::default().validate().unwrap();
     }
 
     #[test]
