@@ -404,67 +404,9 @@ fn metrics_table(h: &mut String, report: &Report, names: &[String]) {
         }),
         ("iterations", |r| r.iterations.to_string()),
         ("training time (s)", |r| format!("{:.1}", r.train_seconds)),
-        ("step time, probe / run (ms)", |r| {
-            let Some(probe) = r.probe_pace else {
-                return "–".into();
-            };
-            let at_size = r.probed_size_steps.map(|s| (s.splats, s.mean_pace()));
-            let kinds = [
-                (
-                    "full size",
-                    probe.step_s,
-                    r.run_pace.step_s,
-                    at_size.and_then(|(n, p)| Some((n, p.step_s?))),
-                ),
-                (
-                    "warm-up",
-                    probe.coarse_step_s,
-                    r.run_pace.coarse_step_s,
-                    at_size.and_then(|(n, p)| Some((n, p.coarse_step_s?))),
-                ),
-            ];
-            let off = |p: f64, run: f64| 100.0 * (p / run - 1.0);
-            let shown: Vec<String> = kinds
-                .iter()
-                .filter_map(|&(kind, p, run, same_size)| {
-                    let (p, run) = (p?, run?);
-                    let like_for_like = same_size.map_or(String::new(), |(n, s)| {
-                        format!(
-                            "; at the probe's {n} splats {:.1}, {:+.0} %",
-                            1e3 * s,
-                            off(p, s)
-                        )
-                    });
-                    Some(format!(
-                        "{kind} {:.1} / {:.1} ({:+.0} %{like_for_like})",
-                        1e3 * p,
-                        1e3 * run,
-                        off(p, run)
-                    ))
-                })
-                .collect();
-            if shown.is_empty() {
-                "–".into()
-            } else {
-                shown.join("; ")
-            }
-        }),
+        ("step time, probe / run (ms)", step_time_cell),
         ("model file", |r| human_bytes(r.model_bytes)),
-        ("compact files", |r| {
-            if r.compact_files.is_empty() {
-                return "–".into();
-            }
-            r.compact_files
-                .iter()
-                .map(|(p, bytes)| {
-                    let ext = p
-                        .extension()
-                        .map_or(String::new(), |e| e.to_string_lossy().into());
-                    format!("{ext} {}", human_bytes(*bytes))
-                })
-                .collect::<Vec<_>>()
-                .join(", ")
-        }),
+        ("compact files", compact_files_cell),
         ("SH fit RMS, degree 0/1/2/3", |r| {
             r.init.sh_fit_rms.map_or("–".into(), |e| {
                 format!("{:.4} / {:.4} / {:.4} / {:.4}", e[0], e[1], e[2], e[3])
@@ -479,6 +421,71 @@ fn metrics_table(h: &mut String, report: &Report, names: &[String]) {
         h.push_str("</tr>\n");
     }
     h.push_str("</table>\n");
+}
+
+/// The time-budget probe's step times against the run's, full size and warm-up, each with
+/// its error, and against the run's steps at the probe's splat count where there were some.
+fn step_time_cell(r: &RunReport) -> String {
+    let Some(probe) = r.probe_pace else {
+        return "–".into();
+    };
+    let at_size = r.probed_size_steps.map(|s| (s.splats, s.mean_pace()));
+    let kinds = [
+        (
+            "full size",
+            probe.step_s,
+            r.run_pace.step_s,
+            at_size.and_then(|(n, p)| Some((n, p.step_s?))),
+        ),
+        (
+            "warm-up",
+            probe.coarse_step_s,
+            r.run_pace.coarse_step_s,
+            at_size.and_then(|(n, p)| Some((n, p.coarse_step_s?))),
+        ),
+    ];
+    let off = |p: f64, run: f64| 100.0 * (p / run - 1.0);
+    let shown: Vec<String> = kinds
+        .iter()
+        .filter_map(|&(kind, p, run, same_size)| {
+            let (p, run) = (p?, run?);
+            let like_for_like = same_size.map_or(String::new(), |(n, s)| {
+                format!(
+                    "; at the probe's {n} splats {:.1}, {:+.0} %",
+                    1e3 * s,
+                    off(p, s)
+                )
+            });
+            Some(format!(
+                "{kind} {:.1} / {:.1} ({:+.0} %{like_for_like})",
+                1e3 * p,
+                1e3 * run,
+                off(p, run)
+            ))
+        })
+        .collect();
+    if shown.is_empty() {
+        "–".into()
+    } else {
+        shown.join("; ")
+    }
+}
+
+/// The compact files written beside the model, by extension and size.
+fn compact_files_cell(r: &RunReport) -> String {
+    if r.compact_files.is_empty() {
+        return "–".into();
+    }
+    r.compact_files
+        .iter()
+        .map(|(p, bytes)| {
+            let ext = p
+                .extension()
+                .map_or(String::new(), |e| e.to_string_lossy().into());
+            format!("{ext} {}", human_bytes(*bytes))
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// Where the held-out error comes from: each region's share of the MSE on black and on white,
