@@ -203,161 +203,246 @@ pub fn parse_model(path: &Path, data: &[u8]) -> Result<PlyModel, Error> {
     let (vi, el) = header
         .element("vertex")
         .ok_or_else(|| header_err(path, 0, "no `vertex` element"))?;
-    let cols = find_columns(path, el)?;
-    let degree = match cols.rest.len() {
-        0 => 0,
-        9 => 1,
-        24 => 2,
-        45 => 3,
-        n => {
-            return Err(header_err(
-                path,
-                0,
-                format!("{n} f_rest properties; 3DGS degree 0–3 has 0, 9, 24 or 45"),
-            ));
-        }
+    let columns = find_columns(path, el)?;
+    let degree = sh_degree(path, columns.rest.len())?;
+    let n = vertex_count(path, el)?;
+    let vertices = Vertices {
+        path,
+        data,
+        header: &header,
+        index: vi,
+        count: n,
     };
-    let n = match usize::try_from(el.count) {
-        Ok(n) if n <= MAX_SPLATS => n,
-        _ => {
-            return Err(header_err(
-                path,
-                0,
-                format!(
-                    "{} vertices claimed (at most {MAX_SPLATS} are accepted)",
-                    el.count
-                ),
-            ));
+    let mut builder = SplatBuilder::new(path, el, columns, degree);
+    match header.format {
+        PlyFormat::Ascii => vertices.read_ascii(&mut builder)?,
+        PlyFormat::BinaryLittleEndian | PlyFormat::BinaryBigEndian => {
+            vertices.read_binary(&mut builder)?;
         }
-    };
-    // find_columns refused list properties, so every property has a scalar type.
-    let types: Vec<ScalarType> = el
-        .properties
-        .iter()
-        .map(|p| match p.kind {
-            PropertyKind::Scalar(ty) | PropertyKind::List { item: ty, .. } => ty,
-        })
-        .collect();
-    let n_props = types.len();
-    let used = cols.used();
-    let body = &data[header.body_offset..];
-    let mut values = vec![0.0_f64; n_props];
-    let mut splats = Splats::new(degree);
-    let k = num_sh_coeffs(degree);
-    let kp = k - 1;
-    let mut sh = vec![[0.0_f32; 3]; k];
-    let mut emit = |splats: &mut Splats, v: &[f64]| {
+    }
+    Ok(PlyModel {
+        splats: builder.splats,
+        antialiased,
+    })
+}
+
+/// The SH degree that `rest` `f_rest` properties make.
+fn sh_degree(path: &Path, rest: usize) -> Result<u32, Error> {
+    match rest {
+        0 => Ok(0),
+        9 => Ok(1),
+        24 => Ok(2),
+        45 => Ok(3),
+        n => Err(header_err(
+            path,
+            0,
+            format!("{n} f_rest properties; 3DGS degree 0–3 has 0, 9, 24 or 45"),
+        )),
+    }
+}
+
+/// The vertex count the header claims, refused above [`MAX_SPLATS`] before anything is
+/// allocated for it.
+fn vertex_count(path: &Path, el: &Element) -> Result<usize, Error> {
+    match usize::try_from(el.count) {
+        Ok(n) if n <= MAX_SPLATS => Ok(n),
+        _ => Err(header_err(
+            path,
+            0,
+            format!(
+                "{} vertices claimed (at most {MAX_SPLATS} are accepted)",
+                el.count
+            ),
+        )),
+    }
+}
+
+/// Splats made from vertex rows (each row's values as f64, one per property, file order).
+struct SplatBuilder<'a> {
+    path: &'a Path,
+    el: &'a Element,
+    columns: Columns,
+    /// The columns that become part of a splat, for the finiteness check.
+    used: Vec<usize>,
+    splats: Splats,
+    /// One splat's SH coefficients, reused.
+    sh: Vec<[f32; 3]>,
+}
+
+impl<'a> SplatBuilder<'a> {
+    fn new(path: &'a Path, el: &'a Element, columns: Columns, degree: u32) -> Self {
+        Self {
+            path,
+            el,
+            used: columns.used(),
+            columns,
+            splats: Splats::new(degree),
+            sh: vec![[0.0_f32; 3]; num_sh_coeffs(degree)],
+        }
+    }
+
+    /// Room for `n` splats' means (once the body is known to hold them).
+    fn reserve(&mut self, n: usize) {
+        self.splats.means.reserve(n);
+    }
+
+    /// Vertex `index`'s row as a splat, refused if a value it uses is not a finite f32.
+    fn add(&mut self, index: usize, v: &[f64]) -> Result<(), Error> {
+        check_finite(self.path, self.el, &self.used, index, v)?;
+        let cols = &self.columns;
         let f = |c: usize| v[c] as f32;
-        sh[0] = cols.dc.map(f);
+        let kp = self.sh.len() - 1;
+        self.sh[0] = cols.dc.map(f);
         for j in 0..kp {
             for (ch, coef) in (0..3).map(|ch| (ch, f(cols.rest[ch * kp + j]))) {
-                sh[j + 1][ch] = coef;
+                self.sh[j + 1][ch] = coef;
             }
         }
-        splats.push(
+        self.splats.push(
             Vec3::new(f(cols.mean[0]), f(cols.mean[1]), f(cols.mean[2])),
             Vec3::new(f(cols.scale[0]), f(cols.scale[1]), f(cols.scale[2])),
             cols.rot.map(f),
             f(cols.opacity),
-            &sh,
+            &self.sh,
         );
-    };
-    match header.format {
-        PlyFormat::Ascii => {
-            let text = std::str::from_utf8(body).map_err(|e| Error::Body {
-                path: path.to_path_buf(),
-                offset: (header.body_offset + e.valid_up_to()) as u64,
-                index: 0,
-                message: "ASCII body is not text".into(),
-            })?;
-            let mut lines = text.lines().filter(|l| !l.trim().is_empty());
-            // Skip elements before the vertex element (one line per item); stop at the end of
-            // the text, or a huge claimed count would spin for ever.
-            for (ei, e) in header.elements[..vi].iter().enumerate() {
-                for _ in 0..e.count {
-                    if lines.next().is_none() {
-                        return Err(Error::Body {
-                            path: path.to_path_buf(),
-                            offset: data.len() as u64,
-                            index: ei,
-                            message: format!("element `{}` runs past the end of the file", e.name),
-                        });
-                    }
-                }
-            }
-            for i in 0..n {
-                let line = lines.next().ok_or_else(|| Error::Body {
-                    path: path.to_path_buf(),
-                    offset: data.len() as u64,
-                    index: i,
-                    message: format!("file ends after {i} of {n} vertices"),
-                })?;
-                let mut it = line.split_whitespace();
-                for (c, (slot, &ty)) in values.iter_mut().zip(&types).enumerate() {
-                    *slot =
-                        it.next()
-                            .and_then(|w| parse_ascii(w, ty))
-                            .ok_or_else(|| Error::Body {
-                                path: path.to_path_buf(),
-                                offset: 0,
-                                index: i,
-                                message: format!(
-                                    "property {c} (`{}`) is missing or not a valid {}",
-                                    el.properties[c].name,
-                                    ty.name()
-                                ),
-                            })?;
-                }
-                check_finite(path, el, &used, i, &values)?;
-                emit(&mut splats, &values);
-            }
-        }
-        PlyFormat::BinaryLittleEndian | PlyFormat::BinaryBigEndian => {
-            let big = header.format == PlyFormat::BinaryBigEndian;
-            let mut off = 0;
-            for (ei, e) in header.elements[..vi].iter().enumerate() {
-                off = skip_element(body, off, e, big).map_err(|m| Error::Body {
-                    path: path.to_path_buf(),
-                    offset: (header.body_offset + off) as u64,
-                    index: ei,
-                    message: m,
-                })?;
-            }
-            let mut layout = Vec::with_capacity(n_props);
-            let mut stride = 0;
-            for &ty in &types {
-                layout.push((stride, ty));
-                stride += ty.size();
-            }
-            let need = n.checked_mul(stride).and_then(|b| b.checked_add(off));
-            if need.is_none_or(|need| need > body.len()) {
-                return Err(Error::Body {
-                    path: path.to_path_buf(),
-                    offset: (header.body_offset + off) as u64,
-                    index: (body.len().saturating_sub(off)) / stride.max(1),
-                    message: format!(
-                        "{n} vertices of {stride} bytes need {} bytes but the body after this \
-                         offset has {}",
-                        n.saturating_mul(stride),
-                        body.len().saturating_sub(off)
-                    ),
-                });
-            }
-            splats.means.reserve(n);
-            for i in 0..n {
-                let rec = &body[off + i * stride..off + (i + 1) * stride];
-                for (slot, &(o, ty)) in values.iter_mut().zip(&layout) {
-                    *slot = read_binary(&rec[o..], ty, big);
-                }
-                check_finite(path, el, &used, i, &values)?;
-                emit(&mut splats, &values);
-            }
+        Ok(())
+    }
+}
+
+/// The vertex element's rows in a file's body.
+struct Vertices<'a> {
+    path: &'a Path,
+    /// The whole file.
+    data: &'a [u8],
+    header: &'a Header,
+    /// Index of the vertex element among the header's elements.
+    index: usize,
+    /// Vertices claimed (at most [`MAX_SPLATS`]).
+    count: usize,
+}
+
+impl Vertices<'_> {
+    fn element(&self) -> &Element {
+        &self.header.elements[self.index]
+    }
+
+    /// Each property's value type (`find_columns` refused list properties).
+    fn types(&self) -> Vec<ScalarType> {
+        self.element()
+            .properties
+            .iter()
+            .map(|p| match p.kind {
+                PropertyKind::Scalar(ty) | PropertyKind::List { item: ty, .. } => ty,
+            })
+            .collect()
+    }
+
+    fn body(&self) -> &[u8] {
+        &self.data[self.header.body_offset..]
+    }
+
+    /// An error at byte `offset` of the file, item `index`.
+    fn body_err(&self, offset: usize, index: usize, message: String) -> Error {
+        Error::Body {
+            path: self.path.to_path_buf(),
+            offset: offset as u64,
+            index,
+            message,
         }
     }
-    Ok(PlyModel {
-        splats,
-        antialiased,
-    })
+
+    /// The rows of an ASCII body: one line an item, the elements before the vertices skipped.
+    fn read_ascii(&self, builder: &mut SplatBuilder<'_>) -> Result<(), Error> {
+        let (n, el, types) = (self.count, self.element(), self.types());
+        let text = std::str::from_utf8(self.body()).map_err(|e| {
+            self.body_err(
+                self.header.body_offset + e.valid_up_to(),
+                0,
+                "ASCII body is not text".into(),
+            )
+        })?;
+        let mut lines = text.lines().filter(|l| !l.trim().is_empty());
+        // Skip elements before the vertex element (one line per item); stop at the end of
+        // the text, or a huge claimed count would spin for ever.
+        for (ei, e) in self.header.elements[..self.index].iter().enumerate() {
+            for _ in 0..e.count {
+                if lines.next().is_none() {
+                    return Err(self.body_err(
+                        self.data.len(),
+                        ei,
+                        format!("element `{}` runs past the end of the file", e.name),
+                    ));
+                }
+            }
+        }
+        let mut values = vec![0.0_f64; types.len()];
+        for i in 0..n {
+            let line = lines.next().ok_or_else(|| {
+                self.body_err(
+                    self.data.len(),
+                    i,
+                    format!("file ends after {i} of {n} vertices"),
+                )
+            })?;
+            let mut it = line.split_whitespace();
+            for (c, (slot, &ty)) in values.iter_mut().zip(&types).enumerate() {
+                *slot = it.next().and_then(|w| parse_ascii(w, ty)).ok_or_else(|| {
+                    self.body_err(
+                        0,
+                        i,
+                        format!(
+                            "property {c} (`{}`) is missing or not a valid {}",
+                            el.properties[c].name,
+                            ty.name()
+                        ),
+                    )
+                })?;
+            }
+            builder.add(i, &values)?;
+        }
+        Ok(())
+    }
+
+    /// The rows of a binary body: fixed-size records after the elements before them, the
+    /// body's length checked against the claimed count before any is read.
+    fn read_binary(&self, builder: &mut SplatBuilder<'_>) -> Result<(), Error> {
+        let (n, types, body) = (self.count, self.types(), self.body());
+        let big = self.header.format == PlyFormat::BinaryBigEndian;
+        let mut off = 0;
+        for (ei, e) in self.header.elements[..self.index].iter().enumerate() {
+            off = skip_element(body, off, e, big)
+                .map_err(|m| self.body_err(self.header.body_offset + off, ei, m))?;
+        }
+        let mut layout = Vec::with_capacity(types.len());
+        let mut stride = 0;
+        for &ty in &types {
+            layout.push((stride, ty));
+            stride += ty.size();
+        }
+        let need = n.checked_mul(stride).and_then(|b| b.checked_add(off));
+        if need.is_none_or(|need| need > body.len()) {
+            return Err(self.body_err(
+                self.header.body_offset + off,
+                (body.len().saturating_sub(off)) / stride.max(1),
+                format!(
+                    "{n} vertices of {stride} bytes need {} bytes but the body after this \
+                     offset has {}",
+                    n.saturating_mul(stride),
+                    body.len().saturating_sub(off)
+                ),
+            ));
+        }
+        builder.reserve(n);
+        let mut values = vec![0.0_f64; types.len()];
+        for i in 0..n {
+            let rec = &body[off + i * stride..off + (i + 1) * stride];
+            for (slot, &(o, ty)) in values.iter_mut().zip(&layout) {
+                *slot = read_binary(&rec[o..], ty, big);
+            }
+            builder.add(i, &values)?;
+        }
+        Ok(())
+    }
 }
 
 /// Skips one element's items in a binary body, returning the offset after it.
