@@ -69,6 +69,26 @@ pub(crate) fn write_cloud(path: &Path, cloud: &PlenopticCloud) -> Result<(), Err
         path: path.to_path_buf(),
         message,
     };
+    check_columns(cloud).map_err(err)?;
+    let layout = cloud
+        .layout
+        .clone()
+        .unwrap_or_else(|| default_layout(cloud));
+    let sources = plan_sources(cloud, &layout).map_err(err)?;
+    let header = header_text(cloud, &layout, cloud.len());
+    let body = match layout.format {
+        PlyFormat::Ascii => ascii_body(cloud, &sources),
+        format => binary_body(cloud, &sources, format == PlyFormat::BinaryBigEndian),
+    };
+    atomic_output::write_atomic_with(path, |w| {
+        w.write_all(header.as_bytes())?;
+        w.write_all(&body)
+    })
+    .map_err(|e| Error::io(path, e))
+}
+
+/// The cloud's columns agree with its point and camera counts.
+fn check_columns(cloud: &PlenopticCloud) -> Result<(), String> {
     let n = cloud.len();
     let k = cloud.num_cameras;
     if cloud.colors.len() != n
@@ -76,23 +96,30 @@ pub(crate) fn write_cloud(path: &Path, cloud: &PlenopticCloud) -> Result<(), Err
         || cloud.normals.as_ref().is_some_and(|v| v.len() != n)
         || cloud.extra.iter().any(|e| e.values.len() != n)
     {
-        return Err(err(format!(
+        return Err(format!(
             "column lengths disagree with {n} points and {k} cameras (colours {}, camera colours {}, normals {:?})",
             cloud.colors.len(),
             cloud.camera_colors.len(),
             cloud.normals.as_ref().map(Vec::len)
-        )));
+        ));
     }
     if !cloud.cameras.is_empty() && cloud.cameras.len() != k {
-        return Err(err(format!(
+        return Err(format!(
             "the rig has {} cameras but the points have colours for {k}",
             cloud.cameras.len()
-        )));
+        ));
     }
-    let layout = cloud
-        .layout
-        .clone()
-        .unwrap_or_else(|| default_layout(cloud));
+    Ok(())
+}
+
+/// Where each of the layout's properties takes its value from, refusing a property the cloud
+/// has no data for, a colour in a type colours cannot take, and a layout that leaves out a
+/// coordinate or a camera's colour channel.
+fn plan_sources(
+    cloud: &PlenopticCloud,
+    layout: &PlyLayout,
+) -> Result<Vec<(Source, ScalarType)>, String> {
+    let k = cloud.num_cameras;
     let mut sources = Vec::with_capacity(layout.properties.len());
     let mut seen_position = [false; 3];
     let mut seen_cameras = vec![[false; 3]; k];
@@ -111,116 +138,117 @@ pub(crate) fn write_cloud(path: &Path, cloud: &PlenopticCloud) -> Result<(), Err
             _ => match cloud.extra.iter().position(|e| &e.name == name) {
                 Some(e) => Source::Extra(e),
                 None => {
-                    return Err(err(format!(
+                    return Err(format!(
                         "the layout has property '{name}' but the cloud has no data for it"
-                    )));
+                    ));
                 }
             },
         };
         if matches!(source, Source::Main(_) | Source::Camera(..))
             && !super::schema::is_color_type(*ty)
         {
-            return Err(err(format!(
+            return Err(format!(
                 "colour property '{name}' cannot be written as {}",
                 ty.name()
-            )));
+            ));
         }
         sources.push((source, *ty));
     }
     if seen_position.contains(&false) {
-        return Err(err("the layout lacks x, y or z".into()));
+        return Err("the layout lacks x, y or z".into());
     }
     if let Some(cam) = seen_cameras.iter().position(|s| s.contains(&false)) {
-        return Err(err(format!(
+        return Err(format!(
             "the layout lacks a colour property of camera {cam}"
-        )));
+        ));
     }
-    let header = header_text(cloud, &layout, n);
-    let value = |i: usize, source: Source, ty: ScalarType| -> f64 {
-        match source {
-            Source::Position(c) => f64::from(cloud.positions[i][c]),
-            Source::Normal(c) => cloud.normals.as_ref().map_or(0.0, |v| f64::from(v[i][c])),
-            Source::Main(c) => color_to_stored(cloud.colors[i][c], ty),
-            Source::Camera(cam, c) => color_to_stored(cloud.camera_colors[i * k + cam][c], ty),
-            Source::Extra(e) => cloud.extra[e].values[i],
+    Ok(sources)
+}
+
+/// The value point `i` stores for `source`, as a property of type `ty` holds it.
+fn value(cloud: &PlenopticCloud, i: usize, source: Source, ty: ScalarType) -> f64 {
+    match source {
+        Source::Position(c) => f64::from(cloud.positions[i][c]),
+        Source::Normal(c) => cloud.normals.as_ref().map_or(0.0, |v| f64::from(v[i][c])),
+        Source::Main(c) => color_to_stored(cloud.colors[i][c], ty),
+        Source::Camera(cam, c) => {
+            color_to_stored(cloud.camera_colors[i * cloud.num_cameras + cam][c], ty)
         }
-    };
-    let body: Vec<u8> = match layout.format {
-        PlyFormat::Ascii => (0..n)
-            .into_par_iter()
-            .chunks(CHUNK_POINTS)
-            .map(|rows| {
-                let mut text = String::new();
-                for i in rows {
-                    for (p, &(source, ty)) in sources.iter().enumerate() {
-                        if p > 0 {
-                            text.push(' ');
-                        }
-                        write_ascii(&mut text, value(i, source, ty), ty);
+        Source::Extra(e) => cloud.extra[e].values[i],
+    }
+}
+
+/// An ASCII body: one line a point, chunks of points in parallel.
+fn ascii_body(cloud: &PlenopticCloud, sources: &[(Source, ScalarType)]) -> Vec<u8> {
+    (0..cloud.len())
+        .into_par_iter()
+        .chunks(CHUNK_POINTS)
+        .map(|rows| {
+            let mut text = String::new();
+            for i in rows {
+                for (p, &(source, ty)) in sources.iter().enumerate() {
+                    if p > 0 {
+                        text.push(' ');
                     }
-                    text.push('\n');
+                    write_ascii(&mut text, value(cloud, i, source, ty), ty);
                 }
-                text.into_bytes()
+                text.push('\n');
+            }
+            text.into_bytes()
+        })
+        .collect::<Vec<_>>()
+        .concat()
+}
+
+/// A binary body: fixed-size records, chunks of points in parallel.
+fn binary_body(cloud: &PlenopticCloud, sources: &[(Source, ScalarType)], big: bool) -> Vec<u8> {
+    let (n, k) = (cloud.len(), cloud.num_cameras);
+    let stride: usize = sources.iter().map(|(_, t)| t.size()).sum();
+    let mut fields = Vec::with_capacity(sources.len());
+    let mut at = 0;
+    for &(source, ty) in sources {
+        fields.push((source, ty, at));
+        at += ty.size();
+    }
+    // uchar camera colours packed as r0 g0 b0 r1 … (the 8iVSLF layout) are written as one run.
+    let camera_block = fields
+        .iter()
+        .find(|(s, _, _)| matches!(s, Source::Camera(0, 0)))
+        .map(|&(_, _, base)| base)
+        .filter(|&base| {
+            fields.iter().all(|&(s, ty, off)| match s {
+                Source::Camera(cam, c) => ty == ScalarType::U8 && off == base + 3 * cam + c,
+                _ => true,
             })
-            .collect::<Vec<_>>()
-            .concat(),
-        format => {
-            let big = format == PlyFormat::BinaryBigEndian;
-            let stride: usize = sources.iter().map(|(_, t)| t.size()).sum();
-            let mut fields = Vec::with_capacity(sources.len());
-            let mut at = 0;
-            for &(source, ty) in &sources {
-                fields.push((source, ty, at));
-                at += ty.size();
-            }
-            // uchar camera colours packed as r0 g0 b0 r1 … (the 8iVSLF layout) are written as one run.
-            let camera_block = fields
-                .iter()
-                .find(|(s, _, _)| matches!(s, Source::Camera(0, 0)))
-                .map(|&(_, _, base)| base)
-                .filter(|&base| {
-                    fields.iter().all(|&(s, ty, off)| match s {
-                        Source::Camera(cam, c) => ty == ScalarType::U8 && off == base + 3 * cam + c,
-                        _ => true,
-                    })
-                });
-            if camera_block.is_some() {
-                fields.retain(|(s, _, _)| !matches!(s, Source::Camera(..)));
-            }
-            let mut body = vec![0u8; n * stride];
-            body.par_chunks_mut((CHUNK_POINTS * stride).max(1))
-                .enumerate()
-                .for_each(|(c, chunk)| {
-                    for (j, rec) in chunk.chunks_exact_mut(stride).enumerate() {
-                        let i = c * CHUNK_POINTS + j;
-                        for &(source, ty, off) in &fields {
-                            write_binary(
-                                &mut rec[off..off + ty.size()],
-                                value(i, source, ty),
-                                ty,
-                                big,
-                            );
-                        }
-                        if let Some(base) = camera_block {
-                            let colors = &cloud.camera_colors[i * k..(i + 1) * k];
-                            for (dst, color) in
-                                rec[base..base + 3 * k].chunks_exact_mut(3).zip(colors)
-                            {
-                                for (d, &v) in dst.iter_mut().zip(color) {
-                                    *d = color_to_stored(v, ScalarType::U8) as u8;
-                                }
-                            }
+        });
+    if camera_block.is_some() {
+        fields.retain(|(s, _, _)| !matches!(s, Source::Camera(..)));
+    }
+    let mut body = vec![0u8; n * stride];
+    body.par_chunks_mut((CHUNK_POINTS * stride).max(1))
+        .enumerate()
+        .for_each(|(c, chunk)| {
+            for (j, rec) in chunk.chunks_exact_mut(stride).enumerate() {
+                let i = c * CHUNK_POINTS + j;
+                for &(source, ty, off) in &fields {
+                    write_binary(
+                        &mut rec[off..off + ty.size()],
+                        value(cloud, i, source, ty),
+                        ty,
+                        big,
+                    );
+                }
+                if let Some(base) = camera_block {
+                    let colors = &cloud.camera_colors[i * k..(i + 1) * k];
+                    for (dst, color) in rec[base..base + 3 * k].chunks_exact_mut(3).zip(colors) {
+                        for (d, &v) in dst.iter_mut().zip(color) {
+                            *d = color_to_stored(v, ScalarType::U8) as u8;
                         }
                     }
-                });
-            body
-        }
-    };
-    atomic_output::write_atomic_with(path, |w| {
-        w.write_all(header.as_bytes())?;
-        w.write_all(&body)
-    })
-    .map_err(|e| Error::io(path, e))
+                }
+            }
+        });
+    body
 }
 
 /// The header: format, comments, rig comments, the vertex element.
