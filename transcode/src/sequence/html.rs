@@ -47,13 +47,24 @@ fn axes(y: &str, round_y: bool) -> plot::Axes {
 /// The page.
 #[must_use]
 pub fn render(m: &SequenceManifest) -> String {
-    let s = &m.summary;
     let mut h = String::from(
         "<!doctype html><html><head><meta charset=\"utf-8\"><title>Sequence report</title>\
          <style>body{font-family:sans-serif;margin:2em;max-width:1100px}\
          table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}\
          td:first-child,th:first-child{text-align:left}.failed{color:#b00}</style></head><body>\n",
     );
+    summary(&mut h, m);
+    per_frame_plots(&mut h, m);
+    temporal_plot(&mut h, m);
+    frames_table(&mut h, m);
+    consecutive_table(&mut h, m);
+    h.push_str("</body></html>\n");
+    h
+}
+
+/// The title and how many frames are in each state, with the frame times.
+fn summary(h: &mut String, m: &SequenceManifest) {
+    let s = &m.summary;
     let _ = writeln!(
         h,
         "<h1>Sequence: {}</h1>\n<p>{} frames: {} finished, {} failed, {} running or killed, \
@@ -70,6 +81,10 @@ pub fn render(m: &SequenceManifest) -> String {
             .map_or("–".into(), |t| format!("{t:.1} s")),
         s.total_seconds
     );
+}
+
+/// Held-out PSNR, time and splats against the frame number.
+fn per_frame_plots(h: &mut String, m: &SequenceManifest) {
     h.push_str("<h2>Held-out PSNR per frame</h2>\n");
     h.push_str(&plot::svg(
         &axes("PSNR (dB)", true),
@@ -103,6 +118,10 @@ pub fn render(m: &SequenceManifest) -> String {
         )],
         &[],
     ));
+}
+
+/// Consecutive frames' renders against each other, beside the references'.
+fn temporal_plot(h: &mut String, m: &SequenceManifest) {
     h.push_str(
         "<h2>Temporal stability</h2>\n<p>PSNR between consecutive frames' renders of the same \
          held-out cameras, beside the same figure for the reference views: where the models' \
@@ -132,6 +151,10 @@ pub fn render(m: &SequenceManifest) -> String {
         ],
         &[],
     ));
+}
+
+/// Every frame: its state, start, figures, and a link to its own report once finished.
+fn frames_table(h: &mut String, m: &SequenceManifest) {
     h.push_str(
         "<h2>Frames</h2>\n<table><tr><th>frame</th><th>state</th><th>start</th><th>steps</th>\
          <th>PSNR black / white (dB)</th><th>masked (dB)</th><th>SSIM</th><th>splats</th>\
@@ -181,6 +204,10 @@ pub fn render(m: &SequenceManifest) -> String {
         }
     }
     h.push_str("</table>\n");
+}
+
+/// The temporal stability figures frame pair by frame pair.
+fn consecutive_table(h: &mut String, m: &SequenceManifest) {
     if !m.temporal.is_empty() {
         h.push_str(
             "<h2>Consecutive frames</h2>\n<table><tr><th>frames</th><th>models (dB)</th>\
@@ -199,6 +226,4 @@ pub fn render(m: &SequenceManifest) -> String {
         }
         h.push_str("</table>\n");
     }
-    h.push_str("</body></html>\n");
-    h
 }
