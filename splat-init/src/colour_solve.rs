@@ -22,7 +22,7 @@
 
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
-use splat_core::{Rasterizer, RenderOptions, SplatGrads, Splats};
+use splat_core::{Rasterizer, RenderCamera, RenderOptions, SplatGrads, Splats};
 use splat_train::{View, from_unorm16};
 
 /// Coverage from which a pixel counts as covered, in the view and in the render, for the solve.
@@ -82,7 +82,45 @@ pub fn solve_colours(
     views: &[View],
     opts: &SolveOptions,
 ) -> Result<SolveReport, SolveError> {
-    let cameras = views
+    let cameras = view_cameras(views)?;
+    // Straight colour of each view and its coverage (1 everywhere for a view without a mask),
+    // as the views hold them: 16-bit fractions, read value by value (`from_unorm16`) rather than
+    // expanded, which would double the views' memory while the solve runs.
+    let targets: Vec<(&[u16], Option<&[u16]>)> = views
+        .iter()
+        .map(|v| (v.image.as_slice(), v.mask.as_deref()))
+        .collect();
+    let mut system = NormalEquations {
+        work: splats.clone(),
+        grads: SplatGrads::zeros_like(splats),
+        raster: Rasterizer::new(),
+        render: RenderOptions {
+            background: Vec3::ZERO,
+            active_sh_degree: splats.sh_degree,
+            antialiased: false,
+            linear_colour: true,
+        },
+        cameras,
+        scales: Vec::new(),
+        ridge: opts.ridge,
+    };
+    let (g, rms_before) = system.right_hand_side(&targets);
+    let solution = conjugate_gradients(g, opts.iterations, |p| system.apply(p));
+    for (x, d) in splats.sh.iter_mut().zip(&solution.delta) {
+        for c in 0..3 {
+            x[c] += d[c];
+        }
+    }
+    Ok(SolveReport {
+        iterations: solution.iterations,
+        rms_before,
+        residuals: solution.residuals,
+    })
+}
+
+/// Each view's camera, the view checked against it.
+fn view_cameras(views: &[View]) -> Result<Vec<RenderCamera>, SolveError> {
+    views
         .iter()
         .map(|v| {
             v.check().map_err(|problem| SolveError::View {
@@ -94,96 +132,140 @@ pub fn solve_colours(
                 problem,
             })
         })
-        .collect::<Result<Vec<_>, _>>()?;
-    // Straight colour of each view and its coverage (1 everywhere for a view without a mask),
-    // as the views hold them: 16-bit fractions, read value by value (`from_unorm16`) rather than
-    // expanded, which would double the views' memory while the solve runs.
-    let targets: Vec<(&[u16], Option<&[u16]>)> = views
-        .iter()
-        .map(|v| (v.image.as_slice(), v.mask.as_deref()))
-        .collect();
-    let render = RenderOptions {
-        background: Vec3::ZERO,
-        active_sh_degree: splats.sh_degree,
-        antialiased: false,
-        linear_colour: true,
-    };
-    let mut raster = Rasterizer::new();
-    let mut grads = SplatGrads::zeros_like(splats);
+        .collect()
+}
 
-    // One pass over the views at x₀ gives both, since coverage does not depend on colour:
-    // - per view, 1/α on the pixels both cover and 0 elsewhere: the row scaling of B = D⁻¹A
-    //   restricted to those pixels;
-    // - the right-hand side g = Bᵀ(y − 0.5 − B x₀), with δ = x − x₀.
-    let mut work = splats.clone();
-    let mut scales: Vec<Vec<f32>> = Vec::with_capacity(cameras.len());
-    let mut sq_error = 0.0f64;
-    let mut values = 0usize;
-    grads.reset(&work);
-    for (cam, (y, mask)) in cameras.iter().zip(&targets) {
-        let out = raster.forward(&work, cam, &render);
-        let scale: Vec<f32> = out
-            .alpha
-            .iter()
-            .enumerate()
-            .map(|(i, &a)| {
-                let reference = mask.map_or(1.0, |m| from_unorm16(m[i]));
-                if a >= COVERED && reference >= COVERED {
-                    1.0 / a
-                } else {
-                    0.0
+/// The solve's normal equations (BᵀB + λI) δ = g over the views, with B = D⁻¹A restricted to
+/// the pixels that view and render both cover, applied through renders and backward passes.
+struct NormalEquations {
+    /// The splats whose coefficients the renders take (the starting ones, then each direction).
+    work: Splats,
+    grads: SplatGrads,
+    raster: Rasterizer,
+    render: RenderOptions,
+    cameras: Vec<RenderCamera>,
+    /// Per view, 1/α on the pixels both cover and 0 elsewhere: the row scaling D⁻¹.
+    scales: Vec<Vec<f32>>,
+    ridge: f32,
+}
+
+impl NormalEquations {
+    /// One pass over the views at x₀ gives both the row scaling (coverage does not depend on
+    /// colour) and the right-hand side g = Bᵀ(y − 0.5 − B x₀), with δ = x − x₀; also the RMS
+    /// colour error over the pixels used, before the solve.
+    fn right_hand_side(&mut self, targets: &[(&[u16], Option<&[u16]>)]) -> (Vec<[f32; 3]>, f64) {
+        let mut sq_error = 0.0f64;
+        let mut values = 0usize;
+        self.scales.clear();
+        self.grads.reset(&self.work);
+        for (cam, (y, mask)) in self.cameras.iter().zip(targets) {
+            let out = self.raster.forward(&self.work, cam, &self.render);
+            let scale: Vec<f32> = out
+                .alpha
+                .iter()
+                .enumerate()
+                .map(|(i, &a)| {
+                    let reference = mask.map_or(1.0, |m| from_unorm16(m[i]));
+                    if a >= COVERED && reference >= COVERED {
+                        1.0 / a
+                    } else {
+                        0.0
+                    }
+                })
+                .collect();
+            let mut d_rgb = vec![0.0f32; out.rgb.len()];
+            for (i, &s) in scale.iter().enumerate() {
+                if s == 0.0 {
+                    continue;
                 }
-            })
-            .collect();
-        let mut d_rgb = vec![0.0f32; out.rgb.len()];
-        for (i, &s) in scale.iter().enumerate() {
-            if s == 0.0 {
-                continue;
+                for c in 3 * i..3 * i + 3 {
+                    let r = from_unorm16(y[c]) - 0.5 - s * out.rgb[c];
+                    sq_error += f64::from(r).powi(2);
+                    values += 1;
+                    d_rgb[c] = s * r;
+                }
             }
-            for c in 3 * i..3 * i + 3 {
-                let r = from_unorm16(y[c]) - 0.5 - s * out.rgb[c];
-                sq_error += f64::from(r).powi(2);
-                values += 1;
-                d_rgb[c] = s * r;
-            }
+            self.raster.backward(
+                &self.work,
+                cam,
+                &self.render,
+                &d_rgb,
+                None,
+                None,
+                &mut self.grads,
+            );
+            self.scales.push(scale);
         }
-        raster.backward(&work, cam, &render, &d_rgb, None, None, &mut grads);
-        scales.push(scale);
+        let rms_before = (sq_error / values.max(1) as f64).sqrt();
+        (std::mem::take(&mut self.grads.sh), rms_before)
     }
-    let rms_before = (sq_error / values.max(1) as f64).sqrt();
 
-    // Conjugate gradients on (BᵀB + λI) δ = g, one per channel over shared renders.
-    let n = splats.sh.len();
-    let mut delta = vec![[0.0f32; 3]; n];
-    let mut r = grads.sh.clone();
-    let mut p = r.clone();
-    let mut rs = dot(&r, &r);
-    let first = rs.map(f64::sqrt);
-    let mut residuals = Vec::new();
-    let mut done = 0;
-    for _ in 0..opts.iterations {
-        if rs.iter().all(|&v| v == 0.0) {
-            break;
-        }
-        // q = (BᵀB + λI) p.
-        work.sh.copy_from_slice(&p);
-        grads.reset(&work);
-        for (cam, scale) in cameras.iter().zip(&scales) {
-            // BᵀB p = Aᵀ D⁻² A p on the covered pixels.
-            let mut d_rgb = raster.forward(&work, cam, &render).rgb.clone();
+    /// q = (BᵀB + λI) p, where BᵀB p = Aᵀ D⁻² A p on the covered pixels.
+    fn apply(&mut self, p: &[[f32; 3]]) -> Vec<[f32; 3]> {
+        self.work.sh.copy_from_slice(p);
+        self.grads.reset(&self.work);
+        for (cam, scale) in self.cameras.iter().zip(&self.scales) {
+            let mut d_rgb = self
+                .raster
+                .forward(&self.work, cam, &self.render)
+                .rgb
+                .clone();
             for (px, &s) in d_rgb.chunks_exact_mut(3).zip(scale) {
                 for v in px {
                     *v *= s * s;
                 }
             }
-            raster.backward(&work, cam, &render, &d_rgb, None, None, &mut grads);
+            self.raster.backward(
+                &self.work,
+                cam,
+                &self.render,
+                &d_rgb,
+                None,
+                None,
+                &mut self.grads,
+            );
         }
-        let mut q = std::mem::take(&mut grads.sh);
-        for (qk, pk) in q.iter_mut().zip(&p) {
+        let mut q = std::mem::take(&mut self.grads.sh);
+        for (qk, pk) in q.iter_mut().zip(p) {
             for c in 0..3 {
-                qk[c] += opts.ridge * pk[c];
+                qk[c] += self.ridge * pk[c];
             }
         }
+        q
+    }
+}
+
+/// What [`conjugate_gradients`] found.
+struct CgSolution {
+    /// The solution δ, per channel.
+    delta: Vec<[f32; 3]>,
+    /// Iterations run.
+    iterations: u32,
+    /// The residual's norm after each iteration relative to the first, the largest channel's.
+    residuals: Vec<f64>,
+}
+
+/// Conjugate gradients on M δ = g from δ = 0, one independent solve per channel sharing each
+/// product `apply(p)` = M p (M symmetric positive semi-definite); at most `iterations` steps,
+/// fewer once every channel's residual is exactly zero.
+fn conjugate_gradients(
+    g: Vec<[f32; 3]>,
+    iterations: u32,
+    mut apply: impl FnMut(&[[f32; 3]]) -> Vec<[f32; 3]>,
+) -> CgSolution {
+    let n = g.len();
+    let mut delta = vec![[0.0f32; 3]; n];
+    let mut r = g;
+    let mut p = r.clone();
+    let mut rs = dot(&r, &r);
+    let first = rs.map(f64::sqrt);
+    let mut residuals = Vec::new();
+    let mut done = 0;
+    for _ in 0..iterations {
+        if rs.iter().all(|&v| v == 0.0) {
+            break;
+        }
+        let q = apply(&p);
         let pq = dot(&p, &q);
         let step: [f32; 3] = [0, 1, 2].map(|c| {
             if pq[c] > 0.0 {
@@ -219,16 +301,11 @@ pub fn solve_colours(
                 .fold(0.0, f64::max),
         );
     }
-    for (x, d) in splats.sh.iter_mut().zip(&delta) {
-        for c in 0..3 {
-            x[c] += d[c];
-        }
-    }
-    Ok(SolveReport {
+    CgSolution {
+        delta,
         iterations: done,
-        rms_before,
         residuals,
-    })
+    }
 }
 
 /// Per-channel dot products in f64.
@@ -267,7 +344,7 @@ mod tests {
                     Intrinsics::from_fov_y(48, 48, 40.0),
                     Pose::look_at(eye, DVec3::ZERO, DVec3::new(0.0, 0.0, 1.0)),
                 );
-                let cam = splat_core::RenderCamera::try_from(&camera).unwrap();
+                let cam = RenderCamera::try_from(&camera).unwrap();
                 let out = raster.forward(splats, &cam, &RenderOptions::default());
                 View::from_premultiplied(format!("v{i}"), camera, &out.rgb, &out.alpha).unwrap()
             })
@@ -300,6 +377,88 @@ mod tests {
         }
         assert!(n > 1000, "too few covered pixels: {n}");
         sum / n as f64
+    }
+
+    /// The per-channel solver against Gaussian elimination in f64 on three different symmetric
+    /// positive-definite 6 × 6 systems (one a channel): within six steps it reaches their
+    /// solutions, its residual history falls to rounding, and it stops early once every
+    /// channel's residual is exactly zero (a zero right-hand side: no step at all).
+    #[test]
+    fn conjugate_gradients_solve_each_channel_s_system() {
+        const N: usize = 6;
+        let mut seed = 11u64;
+        let mut next = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        // M_c = L Lᵀ + I with a random L, per channel; g random.
+        let m: Vec<[[f64; N]; N]> = (0..3)
+            .map(|_| {
+                let l: [[f64; N]; N] = std::array::from_fn(|_| std::array::from_fn(|_| next()));
+                std::array::from_fn(|i| {
+                    std::array::from_fn(|j| {
+                        (0..N).map(|k| l[i][k] * l[j][k]).sum::<f64>()
+                            + if i == j { 1.0 } else { 0.0 }
+                    })
+                })
+            })
+            .collect();
+        let g: Vec<[f32; 3]> = (0..N)
+            .map(|_| [next() as f32, next() as f32, next() as f32])
+            .collect();
+        let apply = |p: &[[f32; 3]]| -> Vec<[f32; 3]> {
+            (0..N)
+                .map(|i| {
+                    [0, 1, 2].map(|c| {
+                        (0..N).map(|j| m[c][i][j] * f64::from(p[j][c])).sum::<f64>() as f32
+                    })
+                })
+                .collect()
+        };
+        let solution = conjugate_gradients(g.clone(), 6, apply);
+        assert_eq!(solution.iterations, 6);
+        assert!(
+            *solution.residuals.last().unwrap() < 1e-4,
+            "{:?}",
+            solution.residuals
+        );
+        for c in 0..3 {
+            // Gaussian elimination with partial pivoting in f64.
+            let mut a = m[c];
+            let mut b: [f64; N] = std::array::from_fn(|i| f64::from(g[i][c]));
+            for col in 0..N {
+                let piv = (col..N)
+                    .max_by(|&x, &y| a[x][col].abs().total_cmp(&a[y][col].abs()))
+                    .unwrap();
+                a.swap(col, piv);
+                b.swap(col, piv);
+                let (pivot_row, pivot_b) = (a[col], b[col]);
+                for (row, b_row) in a.iter_mut().zip(&mut b).skip(col + 1) {
+                    let f = row[col] / pivot_row[col];
+                    for (v, p) in row.iter_mut().zip(&pivot_row).skip(col) {
+                        *v -= f * p;
+                    }
+                    *b_row -= f * pivot_b;
+                }
+            }
+            let mut x = [0.0f64; N];
+            for row in (0..N).rev() {
+                let tail: f64 = (row + 1..N).map(|k| a[row][k] * x[k]).sum();
+                x[row] = (b[row] - tail) / a[row][row];
+            }
+            for (i, (d, want)) in solution.delta.iter().zip(x).enumerate() {
+                let got = f64::from(d[c]);
+                assert!(
+                    (got - want).abs() < 1e-4 * (1.0 + want.abs()),
+                    "channel {c}, unknown {i}: {got} against {want}"
+                );
+            }
+        }
+        let zero = conjugate_gradients(vec![[0.0; 3]; N], 6, apply);
+        assert_eq!(zero.iterations, 0);
+        assert!(zero.delta.iter().all(|d| *d == [0.0; 3]));
     }
 
     /// Splats with known degree-2 colours make the views; from a wrong start (grey, no view
