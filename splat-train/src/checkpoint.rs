@@ -112,35 +112,52 @@ pub(crate) fn load(
         offset: offset as u64,
         problem,
     };
+    let body = verified_body(&bytes).map_err(|(o, p)| bad(o, p))?;
+    let (header, hend) = read_header(body, views.len()).map_err(|(o, p)| bad(o, p))?;
+    let (state, strategy) = read_state(&body[hend..], &header);
+    let mut trainer = Trainer::new(state.splats.clone(), views, config)?;
+    trainer
+        .restore(state, header.run, &strategy)
+        .map_err(|p| bad(hend, p))?;
+    Ok(trainer)
+}
+
+/// A refusal: the byte offset and the problem.
+type Refusal = (usize, String);
+
+/// The file's body (without its checksum) once the magic, the version and the checksum are
+/// right: a damaged file must not be half-read before it is refused.
+fn verified_body(bytes: &[u8]) -> Result<&[u8], Refusal> {
     if bytes.len() < 20 + CHECKSUM_LEN || &bytes[..8] != MAGIC {
-        return Err(bad(
+        return Err((
             0,
             "not a splat-train checkpoint (magic SPLTCKPT missing)".into(),
         ));
     }
     let version = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]);
     if version != VERSION {
-        return Err(bad(
-            8,
-            format!("version {version}, this build reads {VERSION}"),
-        ));
+        return Err((8, format!("version {version}, this build reads {VERSION}")));
     }
-    // The checksum first: a damaged file must not be half-read before it is refused.
     let body = bytes.len() - CHECKSUM_LEN;
     let mut sum8 = [0u8; 8];
     sum8.copy_from_slice(&bytes[body..]);
     if u64::from_le_bytes(sum8) != checksum(&bytes[..body]) {
-        return Err(bad(
+        return Err((
             body,
             "checksum mismatch: the file is truncated or damaged".into(),
         ));
     }
-    let bytes = &bytes[..body];
+    Ok(&bytes[..body])
+}
+
+/// The JSON header and the offset where the data after it starts, checked against `views`
+/// views and against the data's length.
+fn read_header(bytes: &[u8], views: usize) -> Result<(Header, usize), Refusal> {
     let mut len8 = [0u8; 8];
     len8.copy_from_slice(&bytes[12..20]);
     let hlen = u64::from_le_bytes(len8);
     if hlen > MAX_HEADER || 20 + hlen > bytes.len() as u64 {
-        return Err(bad(
+        return Err((
             12,
             format!(
                 "header length {hlen} exceeds the file ({} bytes)",
@@ -150,46 +167,57 @@ pub(crate) fn load(
     }
     let hend = 20 + hlen as usize;
     let header: Header = serde_json::from_slice(&bytes[20..hend])
-        .map_err(|e| bad(20, format!("header is not valid: {e}")))?;
+        .map_err(|e| (20, format!("header is not valid: {e}")))?;
     if header.sh_degree > 3 {
-        return Err(bad(20, format!("SH degree {} exceeds 3", header.sh_degree)));
+        return Err((20, format!("SH degree {} exceeds 3", header.sh_degree)));
     }
-    if header.views != views.len() {
-        return Err(bad(
+    if header.views != views {
+        return Err((
             20,
-            format!(
-                "saved with {} views, resumed with {}",
-                header.views,
-                views.len()
-            ),
+            format!("saved with {} views, resumed with {views}", header.views),
         ));
     }
-    if header.run.order.iter().any(|&v| v as usize >= views.len())
+    if header.run.order.iter().any(|&v| v as usize >= views)
         || header.run.cursor > header.run.order.len()
     {
-        return Err(bad(
-            20,
-            "view order refers to views that do not exist".into(),
-        ));
+        return Err((20, "view order refers to views that do not exist".into()));
     }
-    let n = header.splats;
-    let k = num_sh_coeffs(header.sh_degree);
-    let sizes = [3 * n, 3 * n, 4 * n, n, 3 * k * n];
-    let floats: usize = 3 * sizes.iter().sum::<usize>() + header.strategy_values;
+    let floats = state_floats(&header);
     let expected = floats.checked_mul(4).and_then(|b| b.checked_add(hend));
     if expected != Some(bytes.len()) {
-        return Err(bad(
+        return Err((
             hend,
             format!(
-                "{} bytes of data, expected {} for {n} splats",
+                "{} bytes of data, expected {} for {} splats",
                 bytes.len() - hend,
-                floats * 4
+                floats * 4,
+                header.splats
             ),
         ));
     }
-    let mut cursor = hend;
+    Ok((header, hend))
+}
+
+/// Floats of each parameter group of `header.splats` splats: means, log-scales, rotations,
+/// opacity logits, SH coefficients.
+fn group_sizes(header: &Header) -> [usize; 5] {
+    let n = header.splats;
+    let k = num_sh_coeffs(header.sh_degree);
+    [3 * n, 3 * n, 4 * n, n, 3 * k * n]
+}
+
+/// Floats after the header: the parameters, both Adam moments, and the strategy's values.
+fn state_floats(header: &Header) -> usize {
+    3 * group_sizes(header).iter().sum::<usize>() + header.strategy_values
+}
+
+/// The parameters, their moments and the strategy's values from `data` (exactly
+/// [`state_floats`] little-endian floats, checked by [`read_header`]).
+fn read_state(data: &[u8], header: &Header) -> (ParamState, Vec<f32>) {
+    let sizes = group_sizes(header);
+    let mut cursor = 0;
     let mut take = |count: usize| -> Vec<f32> {
-        let v = bytes[cursor..cursor + 4 * count]
+        let v = data[cursor..cursor + 4 * count]
             .chunks_exact(4)
             .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
             .collect();
@@ -224,11 +252,7 @@ pub(crate) fn load(
         opacity_logits: next(),
         sh: next(),
     };
-    let mut trainer = Trainer::new(splats.clone(), views, config)?;
-    trainer
-        .restore(ParamState { splats, moments }, header.run, &strategy)
-        .map_err(|p| bad(hend, p))?;
-    Ok(trainer)
+    (ParamState { splats, moments }, strategy)
 }
 
 /// FNV-1a over little-endian 64-bit words (the tail zero-padded), seeded with the length.
