@@ -5,23 +5,16 @@
 #![allow(clippy::print_stderr)] // tests report what they measured
 
 use std::path::Path;
-use std::process::Command;
 
 use glam::Vec3;
-use plenoptic_scenes::{DemoConfig, demo_scene};
 
-const BIN: &str = env!("CARGO_BIN_EXE_transcode");
-
-fn transcode(args: &[&str]) -> std::process::Output {
-    Command::new(BIN).args(args).output().unwrap()
-}
+mod support;
+use support::{arg as s, check, demo_datasets, transcode};
 
 fn ok(args: &[&str]) {
-    let out = transcode(args);
-    assert!(
-        out.status.success(),
-        "transcode {args:?} failed: {}",
-        String::from_utf8_lossy(&out.stderr)
+    check(
+        &transcode(args).output().unwrap(),
+        &format!("transcode {args:?}"),
     );
 }
 
@@ -38,28 +31,7 @@ fn psnr_on_black(dir: &Path, heldout: &Path) -> f64 {
 fn random_backgrounds_go_behind_masks_and_need_them() {
     let tmp = tempfile::tempdir().unwrap();
     let root = tmp.path();
-    let cloud = demo_scene(&DemoConfig {
-        grid: 40,
-        ..DemoConfig::default()
-    })
-    .unwrap();
-    let input = root.join("demo.ply");
-    plenoptic_io::write_cloud(&input, &cloud).unwrap();
-    let s = |p: &Path| p.to_str().unwrap().to_owned();
-    let (train, heldout) = (root.join("train"), root.join("heldout"));
-    for (dir, cameras) in [(&train, "16"), (&heldout, "5")] {
-        ok(&[
-            "views",
-            &s(&input),
-            "--out",
-            &s(dir),
-            "--cameras",
-            cameras,
-            "--resolution",
-            "96",
-        ]);
-        assert!(dir.join("masks").is_dir());
-    }
+    let (train, heldout) = demo_datasets(root, 40, [16, 5], 96);
     let mut scores = Vec::new();
     for background in ["black", "random"] {
         let out = root.join(background);
@@ -149,7 +121,9 @@ fn random_backgrounds_go_behind_masks_and_need_them() {
             "--background",
             background,
             "--quiet",
-        ]);
+        ])
+        .output()
+        .unwrap();
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(!out.status.success(), "{background} was accepted");
         assert!(

@@ -8,10 +8,8 @@
 use std::path::Path;
 use std::time::Instant;
 
-use plenoptic_scenes::{DemoConfig, demo_scene};
-
 mod support;
-use support::{SplitMix, check, run_or_kill, transcode};
+use support::{SplitMix, arg as s, check, demo_datasets, run_or_kill, transcode};
 
 /// The files that mark a finished training run.
 const FINISHED: [&str; 2] = ["splats.ply", "history.json"];
@@ -66,30 +64,7 @@ fn evaluations(out: &Path) -> Vec<(u64, u64, f64, f64)> {
 fn a_training_run_killed_at_random_moments_resumes_to_the_same_model() {
     let tmp = tempfile::tempdir().unwrap();
     let root = tmp.path();
-    let cloud = demo_scene(&DemoConfig {
-        grid: 32,
-        ..DemoConfig::default()
-    })
-    .unwrap();
-    let input = root.join("demo.ply");
-    plenoptic_io::write_cloud(&input, &cloud).unwrap();
-    let s = |p: &Path| p.to_str().unwrap().to_owned();
-    let (train, heldout) = (root.join("train"), root.join("heldout"));
-    for (dir, cameras) in [(&train, "12"), (&heldout, "3")] {
-        let out = transcode(&[
-            "views",
-            &s(&input),
-            "--out",
-            &s(dir),
-            "--cameras",
-            cameras,
-            "--resolution",
-            "64",
-        ])
-        .output()
-        .unwrap();
-        check(&out, "views");
-    }
+    let (train, heldout) = demo_datasets(root, 32, [12, 3], 64);
     let (train, heldout) = (s(&train), s(&heldout));
     let (whole, killed) = (root.join("whole"), root.join("killed"));
     let killed_s = s(&killed);

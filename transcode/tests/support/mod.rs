@@ -1,7 +1,10 @@
-//! Helpers shared by the kill-and-resume tests (`resume.rs`, `sequence.rs`, `train_resume.rs`):
-//! the binary as a child process, its success checked, a session killed at a chosen moment, and
-//! the generator of those moments.
+//! Helpers shared by the binary's integration tests (`resume.rs`, `sequence.rs`,
+//! `train_resume.rs`, `train_backgrounds.rs`): the binary as a child process, its success
+//! checked, a session killed at a chosen moment and the generator of those moments, and the
+//! demo's training and held-out datasets. Each test uses some of them.
+#![allow(dead_code)]
 
+use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
@@ -63,4 +66,45 @@ impl SplitMix {
         z ^= z >> 31;
         (z >> 11) as f64 / (1u64 << 53) as f64
     }
+}
+
+/// `p` as a command-line argument (the tests' temporary paths are UTF-8).
+pub fn arg(p: &Path) -> String {
+    p.to_str().unwrap().to_owned()
+}
+
+/// The demo scene on a `grid`³ voxel grid written to `root/demo.ply`, and `transcode views` of
+/// it at `resolution`² into `root/train` (`train_cameras` cameras) and `root/heldout`
+/// (`heldout_cameras`), each with its masks; returns the two dataset folders.
+pub fn demo_datasets(
+    root: &Path,
+    grid: u32,
+    [train_cameras, heldout_cameras]: [usize; 2],
+    resolution: u32,
+) -> (PathBuf, PathBuf) {
+    let cloud = plenoptic_scenes::demo_scene(&plenoptic_scenes::DemoConfig {
+        grid,
+        ..plenoptic_scenes::DemoConfig::default()
+    })
+    .unwrap();
+    let input = root.join("demo.ply");
+    plenoptic_io::write_cloud(&input, &cloud).unwrap();
+    let (train, heldout) = (root.join("train"), root.join("heldout"));
+    for (dir, cameras) in [(&train, train_cameras), (&heldout, heldout_cameras)] {
+        let out = transcode(&[
+            "views",
+            &arg(&input),
+            "--out",
+            &arg(dir),
+            "--cameras",
+            &cameras.to_string(),
+            "--resolution",
+            &resolution.to_string(),
+        ])
+        .output()
+        .unwrap();
+        check(&out, "views");
+        assert!(dir.join("masks").is_dir());
+    }
+    (train, heldout)
 }
