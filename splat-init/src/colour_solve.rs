@@ -158,7 +158,8 @@ impl NormalEquations {
         let mut values = 0usize;
         self.scales.clear();
         self.grads.reset(&self.work);
-        for (cam, (y, mask)) in self.cameras.iter().zip(targets) {
+        for (vi, (y, mask)) in targets.iter().enumerate() {
+            let cam = &self.cameras[vi];
             let out = self.raster.forward(&self.work, cam, &self.render);
             let scale: Vec<f32> = out
                 .alpha
@@ -185,45 +186,45 @@ impl NormalEquations {
                     d_rgb[c] = s * r;
                 }
             }
-            self.raster.backward(
-                &self.work,
-                cam,
-                &self.render,
-                &d_rgb,
-                None,
-                None,
-                &mut self.grads,
-            );
+            self.add_adjoint(vi, &d_rgb);
             self.scales.push(scale);
         }
         let rms_before = (sq_error / values.max(1) as f64).sqrt();
         (std::mem::take(&mut self.grads.sh), rms_before)
     }
 
+    /// Adds Aᵀ `d_rgb` for view `vi` (the backward pass of `Σ d_rgb·rgb` with respect to the SH
+    /// coefficients of `work`) into the gradients.
+    fn add_adjoint(&mut self, vi: usize, d_rgb: &[f32]) {
+        let cam = &self.cameras[vi];
+        self.raster.backward(
+            &self.work,
+            cam,
+            &self.render,
+            d_rgb,
+            None,
+            None,
+            &mut self.grads,
+        );
+    }
+
     /// q = (BᵀB + λI) p, where BᵀB p = Aᵀ D⁻² A p on the covered pixels.
     fn apply(&mut self, p: &[[f32; 3]]) -> Vec<[f32; 3]> {
         self.work.sh.copy_from_slice(p);
         self.grads.reset(&self.work);
-        for (cam, scale) in self.cameras.iter().zip(&self.scales) {
+        for vi in 0..self.cameras.len() {
+            let cam = &self.cameras[vi];
             let mut d_rgb = self
                 .raster
                 .forward(&self.work, cam, &self.render)
                 .rgb
                 .clone();
-            for (px, &s) in d_rgb.chunks_exact_mut(3).zip(scale) {
+            for (px, &s) in d_rgb.chunks_exact_mut(3).zip(&self.scales[vi]) {
                 for v in px {
                     *v *= s * s;
                 }
             }
-            self.raster.backward(
-                &self.work,
-                cam,
-                &self.render,
-                &d_rgb,
-                None,
-                None,
-                &mut self.grads,
-            );
+            self.add_adjoint(vi, &d_rgb);
         }
         let mut q = std::mem::take(&mut self.grads.sh);
         for (qk, pk) in q.iter_mut().zip(p) {

@@ -194,15 +194,22 @@ mod tests {
     use super::*;
     use rand::{RngExt, SeedableRng};
 
-    /// Direct 2D SSIM in f64, the window summed in full (not separable) with explicit zero padding.
-    fn reference_ssim(x: &[f64], y: &[f64], w: usize, h: usize) -> f64 {
+    /// The window's 1D Gaussian taps in f64, written out from σ = 1.5 (not from [`SIGMA`] or
+    /// [`gaussian_taps`], which they check), and their sum.
+    fn reference_window() -> (Vec<f64>, f64) {
         let g: Vec<f64> = (0..TAPS)
             .map(|i| {
                 let d = i as f64 - RADIUS as f64;
                 (-d * d / (2.0 * 1.5 * 1.5)).exp()
             })
             .collect();
-        let gs: f64 = g.iter().sum();
+        let sum = g.iter().sum();
+        (g, sum)
+    }
+
+    /// Direct 2D SSIM in f64, the window summed in full (not separable) with explicit zero padding.
+    fn reference_ssim(x: &[f64], y: &[f64], w: usize, h: usize) -> f64 {
+        let (g, gs) = reference_window();
         let c1 = 0.01f64.powi(2);
         let c2 = 0.03f64.powi(2);
         let mut total = 0.0;
@@ -383,13 +390,7 @@ mod tests {
     /// The exact gradient of [`reference_ssim`] with respect to x, in f64, from direct 2D
     /// window sums over the whole image (no spans, no separable passes).
     fn reference_grad(x: &[f64], y: &[f64], w: usize, h: usize) -> Vec<f64> {
-        let g: Vec<f64> = (0..TAPS)
-            .map(|i| {
-                let d = i as f64 - RADIUS as f64;
-                (-d * d / (2.0 * 1.5 * 1.5)).exp()
-            })
-            .collect();
-        let gs: f64 = g.iter().sum();
+        let (g, gs) = reference_window();
         let (c1, c2) = (0.01f64.powi(2), 0.03f64.powi(2));
         let n = (3 * w * h) as f64;
         let mut grad = vec![0.0; x.len()];
