@@ -52,42 +52,10 @@ pub(super) fn initialise(
     state: &mut RunState,
     observer: Observer<'_>,
 ) -> Result<Initialised, PipelineError> {
-    let (mode, k, out) = (run.mode, run.index, &layout.out);
-    let ckpt = resume::checkpoint_path(out, mode);
-    let saved = state.modes.get(k).cloned();
-    if let Some(m) = &saved
-        && m.mode != mode
-    {
-        return Err(ResumeError::Malformed {
-            path: out.join(resume::STATE_FILE),
-            problem: format!("run {k} is {} init, the configuration says {mode}", m.mode),
-        }
-        .into());
-    }
-    let resume_from_checkpoint = saved.is_some() && ckpt.is_file();
-    if saved.is_none() {
-        // No checkpoint can belong to a mode the state does not list yet.
-        remove_file_if_present(&ckpt)?;
-    }
-    if saved.as_ref().is_some_and(|m| m.trained.is_some()) && !resume_from_checkpoint {
-        return Err(ResumeError::Checkpoint {
-            path: ckpt,
-            problem: "the trained model's checkpoint is missing".into(),
-        }
-        .into());
-    }
-    if let Some(m) = saved.as_ref().filter(|_| resume_from_checkpoint) {
-        observer(Event::Stage {
-            index: 3,
-            of: STAGES,
-            what: format!("{mode} init: continuing from {}", ckpt.display()),
-        });
-        return Ok(Initialised {
-            summary: m.init.clone(),
-            schedule: m.schedule,
-            step_zero: m.step_zero.clone(),
-            fresh: None,
-        });
+    let (mode, out) = (run.mode, &layout.out);
+    let saved = state.modes.get(run.index).cloned();
+    if let Some(continuing) = continuing_from_checkpoint(run, saved.as_ref(), layout, observer)? {
+        return Ok(continuing);
     }
     observer(Event::Stage {
         index: 3,
@@ -97,20 +65,8 @@ pub(super) fn initialise(
     let mut init_cfg = cfg.init.clone();
     init_cfg.mode = mode;
     let budget = budget_applies(cfg, mode).then_some(&cfg.budget);
-    // `--splats K` caps the search's start, never raises it (`BudgetConfig::start_splats`).
     if let Some(b) = budget {
-        let points = surfaces.init.len();
-        let asked = init_cfg.splats;
-        let start = b.start_splats(points, mean_covered_pixels(&refs.train), asked);
-        if start < asked.unwrap_or(points).min(points) {
-            let asked = asked.map_or(String::new(), |k| format!(", under the {k} asked for"));
-            observer(Event::Note(format!(
-                "splat budget: {points} points merged to about {start} ({} per covered pixel \
-                 of the mean training view{asked}) before training",
-                b.splats_per_pixel
-            )));
-            init_cfg.splats = Some(start);
-        }
+        cap_at_budget_start(&mut init_cfg, b, surfaces, refs, observer);
     }
     let (mut splats, mut summary) = init::initialise(
         &surfaces.init,
@@ -171,6 +127,78 @@ pub(super) fn initialise(
         step_zero: Some(step_zero),
         fresh: Some(splats),
     })
+}
+
+/// What the saved state says of this model: training continues from its checkpoint (the saved
+/// init, schedule and step-0 figures), or `None` when it starts afresh. Refuses a saved model
+/// of another init mode, and a trained one whose checkpoint is gone; removes a checkpoint the
+/// state does not list.
+fn continuing_from_checkpoint(
+    run: &RunOf<'_>,
+    saved: Option<&ModeState>,
+    layout: &Layout,
+    observer: Observer<'_>,
+) -> Result<Option<Initialised>, PipelineError> {
+    let (mode, k, out) = (run.mode, run.index, &layout.out);
+    let ckpt = resume::checkpoint_path(out, mode);
+    if let Some(m) = saved
+        && m.mode != mode
+    {
+        return Err(ResumeError::Malformed {
+            path: out.join(resume::STATE_FILE),
+            problem: format!("run {k} is {} init, the configuration says {mode}", m.mode),
+        }
+        .into());
+    }
+    let Some(m) = saved else {
+        // No checkpoint can belong to a mode the state does not list yet.
+        remove_file_if_present(&ckpt)?;
+        return Ok(None);
+    };
+    if !ckpt.is_file() {
+        if m.trained.is_some() {
+            return Err(ResumeError::Checkpoint {
+                path: ckpt,
+                problem: "the trained model's checkpoint is missing".into(),
+            }
+            .into());
+        }
+        return Ok(None);
+    }
+    observer(Event::Stage {
+        index: 3,
+        of: STAGES,
+        what: format!("{mode} init: continuing from {}", ckpt.display()),
+    });
+    Ok(Some(Initialised {
+        summary: m.init.clone(),
+        schedule: m.schedule,
+        step_zero: m.step_zero.clone(),
+        fresh: None,
+    }))
+}
+
+/// `--splats K` caps the splat budget's start, never raises it
+/// (`BudgetConfig::start_splats`): the points merged to about the start before training.
+fn cap_at_budget_start(
+    init_cfg: &mut init::InitConfig,
+    budget: &splat_train::BudgetConfig,
+    surfaces: &Surfaces,
+    refs: &References,
+    observer: Observer<'_>,
+) {
+    let points = surfaces.init.len();
+    let asked = init_cfg.splats;
+    let start = budget.start_splats(points, mean_covered_pixels(&refs.train), asked);
+    if start < asked.unwrap_or(points).min(points) {
+        let asked = asked.map_or(String::new(), |k| format!(", under the {k} asked for"));
+        observer(Event::Note(format!(
+            "splat budget: {points} points merged to about {start} ({} per covered pixel \
+             of the mean training view{asked}) before training",
+            budget.splats_per_pixel
+        )));
+        init_cfg.splats = Some(start);
+    }
 }
 
 /// Warm start: reproduces the previous frame's initialisation from its input and adds what
