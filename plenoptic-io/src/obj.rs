@@ -33,10 +33,29 @@ pub(crate) fn read_obj(path: &Path) -> Result<Mesh, Error> {
             Vec::new()
         }
     };
-    let mut mesh = Mesh::default();
+    let (materials, textures) = materials_of(path, &obj_materials)?;
+    let mut mesh = Mesh {
+        materials,
+        textures,
+        ..Mesh::default()
+    };
+    merge_objects(path, &models, obj_materials.len(), &mut mesh)?;
+    if mesh.triangles.is_empty() {
+        return Err(err("the file has no faces".into()));
+    }
+    Ok(mesh)
+}
+
+/// The MTL materials as the mesh's, each diffuse texture loaded once however many materials
+/// name it.
+fn materials_of(
+    path: &Path,
+    obj_materials: &[tobj::Material],
+) -> Result<(Vec<Material>, Vec<Texture>), Error> {
+    let mut materials = Vec::with_capacity(obj_materials.len());
     let (mut textures, mut texture_index) =
         (Vec::<Texture>::new(), HashMap::<PathBuf, usize>::new());
-    for m in &obj_materials {
+    for m in obj_materials {
         let texture = match &m.diffuse_texture {
             Some(name) if !name.trim().is_empty() => {
                 let file = resolve_relative(path, name);
@@ -52,13 +71,25 @@ pub(crate) fn read_obj(path: &Path) -> Result<Mesh, Error> {
             _ => None,
         };
         let kd = m.diffuse.unwrap_or([1.0; 3]);
-        mesh.materials.push(Material {
+        materials.push(Material {
             name: m.name.clone(),
             base_color: [kd[0], kd[1], kd[2], m.dissolve.unwrap_or(1.0)],
             texture,
         });
     }
-    mesh.textures = textures;
+    Ok((materials, textures))
+}
+
+/// Every object's vertices and triangles appended to `mesh` (which holds the MTL's
+/// `obj_materials` materials): normals, UVs (v flipped) and colours kept only where every
+/// object has them, triangles given their material (a plain white one for faces with none
+/// when the file has materials), and a triangle naming a vertex its object lacks refused.
+fn merge_objects(
+    path: &Path,
+    models: &[tobj::Model],
+    obj_materials: usize,
+    mesh: &mut Mesh,
+) -> Result<(), Error> {
     let all = |f: fn(&tobj::Mesh) -> bool| models.iter().all(|m| f(&m.mesh));
     let has_normals = all(|m| !m.normals.is_empty());
     let has_uvs = all(|m| !m.texcoords.is_empty());
@@ -106,7 +137,7 @@ pub(crate) fn read_obj(path: &Path) -> Result<Mesh, Error> {
                 .push([0, 1, 2].map(|c| (base + tri[c] as usize) as u32));
         }
         if !mesh.materials.is_empty() {
-            let id = match m.material_id.filter(|&id| id < obj_materials.len()) {
+            let id = match m.material_id.filter(|&id| id < obj_materials) {
                 Some(id) => id,
                 None => *default_material.get_or_insert_with(|| {
                     mesh.materials.push(Material {
@@ -121,13 +152,10 @@ pub(crate) fn read_obj(path: &Path) -> Result<Mesh, Error> {
                 .extend(std::iter::repeat_n(id as u32, m.indices.len() / 3));
         }
     }
-    if mesh.triangles.is_empty() {
-        return Err(err("the file has no faces".into()));
-    }
     mesh.normals = has_normals.then_some(normals);
     mesh.uvs = has_uvs.then_some(uvs);
     mesh.colors = has_colors.then_some(colors);
-    Ok(mesh)
+    Ok(())
 }
 
 /// Refuses the first `v`, `vn` or `vt` line holding a NaN or an infinity (or a number beyond the
