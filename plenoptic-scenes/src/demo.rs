@@ -43,6 +43,41 @@ pub enum DemoLayout {
     Floor,
 }
 
+impl DemoConfig {
+    /// Checks the ranges: a grid of 16 to 2048 voxels, 1 to 64 cameras at more than one scene
+    /// radius, a usable gloss and shading.
+    ///
+    /// # Errors
+    /// [`Error::InvalidConfig`] naming the value.
+    pub fn validate(&self) -> Result<(), Error> {
+        if !(16..=2048).contains(&self.grid) {
+            return Err(Error::InvalidConfig(format!(
+                "grid must be in 16..=2048, got {}",
+                self.grid
+            )));
+        }
+        if !(1..=64).contains(&self.cameras) {
+            return Err(Error::InvalidConfig(format!(
+                "cameras must be in 1..=64, got {}",
+                self.cameras
+            )));
+        }
+        if !(self.camera_distance > 1.0 && self.camera_distance.is_finite()) {
+            return Err(Error::InvalidConfig(format!(
+                "camera_distance must exceed 1 scene radius, got {}",
+                self.camera_distance
+            )));
+        }
+        if !(self.specular >= 0.0 && self.shininess > 0.0 && self.shininess.is_finite()) {
+            return Err(Error::InvalidConfig(format!(
+                "bad gloss: specular {}, shininess {}",
+                self.specular, self.shininess
+            )));
+        }
+        self.shading.validate()
+    }
+}
+
 impl Default for DemoConfig {
     fn default() -> Self {
         Self {
@@ -143,6 +178,33 @@ impl Solids {
         Vec3::new(d(Vec3::X * e), d(Vec3::Y * e), d(Vec3::Z * e)).normalize_or(Vec3::Y)
     }
 
+    /// The voxels of a `grid`³ grid whose centre lies in the union and that have a 6-neighbour
+    /// outside it (a closed surface), slice by slice in parallel.
+    fn surface_voxels(&self, grid: u32) -> Vec<Vec3> {
+        (0..grid)
+            .into_par_iter()
+            .flat_map_iter(|x| {
+                (0..grid).flat_map(move |y| {
+                    (0..grid).filter_map(move |z| {
+                        let p = Vec3::new(x as f32, y as f32, z as f32);
+                        let surface = self.inside(p)
+                            && [
+                                Vec3::X,
+                                Vec3::NEG_X,
+                                Vec3::Y,
+                                Vec3::NEG_Y,
+                                Vec3::Z,
+                                Vec3::NEG_Z,
+                            ]
+                            .iter()
+                            .any(|&o| !self.inside(p + o));
+                        surface.then_some(p)
+                    })
+                })
+            })
+            .collect()
+    }
+
     /// Whether the segment from `from` to `to` passes through either solid (analytic slab and
     /// sphere tests).
     fn blocked(&self, from: Vec3, to: Vec3) -> bool {
@@ -177,59 +239,10 @@ impl Solids {
 /// outside form a closed surface; each gets the normal of the nearer solid, a checker albedo
 /// (slab, matte) or a red albedo (sphere, glossy), and one Blinn–Phong colour per capture camera.
 pub fn demo_scene(config: &DemoConfig) -> Result<PlenopticCloud, Error> {
-    if !(16..=2048).contains(&config.grid) {
-        return Err(Error::InvalidConfig(format!(
-            "grid must be in 16..=2048, got {}",
-            config.grid
-        )));
-    }
-    if !(1..=64).contains(&config.cameras) {
-        return Err(Error::InvalidConfig(format!(
-            "cameras must be in 1..=64, got {}",
-            config.cameras
-        )));
-    }
-    if !(config.camera_distance > 1.0 && config.camera_distance.is_finite()) {
-        return Err(Error::InvalidConfig(format!(
-            "camera_distance must exceed 1 scene radius, got {}",
-            config.camera_distance
-        )));
-    }
-    if !(config.specular >= 0.0 && config.shininess > 0.0 && config.shininess.is_finite()) {
-        return Err(Error::InvalidConfig(format!(
-            "bad gloss: specular {}, shininess {}",
-            config.specular, config.shininess
-        )));
-    }
-    config.shading.validate()?;
+    config.validate()?;
     let grid = config.grid as f32;
     let solids = Solids::new(grid, config.layout);
-
-    // Surface voxels, slice by slice in parallel.
-    let positions: Vec<Vec3> = (0..config.grid)
-        .into_par_iter()
-        .flat_map_iter(|x| {
-            let solids = &solids;
-            (0..config.grid).flat_map(move |y| {
-                (0..config.grid).filter_map(move |z| {
-                    let p = Vec3::new(x as f32, y as f32, z as f32);
-                    let surface = solids.inside(p)
-                        && [
-                            Vec3::X,
-                            Vec3::NEG_X,
-                            Vec3::Y,
-                            Vec3::NEG_Y,
-                            Vec3::Z,
-                            Vec3::NEG_Z,
-                        ]
-                        .iter()
-                        .any(|&o| !solids.inside(p + o));
-                    surface.then_some(p)
-                })
-            })
-        })
-        .collect();
-
+    let positions = solids.surface_voxels(config.grid);
     let center = match config.layout {
         DemoLayout::Slab => Vec3::new(0.5, 0.42, 0.5),
         DemoLayout::Floor => Vec3::new(0.5, 0.4, 0.5),
