@@ -1,6 +1,6 @@
 //! The COLMAP training dataset of an input: rendered images, cameras and the input's points.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use camera_model::Camera;
 use colmap_io::Format;
@@ -72,32 +72,9 @@ where
     let writer = DatasetWriter::create(dir)?;
     // A model left by an earlier run would make a failed one look complete: it goes first, and
     // is written again only once every view is rendered and something is visible in them.
-    for name in STALE_MODEL_FILES {
-        let path = writer.sparse_dir().join(name);
-        match std::fs::remove_file(&path) {
-            Ok(()) => {}
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-            Err(source) => return Err(Error::Io { path, source }),
-        }
-    }
-    let mkdir = |name: &str| -> Result<std::path::PathBuf, Error> {
-        let path = dir.join(name);
-        std::fs::create_dir_all(&path).map_err(|source| Error::Io {
-            path: path.clone(),
-            source,
-        })?;
-        Ok(path)
-    };
-    let masks_dir = if opts.masks {
-        Some(mkdir("masks")?)
-    } else {
-        None
-    };
-    let depth_dir = if opts.depth {
-        Some(mkdir("depth")?)
-    } else {
-        None
-    };
+    remove_stale_model(&writer)?;
+    let masks_dir = opts.masks.then(|| create_dir(dir, "masks")).transpose()?;
+    let depth_dir = opts.depth.then(|| create_dir(dir, "depth")).transpose()?;
 
     // A sparse cloud's point size and a cloud's drawing order are worked out once, not once a view.
     // The depth maps need the views' depth whatever the caller keeps of them.
@@ -135,6 +112,18 @@ where
     let covered: Vec<bool> = kept.iter().map(|k| k.0).collect();
     crate::degenerate::check_coverage(dir, "training", &covered, |i| names[i].clone())?;
 
+    write_model_files(&writer, model, &names, cameras)?;
+    Ok(kept.into_iter().map(|k| k.1).collect())
+}
+
+/// `sparse/0/` of the dataset: the COLMAP model (text and binary) of the cameras named `names`
+/// with the input's points as points3D without tracks, and `points3D.ply`.
+fn write_model_files(
+    writer: &DatasetWriter,
+    model: &Model,
+    names: &[String],
+    cameras: &[Camera],
+) -> Result<(), Error> {
     let points = input_points(model);
     let rec = reconstruction_from_cameras(names.iter().map(String::as_str).zip(cameras))?;
     // Three independent files, written at once: at a paper-scale frame's 3M points they are
@@ -166,7 +155,30 @@ where
     text?;
     binary?;
     cloud?;
-    Ok(kept.into_iter().map(|k| k.1).collect())
+    Ok(())
+}
+
+/// Removes the files of `sparse/0/` that would make the dataset look usable.
+fn remove_stale_model(writer: &DatasetWriter) -> Result<(), Error> {
+    for name in STALE_MODEL_FILES {
+        let path = writer.sparse_dir().join(name);
+        match std::fs::remove_file(&path) {
+            Ok(()) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(source) => return Err(Error::Io { path, source }),
+        }
+    }
+    Ok(())
+}
+
+/// `dir/name`, created if missing.
+fn create_dir(dir: &Path, name: &str) -> Result<PathBuf, Error> {
+    let path = dir.join(name);
+    std::fs::create_dir_all(&path).map_err(|source| Error::Io {
+        path: path.clone(),
+        source,
+    })?;
+    Ok(path)
 }
 
 /// The files of `sparse/0/` that make a dataset usable, removed before a dataset is written.
