@@ -193,53 +193,126 @@ pub fn synth_in_volume(
     let scale = f64::from(grid - 1) / f64::from(volume.extent);
     let (center, radius) = (volume.center, volume.radius);
 
-    // Capture cameras in mesh units, with depth maps for visibility.
-    let res = config.visibility_resolution;
-    let distance = config.camera_distance * f64::from(radius);
-    let focal = framing_focal(f64::from(radius), distance, res, res, 0.02)?;
-    let intrinsics = Intrinsics::centered(res, res, focal, focal);
-    let eyes: Vec<DVec3> = capture_directions(config.cameras)
-        .iter()
-        .map(|d| center.as_dvec3() + distance * *d)
-        .collect();
-    let cameras: Vec<Camera> = eyes
-        .iter()
-        .map(|&e| Camera::new(intrinsics, Pose::look_at(e, center.as_dvec3(), WORLD_UP)))
-        .collect();
-    let depth_maps: Vec<ViewImage> = cameras
-        .iter()
-        .map(|c| views::render_mesh(mesh, c, &ViewOptions::single_sample()))
-        .collect::<Result<_, _>>()?;
-
-    let gloss = Gloss {
-        specular: config.specular,
-        shininess: config.shininess,
-    };
-    let shaded: Vec<([f32; 3], Vec<[f32; 3]>, Vec3)> = samples
-        .par_iter()
-        .map(|s| {
-            let main = config.shading.diffuse_color(s.normal, s.albedo);
-            let mut facing = 0i32;
-            let colors = cameras
+    let rig = CaptureRig::new(mesh, config, center, radius)?;
+    let shaded = rig.shade(&samples, config);
+    let voxels = merge_into_voxels(&samples, shaded, lo, scale, config.cameras);
+    let mut cloud = PlenopticCloud {
+        num_cameras: config.cameras,
+        cameras: capture_cameras(
+            &rig.eyes
                 .iter()
-                .zip(&depth_maps)
-                .map(|(cam, map)| {
-                    let to_cam = (cam.center().as_vec3() - s.position).normalize_or_zero();
-                    if !sees(cam, map, s.position, s.normal) {
-                        return main;
-                    }
-                    facing += if s.normal.dot(to_cam) >= 0.0 { 1 } else { -1 };
-                    config.shading.color(s.normal, to_cam, s.albedo, gloss)
-                })
-                .collect();
-            // Orient the stored normal towards the cameras that see the sample (meshes may wind either way).
-            let normal = if facing < 0 { -s.normal } else { s.normal };
-            (main, colors, normal)
-        })
-        .collect();
+                .map(|e| (*e - lo.as_dvec3()) * scale)
+                .collect::<Vec<_>>(),
+            (center - lo).as_dvec3() * scale,
+            1.0 / scale,
+            lo.as_dvec3(),
+        ),
+        frame_to_world_scale: Some(1.0 / scale),
+        frame_to_world_translation: Some(lo.as_dvec3()),
+        width: Some(grid - 1),
+        ..Default::default()
+    };
+    let mut normals = Vec::with_capacity(voxels.len());
+    for Voxel {
+        position: p,
+        normal: n,
+        main,
+        colors,
+        count,
+    } in voxels
+    {
+        cloud.positions.push(p);
+        normals.push(n.normalize_or(Vec3::Y));
+        cloud.colors.push(to_u8_grid(main.map(|c| c / count)));
+        cloud
+            .camera_colors
+            .extend(colors.into_iter().map(|c| to_u8_grid(c.map(|v| v / count))));
+    }
+    cloud.normals = Some(normals);
+    Ok(cloud)
+}
 
-    // Voxelise and merge.
-    let n_cam = config.cameras;
+/// The capture cameras in mesh units, with a depth map each for visibility.
+struct CaptureRig {
+    eyes: Vec<DVec3>,
+    cameras: Vec<Camera>,
+    depth_maps: Vec<ViewImage>,
+}
+
+/// A sample's view-independent colour, its colour seen from each capture camera, and its
+/// normal turned towards the cameras that see it.
+type Shaded = ([f32; 3], Vec<[f32; 3]>, Vec3);
+
+impl CaptureRig {
+    /// `config.cameras` cameras at `config.camera_distance` radii around (`center`, `radius`),
+    /// framing the sphere, and `mesh`'s depth from each.
+    fn new(mesh: &Mesh, config: &SynthConfig, center: Vec3, radius: f32) -> Result<Self, Error> {
+        let res = config.visibility_resolution;
+        let distance = config.camera_distance * f64::from(radius);
+        let focal = framing_focal(f64::from(radius), distance, res, res, 0.02)?;
+        let intrinsics = Intrinsics::centered(res, res, focal, focal);
+        let eyes: Vec<DVec3> = capture_directions(config.cameras)
+            .iter()
+            .map(|d| center.as_dvec3() + distance * *d)
+            .collect();
+        let cameras: Vec<Camera> = eyes
+            .iter()
+            .map(|&e| Camera::new(intrinsics, Pose::look_at(e, center.as_dvec3(), WORLD_UP)))
+            .collect();
+        let depth_maps: Vec<ViewImage> = cameras
+            .iter()
+            .map(|c| views::render_mesh(mesh, c, &ViewOptions::single_sample()))
+            .collect::<Result<_, _>>()?;
+        Ok(Self {
+            eyes,
+            cameras,
+            depth_maps,
+        })
+    }
+
+    /// Every sample shaded for every camera (its view-independent colour where the camera does
+    /// not see it), in parallel.
+    fn shade(&self, samples: &[Sample], config: &SynthConfig) -> Vec<Shaded> {
+        let gloss = Gloss {
+            specular: config.specular,
+            shininess: config.shininess,
+        };
+        samples
+            .par_iter()
+            .map(|s| {
+                let main = config.shading.diffuse_color(s.normal, s.albedo);
+                let mut facing = 0i32;
+                let colors = self
+                    .cameras
+                    .iter()
+                    .zip(&self.depth_maps)
+                    .map(|(cam, map)| {
+                        let to_cam = (cam.center().as_vec3() - s.position).normalize_or_zero();
+                        if !sees(cam, map, s.position, s.normal) {
+                            return main;
+                        }
+                        facing += if s.normal.dot(to_cam) >= 0.0 { 1 } else { -1 };
+                        config.shading.color(s.normal, to_cam, s.albedo, gloss)
+                    })
+                    .collect();
+                // Orient the stored normal towards the cameras that see the sample (meshes may
+                // wind either way).
+                let normal = if facing < 0 { -s.normal } else { s.normal };
+                (main, colors, normal)
+            })
+            .collect()
+    }
+}
+
+/// The samples voxelised (voxel = (p − lo) · scale, rounded) and those sharing a voxel summed,
+/// in the order their voxels are first met.
+fn merge_into_voxels(
+    samples: &[Sample],
+    shaded: Vec<Shaded>,
+    lo: Vec3,
+    scale: f64,
+    n_cam: usize,
+) -> Vec<Voxel> {
     let mut index: HashMap<[i32; 3], usize> = HashMap::new();
     let mut acc: Vec<Voxel> = Vec::new();
     for (s, (main, colors, normal)) in samples.iter().zip(shaded) {
@@ -265,40 +338,7 @@ pub fn synth_in_volume(
         }
         a.count += 1.0;
     }
-    let mut cloud = PlenopticCloud {
-        num_cameras: n_cam,
-        cameras: capture_cameras(
-            &eyes
-                .iter()
-                .map(|e| (*e - lo.as_dvec3()) * scale)
-                .collect::<Vec<_>>(),
-            (center - lo).as_dvec3() * scale,
-            1.0 / scale,
-            lo.as_dvec3(),
-        ),
-        frame_to_world_scale: Some(1.0 / scale),
-        frame_to_world_translation: Some(lo.as_dvec3()),
-        width: Some(grid - 1),
-        ..Default::default()
-    };
-    let mut normals = Vec::with_capacity(acc.len());
-    for Voxel {
-        position: p,
-        normal: n,
-        main,
-        colors,
-        count,
-    } in acc
-    {
-        cloud.positions.push(p);
-        normals.push(n.normalize_or(Vec3::Y));
-        cloud.colors.push(to_u8_grid(main.map(|c| c / count)));
-        cloud
-            .camera_colors
-            .extend(colors.into_iter().map(|c| to_u8_grid(c.map(|v| v / count))));
-    }
-    cloud.normals = Some(normals);
-    Ok(cloud)
+    acc
 }
 
 /// Whether capture camera `cam` sees the surface point `p` (normal `n`), by its depth map.
