@@ -326,6 +326,17 @@ mod tests {
     use camera_model::{Camera, Intrinsics, Pose};
     use glam::DVec3;
 
+    /// Knuth's MMIX linear congruential generator from `seed`: the tests' fixed pseudo-random
+    /// numbers (each takes the high bits it needs).
+    fn lcg(mut seed: u64) -> impl FnMut() -> u64 {
+        move || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            seed
+        }
+    }
+
     /// Views of `splats` (an ordinary render over black, with its coverage as mask) from a ring
     /// and two poles of cameras.
     fn views_of(splats: &Splats) -> Vec<View> {
@@ -387,13 +398,8 @@ mod tests {
     #[test]
     fn conjugate_gradients_solve_each_channel_s_system() {
         const N: usize = 6;
-        let mut seed = 11u64;
-        let mut next = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
+        let mut raw = lcg(11);
+        let mut next = || (raw() >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
         // M_c = L Lᵀ + I with a random L, per channel; g random.
         let m: Vec<[[f64; N]; N]> = (0..3)
             .map(|_| {
@@ -468,13 +474,8 @@ mod tests {
     #[test]
     fn recovers_the_colours_that_made_the_views() {
         let mut truth = Splats::new(2);
-        let mut seed = 3u64;
-        let mut next = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 40) as f32 / (1u64 << 24) as f32 - 0.5
-        };
+        let mut raw = lcg(3);
+        let mut next = || (raw() >> 40) as f32 / (1u64 << 24) as f32 - 0.5;
         for i in 0..60 {
             let t = i as f32 * 0.7;
             let mean = Vec3::new(t.cos(), (i as f32 / 30.0) - 1.0, t.sin()) * 0.8;
