@@ -14,6 +14,10 @@
 //! matter, worked out from where the images differ. Inside the spans the arithmetic is the
 //! dense filter's; outside them the value is the exact 1 and the gradient the exact 0 that the
 //! dense filter approaches up to rounding.
+//!
+//! [`Ssim`] holds the buffers and runs the passes; `spans` works out where they run, `bands`
+//! runs them band by band of rows, `window` is the separable Gaussian window's two passes and
+//! `terms` the per-pixel SSIM map and its partials.
 
 mod bands;
 mod spans;
