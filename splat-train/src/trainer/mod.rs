@@ -18,7 +18,7 @@ use rand::{RngExt, SeedableRng};
 use rand_pcg::Pcg64;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use splat_core::{Rasterizer, RenderOptions, SplatGrads, Splats, logit};
+use splat_core::{Rasterizer, RenderCamera, RenderOptions, SplatGrads, Splats, logit};
 
 use crate::adam::{AdamStep, Rates};
 use crate::config::{Background, TrainConfig};
@@ -59,6 +59,28 @@ pub struct StepStats {
     pub refine: RefineReport,
     /// Whether the step trained on the coarse warm-up's reduced views.
     pub coarse: bool,
+}
+
+/// What one step trains on, decided before it renders.
+struct StepPlan {
+    /// Index of the view (within its level).
+    view: usize,
+    /// Whether the view is the warm-up's reduced one.
+    coarse: bool,
+    /// The view's camera at its level's size.
+    cam: RenderCamera,
+    /// The background and SH degree the step renders with.
+    opts: RenderOptions,
+}
+
+/// The step's loss, before the backward pass.
+struct StepScore {
+    /// The weighted total, with the alpha term where it applies.
+    total: f64,
+    /// The render's mean squared error against the target (for the step's PSNR).
+    mse: f64,
+    /// Whether the alpha term applied (the view has a mask and its weight is positive).
+    use_alpha: bool,
 }
 
 /// One line of the training history.
@@ -525,39 +547,74 @@ impl Trainer {
     /// Runs one optimisation step.
     pub fn step(&mut self) -> StepStats {
         let iteration = self.run.iteration + 1;
-        let vi = self.next_view();
-        let bg = self.background();
-        let opts = self.render_options(bg);
+        let plan = self.plan_step();
+        let scored = self.forward_and_loss(&plan);
+        let refine = if scored.total.is_finite() {
+            self.backward_and_update(iteration, &plan, scored.use_alpha)
+        } else {
+            self.run.non_finite.skipped_steps += 1;
+            RefineReport::default()
+        };
+        self.timings.steps += 1;
+        self.run.iteration = iteration;
+        let stats = StepStats {
+            iteration,
+            view: plan.view,
+            loss: scored.total,
+            psnr: psnr_from_mse(scored.mse),
+            splats: self.state.len(),
+            refine,
+            coarse: plan.coarse,
+        };
+        self.record_history(&stats);
+        stats
+    }
+
+    /// What the next step trains on: its view, its level (the warm-up's reduced views or the
+    /// full ones), its camera and how it renders; the loss buffers are sized for that camera.
+    fn plan_step(&mut self) -> StepPlan {
+        let view = self.next_view();
+        let background = self.background();
+        let opts = self.render_options(background);
         self.run.sh_reached = opts.active_sh_degree;
         let coarse = self.next_step_is_coarse();
         self.run.warmup_over |= !coarse && self.config.warmup.is_some();
-        let li = usize::from(coarse);
-        let level = &self.levels[li];
-        let cam = level.cameras[vi];
-        let (w, h) = (cam.width, cam.height);
+        let cam = self.levels[usize::from(coarse)].cameras[view];
         if self
             .loss
             .as_ref()
-            .is_none_or(|l| l.width() != w || l.height() != h)
+            .is_none_or(|l| l.width() != cam.width || l.height() != cam.height)
         {
-            self.loss = Some(Loss::new(w, h));
+            self.loss = Some(Loss::new(cam.width, cam.height));
         }
-        let Some(loss) = self.loss.as_mut() else {
-            unreachable!("the loss buffers were just created")
-        };
+        StepPlan {
+            view,
+            coarse,
+            cam,
+            opts,
+        }
+    }
 
+    /// Renders the step's view and scores it: the photometric loss (its pixel gradient left
+    /// in the loss buffers) and, where the view has a mask, the alpha term (its gradient in
+    /// `d_alpha`).
+    fn forward_and_loss(&mut self, plan: &StepPlan) -> StepScore {
+        let Some(loss) = self.loss.as_mut() else {
+            unreachable!("plan_step sizes the loss buffers")
+        };
         // Target: the photo over this step's background, expanded to f32 (views hold 16-bit
         // fractions; the pass is one read of the view and one write of the buffer).
-        let view = &level.views[vi];
-        view.target_into(&mut self.target, bg.to_array());
-        let target_img = &self.target[..];
+        let view = &self.levels[usize::from(plan.coarse)].views[plan.view];
+        view.target_into(&mut self.target, plan.opts.background.to_array());
 
         let t0 = Instant::now();
-        let out = self.rasterizer.forward(&self.state.splats, &cam, &opts);
+        let out = self
+            .rasterizer
+            .forward(&self.state.splats, &plan.cam, &plan.opts);
         let t1 = Instant::now();
         let value = loss.evaluate(
             &out.rgb,
-            target_img,
+            &self.target,
             self.config.photometric,
             self.config.ssim_weight,
         );
@@ -573,106 +630,110 @@ impl Trainer {
             );
             total += f64::from(self.config.alpha_loss_weight) * e;
         }
-        let t2 = Instant::now();
         self.timings.forward += t1 - t0;
-        self.timings.loss += t2 - t1;
-
-        let mut refine = RefineReport::default();
-        if total.is_finite() {
-            let t3;
-            let d_alpha = if use_alpha {
-                Some(&self.d_alpha[..])
-            } else {
-                None
-            };
-            let outcome = if self.strategy.is_none() && self.chained_update {
-                // No strategy observes the gradients: the update takes them chunk by chunk
-                // from the rasteriser's chain (the whole-model arrays are never written).
-                self.rasterizer.backward_sums(
-                    &self.state.splats,
-                    &cam,
-                    &opts,
-                    loss.d_rgb(),
-                    d_alpha,
-                    None,
-                );
-                t3 = Instant::now();
-                self.timings.backward += t3 - t2;
-                let plan = self.update_plan(iteration, true);
-                update_chained(&plan, &mut self.state, &self.rasterizer)
-            } else {
-                // The last update left the gradients zero; they need it again only if the model
-                // has changed shape since (refinement, repair) or no update has run yet.
-                if !(self.grads_zeroed && self.grads.fits(&self.state.splats)) {
-                    self.grads.reset(&self.state.splats);
-                }
-                self.grads_zeroed = false;
-                self.rasterizer.backward(
-                    &self.state.splats,
-                    &cam,
-                    &opts,
-                    loss.d_rgb(),
-                    d_alpha,
-                    None,
-                    &mut self.grads,
-                );
-                t3 = Instant::now();
-                self.timings.backward += t3 - t2;
-                // With a strategy observing the gradients, the check runs before it; otherwise
-                // the update does it chunk by chunk.
-                let observed = self.strategy.is_some();
-                if let Some(s) = self.strategy.as_mut() {
-                    self.run.non_finite.zeroed_gradients += zero_non_finite_grads(&mut self.grads);
-                    s.observe(iteration, &self.grads, self.rasterizer.radii());
-                }
-                let plan = self.update_plan(iteration, !observed);
-                let outcome = update(&plan, &mut self.state, &mut self.grads);
-                self.grads_zeroed = true;
-                outcome
-            };
-            self.run.non_finite.zeroed_gradients += outcome.zeroed_gradients;
-            if outcome.non_finite_parameters {
-                self.sanitize();
-            }
-            let t4 = Instant::now();
-            self.timings.adam += t4 - t3;
-            if let Some(s) = self.strategy.as_mut() {
-                refine = s.refine(
-                    iteration,
-                    RefineContext {
-                        state: &mut self.state,
-                        extent: self.extent,
-                        rng: &mut self.run.rng,
-                    },
-                );
-                self.run.refine.add(&refine);
-            }
-            self.timings.refine += t4.elapsed();
-        } else {
-            self.run.non_finite.skipped_steps += 1;
+        self.timings.loss += t1.elapsed();
+        StepScore {
+            total,
+            mse: value.mse,
+            use_alpha,
         }
-        self.timings.steps += 1;
-        self.run.iteration = iteration;
-        let stats = StepStats {
-            iteration,
-            view: vi,
-            loss: total,
-            psnr: psnr_from_mse(value.mse),
-            splats: self.state.len(),
-            refine,
-            coarse,
+    }
+
+    /// The step's backward pass, Adam update and refinement, from the pixel gradients
+    /// [`Trainer::forward_and_loss`] left; returns what the refinement did.
+    fn backward_and_update(
+        &mut self,
+        iteration: u32,
+        plan: &StepPlan,
+        use_alpha: bool,
+    ) -> RefineReport {
+        let Some(loss) = self.loss.as_ref() else {
+            unreachable!("plan_step sizes the loss buffers")
         };
-        if iteration.is_multiple_of(self.config.history_every) || iteration >= self.horizon() {
+        let d_alpha = use_alpha.then_some(&self.d_alpha[..]);
+        let t2 = Instant::now();
+        let t3;
+        let outcome = if self.strategy.is_none() && self.chained_update {
+            // No strategy observes the gradients: the update takes them chunk by chunk from
+            // the rasteriser's chain (the whole-model arrays are never written).
+            self.rasterizer.backward_sums(
+                &self.state.splats,
+                &plan.cam,
+                &plan.opts,
+                loss.d_rgb(),
+                d_alpha,
+                None,
+            );
+            t3 = Instant::now();
+            self.timings.backward += t3 - t2;
+            let update_plan = self.update_plan(iteration, true);
+            update_chained(&update_plan, &mut self.state, &self.rasterizer)
+        } else {
+            // The last update left the gradients zero; they need it again only if the model
+            // has changed shape since (refinement, repair) or no update has run yet.
+            if !(self.grads_zeroed && self.grads.fits(&self.state.splats)) {
+                self.grads.reset(&self.state.splats);
+            }
+            self.grads_zeroed = false;
+            self.rasterizer.backward(
+                &self.state.splats,
+                &plan.cam,
+                &plan.opts,
+                loss.d_rgb(),
+                d_alpha,
+                None,
+                &mut self.grads,
+            );
+            t3 = Instant::now();
+            self.timings.backward += t3 - t2;
+            // With a strategy observing the gradients, the check runs before it; otherwise
+            // the update does it chunk by chunk.
+            let observed = self.strategy.is_some();
+            if let Some(s) = self.strategy.as_mut() {
+                self.run.non_finite.zeroed_gradients += zero_non_finite_grads(&mut self.grads);
+                s.observe(iteration, &self.grads, self.rasterizer.radii());
+            }
+            let update_plan = self.update_plan(iteration, !observed);
+            let outcome = update(&update_plan, &mut self.state, &mut self.grads);
+            self.grads_zeroed = true;
+            outcome
+        };
+        self.run.non_finite.zeroed_gradients += outcome.zeroed_gradients;
+        if outcome.non_finite_parameters {
+            self.sanitize();
+        }
+        let t4 = Instant::now();
+        self.timings.adam += t4 - t3;
+        let mut refine = RefineReport::default();
+        if let Some(s) = self.strategy.as_mut() {
+            refine = s.refine(
+                iteration,
+                RefineContext {
+                    state: &mut self.state,
+                    extent: self.extent,
+                    rng: &mut self.run.rng,
+                },
+            );
+            self.run.refine.add(&refine);
+        }
+        self.timings.refine += t4.elapsed();
+        refine
+    }
+
+    /// Keeps every `history_every`-th step, and the last of the schedule, in the history.
+    fn record_history(&mut self, stats: &StepStats) {
+        if stats.iteration.is_multiple_of(self.config.history_every)
+            || stats.iteration >= self.horizon()
+        {
             // Elapsed time is filled in by `run`, which owns the clock.
             self.run.history.push(HistoryEntry {
-                iteration,
+                iteration: stats.iteration,
                 elapsed_s: self.run.elapsed_s,
                 loss: stats.loss,
                 psnr: stats.psnr,
                 splats: stats.splats,
             });
         }
-        stats
     }
 
     /// This step's update: Adam's rates for every group that is not frozen, and the clamps.
