@@ -65,45 +65,9 @@ pub(super) fn reference_views(
     observer(Event::Stage {
         index: 2,
         of: STAGES,
-        what: format!(
-            "rendering {} training views{} and {} held-out views at {}×{}",
-            rig.train.len(),
-            if cfg.output.dataset {
-                " (and the COLMAP dataset)"
-            } else {
-                ""
-            },
-            rig.heldout.len(),
-            cfg.rig.width,
-            cfg.rig.height
-        ),
+        what: stage_description(rig, cfg),
     });
-    let mut opts = cfg.renderer.for_model(model);
-    opts.background = [0.0; 3];
-    // The trainer keeps colour and coverage; the dataset writer asks for depth if it writes it.
-    opts.depth = false;
-    if opts.point_size != cfg.renderer.point_size {
-        observer(Event::Note(format!(
-            "the cloud samples its surface more sparsely than one point per voxel: its points \
-             are drawn {:.2} voxels wide (not {}) so the surface is closed \
-             (renderer.close_surface)",
-            opts.point_size, cfg.renderer.point_size
-        )));
-    }
-    let dataset_opts = views::DatasetOptions {
-        bit_depth: if cfg.output.png16 {
-            views::BitDepth::Sixteen
-        } else {
-            views::BitDepth::Eight
-        },
-        masks: true,
-        depth: false,
-    };
-    // Each view becomes the trainer's view as soon as it is rendered (its depth dropped), so a
-    // frame's full images are never all held at once.
-    let to_training = |i: usize, image: ViewImage| {
-        training_view(i, views::dataset_image_name(i), rig.train[i], image)
-    };
+    let opts = reference_options(model, cfg, observer);
     let train = if state.dataset_written || !cfg.output.dataset {
         // The dataset's PNGs are quantised: training needs the renders themselves, which are
         // deterministic, so they are made again in memory.
@@ -112,46 +76,27 @@ pub(super) fn reference_views(
                 "the dataset is already written: rendering the training views in memory".into(),
             ));
         }
-        let train = views::render_views_with(model, &rig.train, &opts, to_training)?
-            .into_iter()
-            .collect::<Result<Vec<_>, _>>()?;
-        clock.lap("render training views");
-        train
-    } else {
-        observer(Event::Begin {
-            unit: "views",
-            total: rig.train.len() as u64,
-            done: 0,
-        });
-        let done = AtomicU64::new(0);
-        let train = views::write_dataset(
-            &layout.dataset_dir,
+        let train = collect_views(views::render_views_with(
             model,
             &rig.train,
             &opts,
-            &dataset_opts,
-            &|| {
-                let n = done.fetch_add(1, Ordering::Relaxed) + 1;
-                observer(Event::Advance {
-                    done: n,
-                    message: None,
-                });
-            },
-            to_training,
-        )?
-        .into_iter()
-        .collect::<Result<Vec<_>, _>>()?;
-        observer(Event::End);
+            |i, image| training_view(i, views::dataset_image_name(i), rig.train[i], image),
+        )?)?;
+        clock.lap("render training views");
+        train
+    } else {
+        let train = write_training_dataset(model, rig, &opts, cfg, layout, observer)?;
         state.dataset_written = true;
         state.save(&layout.out)?;
         clock.lap("render training views + write dataset");
         train
     };
-    let heldout: Vec<View> = views::render_views_with(model, &rig.heldout, &opts, |i, image| {
-        training_view(i, heldout_name(i), rig.heldout[i], image)
-    })?
-    .into_iter()
-    .collect::<Result<_, _>>()?;
+    let heldout = collect_views(views::render_views_with(
+        model,
+        &rig.heldout,
+        &opts,
+        |i, image| training_view(i, heldout_name(i), rig.heldout[i], image),
+    )?)?;
     let covered: Vec<bool> = heldout
         .iter()
         .map(|v| v.mask.as_ref().is_none_or(|m| m.iter().any(|&a| a > 0)))
@@ -168,6 +113,91 @@ pub(super) fn reference_views(
         train: Arc::new(train),
         heldout,
     })
+}
+
+/// What the stage's progress line says it renders.
+fn stage_description(rig: &Rig, cfg: &Config) -> String {
+    format!(
+        "rendering {} training views{} and {} held-out views at {}×{}",
+        rig.train.len(),
+        if cfg.output.dataset {
+            " (and the COLMAP dataset)"
+        } else {
+            ""
+        },
+        rig.heldout.len(),
+        cfg.rig.width,
+        cfg.rig.height
+    )
+}
+
+/// The renderer's settings for the references: over black, without depth (the trainer keeps
+/// colour and coverage; the dataset writer asks for depth if it writes it), with the point
+/// size the cloud's sampling needs, which the observer is told of when it is not the
+/// configured one.
+fn reference_options(model: &Model, cfg: &Config, observer: Observer<'_>) -> views::ViewOptions {
+    let mut opts = cfg.renderer.for_model(model);
+    opts.background = [0.0; 3];
+    opts.depth = false;
+    if opts.point_size != cfg.renderer.point_size {
+        observer(Event::Note(format!(
+            "the cloud samples its surface more sparsely than one point per voxel: its points \
+             are drawn {:.2} voxels wide (not {}) so the surface is closed \
+             (renderer.close_surface)",
+            opts.point_size, cfg.renderer.point_size
+        )));
+    }
+    opts
+}
+
+/// Renders the training views and writes them as the COLMAP dataset, with a progress bar;
+/// each view becomes the trainer's as soon as it is rendered (its depth dropped), so a frame's
+/// full images are never all held at once.
+fn write_training_dataset(
+    model: &Model,
+    rig: &Rig,
+    opts: &views::ViewOptions,
+    cfg: &Config,
+    layout: &Layout,
+    observer: Observer<'_>,
+) -> Result<Vec<View>, PipelineError> {
+    let dataset_opts = views::DatasetOptions {
+        bit_depth: if cfg.output.png16 {
+            views::BitDepth::Sixteen
+        } else {
+            views::BitDepth::Eight
+        },
+        masks: true,
+        depth: false,
+    };
+    observer(Event::Begin {
+        unit: "views",
+        total: rig.train.len() as u64,
+        done: 0,
+    });
+    let done = AtomicU64::new(0);
+    let train = collect_views(views::write_dataset(
+        &layout.dataset_dir,
+        model,
+        &rig.train,
+        opts,
+        &dataset_opts,
+        &|| {
+            let n = done.fetch_add(1, Ordering::Relaxed) + 1;
+            observer(Event::Advance {
+                done: n,
+                message: None,
+            });
+        },
+        |i, image| training_view(i, views::dataset_image_name(i), rig.train[i], image),
+    )?)?;
+    observer(Event::End);
+    Ok(train)
+}
+
+/// The views, or the first view's error.
+fn collect_views(views: Vec<Result<View, PipelineError>>) -> Result<Vec<View>, PipelineError> {
+    views.into_iter().collect()
 }
 
 /// The name of held-out view `i` in reports and messages.
