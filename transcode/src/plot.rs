@@ -1,7 +1,7 @@
 //! Inline SVG line plots for the reports: axes with round ticks (1, 2, 2.5 or 5 times a power
-//! of ten, about five to an axis), solid or dashed lines with a legend, and labelled markers. Written by hand because the reports are single self-contained
-//! HTML files and the plots are a few dozen lines of SVG; a plotting crate would bring fonts and
-//! raster backends for nothing.
+//! of ten, about five to an axis), solid or dashed lines with a legend, and labelled markers.
+//! Written by hand because the reports are single self-contained HTML files and the plots are a
+//! few dozen lines of SVG; a plotting crate would bring fonts and raster backends for nothing.
 
 use std::fmt::Write;
 
@@ -70,87 +70,143 @@ pub fn ticks(lo: f64, hi: f64, min_step: f64) -> Vec<f64> {
 /// The plot as an `<svg>` element; a note when there is nothing to plot.
 #[must_use]
 pub fn svg(axes: &Axes, series: &[Series], markers: &[Marker]) -> String {
-    let (w, h, left, bottom, top, right) = (720.0, 360.0, 60.0, 40.0, 15.0, 20.0);
     let points: Vec<(f64, f64)> = series
         .iter()
         .flat_map(|s| s.points.iter().copied())
         .chain(markers.iter().map(|m| (m.0, m.1)))
         .filter(|p| p.0.is_finite() && p.1.is_finite())
         .collect();
-    if points.is_empty() {
+    let Some(frame) = Frame::fitted(axes, &points) else {
         return "<p>(nothing to plot)</p>\n".into();
-    }
-    let fold = |f: fn(&(f64, f64)) -> f64| {
-        points
-            .iter()
-            .map(f)
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
-                (a.min(v), b.max(v))
-            })
     };
-    let (x_lo, x_hi) = fold(|p| p.0);
-    let (y_lo, y_hi) = fold(|p| p.1);
-    let x_ticks = if axes.integer_x {
-        ticks(x_lo, x_hi, 1.0)
-    } else {
-        ticks(x_lo.min(0.0), x_hi, 0.0)
-    };
-    let y_ticks = if axes.round_y {
-        ticks(y_lo, y_hi, 0.0)
-    } else {
-        ticks(y_lo.min(0.0), y_hi, 0.0)
-    };
-    let (x_min, x_max) = (x_ticks[0], x_ticks[x_ticks.len() - 1]);
-    let (y_min, y_max) = (y_ticks[0], y_ticks[y_ticks.len() - 1]);
-    let x = |v: f64| left + (w - left - right) * (v - x_min) / (x_max - x_min);
-    let y = |v: f64| top + (h - top - bottom) * (1.0 - (v - y_min) / (y_max - y_min));
-    let mut s = format!(
-        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" viewBox=\"0 0 {w} {h}\" \
-         font-size=\"12\"><rect width=\"{w}\" height=\"{h}\" fill=\"white\"/>\
-         <line x1=\"{left}\" y1=\"{yb}\" x2=\"{xr}\" y2=\"{yb}\" stroke=\"black\"/>\
-         <line x1=\"{left}\" y1=\"{top}\" x2=\"{left}\" y2=\"{yb}\" stroke=\"black\"/>",
-        yb = h - bottom,
-        xr = w - right
-    );
-    for &t in &x_ticks {
-        let _ = write!(
-            s,
-            "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{}</text>",
-            x(t),
-            h - bottom + 16.0,
-            tick(t, x_ticks[1] - x_ticks[0])
-        );
-    }
-    for &p in &y_ticks {
-        let _ = write!(
-            s,
-            "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"end\">{}</text>\
-             <line x1=\"{left}\" y1=\"{yy:.1}\" x2=\"{xr}\" y2=\"{yy:.1}\" stroke=\"#eee\"/>",
-            left - 6.0,
-            y(p) + 4.0,
-            tick(p, y_ticks[1] - y_ticks[0]),
-            yy = y(p),
-            xr = w - right
-        );
-    }
-    let _ = write!(
-        s,
-        "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{}</text>\
-         <text x=\"14\" y=\"{:.1}\" text-anchor=\"middle\" transform=\"rotate(-90 14 {:.1})\">{}</text>",
-        left + (w - left - right) / 2.0,
-        h - 4.0,
-        esc(&axes.x_label),
-        h / 2.0,
-        h / 2.0,
-        esc(&axes.y_label)
-    );
+    let mut s = frame.axes(axes);
     let mut legend = 0;
     for line in series {
+        frame.line(&mut s, line, &mut legend);
+    }
+    for marker in markers {
+        frame.marker(&mut s, marker);
+    }
+    s.push_str("</svg>\n");
+    s
+}
+
+/// The plot's geometry: the SVG's size, the plot area's margins, and the ticks, whose first
+/// and last values are the ends of each axis.
+struct Frame {
+    x_ticks: Vec<f64>,
+    y_ticks: Vec<f64>,
+}
+
+impl Frame {
+    const WIDTH: f64 = 720.0;
+    const HEIGHT: f64 = 360.0;
+    const LEFT: f64 = 60.0;
+    const BOTTOM: f64 = 40.0;
+    const TOP: f64 = 15.0;
+    const RIGHT: f64 = 20.0;
+
+    /// Axes with round ticks covering `points`; none when there are no points.
+    fn fitted(axes: &Axes, points: &[(f64, f64)]) -> Option<Self> {
+        if points.is_empty() {
+            return None;
+        }
+        let range = |f: fn(&(f64, f64)) -> f64| {
+            points
+                .iter()
+                .map(f)
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                    (a.min(v), b.max(v))
+                })
+        };
+        let (x_lo, x_hi) = range(|p| p.0);
+        let (y_lo, y_hi) = range(|p| p.1);
+        let x_ticks = if axes.integer_x {
+            ticks(x_lo, x_hi, 1.0)
+        } else {
+            ticks(x_lo.min(0.0), x_hi, 0.0)
+        };
+        let y_ticks = if axes.round_y {
+            ticks(y_lo, y_hi, 0.0)
+        } else {
+            ticks(y_lo.min(0.0), y_hi, 0.0)
+        };
+        Some(Self { x_ticks, y_ticks })
+    }
+
+    /// The SVG x coordinate of data value `v`.
+    fn x(&self, v: f64) -> f64 {
+        let (lo, hi) = (self.x_ticks[0], self.x_ticks[self.x_ticks.len() - 1]);
+        Self::LEFT + (Self::WIDTH - Self::LEFT - Self::RIGHT) * (v - lo) / (hi - lo)
+    }
+
+    /// The SVG y coordinate of data value `v` (SVG's y grows downwards).
+    fn y(&self, v: f64) -> f64 {
+        let (lo, hi) = (self.y_ticks[0], self.y_ticks[self.y_ticks.len() - 1]);
+        Self::TOP + (Self::HEIGHT - Self::TOP - Self::BOTTOM) * (1.0 - (v - lo) / (hi - lo))
+    }
+
+    /// The opening `<svg>` tag, the background, the axes with their ticks, grid lines and labels.
+    fn axes(&self, axes: &Axes) -> String {
+        let (w, h, left, bottom, top, right) = (
+            Self::WIDTH,
+            Self::HEIGHT,
+            Self::LEFT,
+            Self::BOTTOM,
+            Self::TOP,
+            Self::RIGHT,
+        );
+        let mut s = format!(
+            "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" viewBox=\"0 0 {w} {h}\" \
+             font-size=\"12\"><rect width=\"{w}\" height=\"{h}\" fill=\"white\"/>\
+             <line x1=\"{left}\" y1=\"{yb}\" x2=\"{xr}\" y2=\"{yb}\" stroke=\"black\"/>\
+             <line x1=\"{left}\" y1=\"{top}\" x2=\"{left}\" y2=\"{yb}\" stroke=\"black\"/>",
+            yb = h - bottom,
+            xr = w - right
+        );
+        for &t in &self.x_ticks {
+            let _ = write!(
+                s,
+                "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{}</text>",
+                self.x(t),
+                h - bottom + 16.0,
+                tick(t, self.x_ticks[1] - self.x_ticks[0])
+            );
+        }
+        for &p in &self.y_ticks {
+            let _ = write!(
+                s,
+                "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"end\">{}</text>\
+                 <line x1=\"{left}\" y1=\"{yy:.1}\" x2=\"{xr}\" y2=\"{yy:.1}\" stroke=\"#eee\"/>",
+                left - 6.0,
+                self.y(p) + 4.0,
+                tick(p, self.y_ticks[1] - self.y_ticks[0]),
+                yy = self.y(p),
+                xr = w - right
+            );
+        }
+        let _ = write!(
+            s,
+            "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{}</text>\
+             <text x=\"14\" y=\"{:.1}\" text-anchor=\"middle\" transform=\"rotate(-90 14 {:.1})\">{}</text>",
+            left + (w - left - right) / 2.0,
+            h - 4.0,
+            esc(&axes.x_label),
+            h / 2.0,
+            h / 2.0,
+            esc(&axes.y_label)
+        );
+        s
+    }
+
+    /// One series as a polyline (its finite points), and its legend entry as the `legend`-th
+    /// when it has a label.
+    fn line(&self, s: &mut String, line: &Series, legend: &mut u32) {
         let pts: Vec<String> = line
             .points
             .iter()
             .filter(|p| p.0.is_finite() && p.1.is_finite())
-            .map(|&(a, b)| format!("{:.1},{:.1}", x(a), y(b)))
+            .map(|&(a, b)| format!("{:.1},{:.1}", self.x(a), self.y(b)))
             .collect();
         let dash = if line.dashed {
             " stroke-dasharray=\"5 3\""
@@ -169,30 +225,30 @@ pub fn svg(axes: &Axes, series: &[Series], markers: &[Marker]) -> String {
             let _ = write!(
                 s,
                 "<text x=\"{:.1}\" y=\"{:.1}\" fill=\"{}\" stroke=\"white\" stroke-width=\"3\" paint-order=\"stroke\">{}</text>",
-                left + 10.0,
-                top + 14.0 + 16.0 * f64::from(legend),
+                Self::LEFT + 10.0,
+                Self::TOP + 14.0 + 16.0 * f64::from(*legend),
                 line.colour,
                 esc(&line.label)
             );
-            legend += 1;
+            *legend += 1;
         }
     }
-    for (mx, my, label, colour) in markers {
+
+    /// A marker: a ringed point with its label beside it and its value on hover.
+    fn marker(&self, s: &mut String, (mx, my, label, colour): &Marker) {
         let _ = write!(
             s,
             "<circle cx=\"{:.1}\" cy=\"{:.1}\" r=\"4\" fill=\"white\" stroke=\"{colour}\" \
              stroke-width=\"2\"><title>{}: {my:.2}</title></circle>\
              <text x=\"{:.1}\" y=\"{:.1}\" fill=\"{colour}\" font-size=\"10\">{}</text>",
-            x(*mx),
-            y(*my),
+            self.x(*mx),
+            self.y(*my),
             esc(label),
-            x(*mx) + 6.0,
-            y(*my) - 6.0,
+            self.x(*mx) + 6.0,
+            self.y(*my) - 6.0,
             esc(label)
         );
     }
-    s.push_str("</svg>\n");
-    s
 }
 
 /// A tick's label, with as many decimals as the step between ticks needs (none for whole steps,
