@@ -227,24 +227,43 @@ pub(super) fn grow_groups(
     target: usize,
     limits: Limits,
 ) -> Vec<Vec<usize>> {
-    let n = splats.len();
     let Some(index) = PointIndex::new(&splats.means) else {
         return Vec::new();
     };
-    let mut sums: Vec<Sums> = (0..n)
-        .map(|i| Sums::of(splats.means[i], weights[i].max(0.0)))
-        .collect();
-    // Each group's Σ w·c over its members' SH coefficients, in the place of the member that
-    // stands for it. In f32, half the memory of f64 (a paper-scale model's 250k splats of
-    // degree 3: 48 MB), and its rounding is far below the colour differences it compares.
-    let dims = 3 * splats.coeffs_per_splat();
-    let mut colour: Vec<f32> = splats
-        .sh
-        .as_flattened()
-        .chunks_exact(dims)
-        .zip(weights)
-        .flat_map(|(c, &w)| c.iter().map(move |&v| w.max(0.0) as f32 * v))
-        .collect();
+    let mut clustering = Clustering::new(splats, weights, neighbour_graph(splats, &index), limits);
+    // A heap of eight children a node (`dary_heap`) rather than std's binary one: the queue
+    // holds millions of unions, most of them stale by the time they come up, and popping one
+    // walked twenty-odd levels of a 100 MB array; with half as many levels, each reading eight
+    // neighbouring entries, a paper-scale plan took a quarter less time. No two unions in the
+    // queue compare equal (the same pair queued again has grown in size), so any heap pops
+    // them in the same order.
+    let mut queue = OctonaryHeap::from(clustering.first_unions());
+    let mut groups = splats.len();
+    while groups > target {
+        let Some(u) = queue.pop() else { break };
+        if !clustering.is_current(&u) {
+            continue;
+        }
+        let (a, b) = (u.a as usize, u.b as usize);
+        clustering.join(a, b);
+        groups -= 1;
+        for &k in &clustering.neighbours[a] {
+            queue.extend(clustering.union(a, k as usize));
+        }
+    }
+    clustering
+        .members
+        .into_iter()
+        .filter(|m| m.len() > 1)
+        .map(|mut m| {
+            m.sort_by(|&a, &b| weights[b].total_cmp(&weights[a]).then(a.cmp(&b)));
+            m
+        })
+        .collect()
+}
+
+/// Each splat's [`NEIGHBOURS`] nearest, joined both ways: sorted lists without repeats.
+fn neighbour_graph(splats: &Splats, index: &PointIndex) -> Vec<Vec<u32>> {
     // The queries on rayon's threads (a paper-scale model's 250k take seconds on one), joined
     // both ways in order after them, so the graph is the same on any number of threads.
     let nearest: Vec<Vec<usize>> = splats
@@ -252,7 +271,7 @@ pub(super) fn grow_groups(
         .par_iter()
         .map(|&p| index.nearest_n(p, NEIGHBOURS + 1))
         .collect();
-    let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); n];
+    let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); splats.len()];
     for (i, near) in nearest.into_iter().enumerate() {
         for j in near.into_iter().filter(|&j| j != i) {
             neighbours[i].push(j as u32);
@@ -263,61 +282,103 @@ pub(super) fn grow_groups(
         list.sort_unstable();
         list.dedup();
     }
-    let mut versions = vec![0_u32; n];
-    let union = |sums: &[Sums], colour: &[f32], versions: &[u32], a: usize, b: usize| {
+    neighbours
+}
+
+/// The groups as they grow: each stands in the place of one member, which holds its sums,
+/// colour, version, neighbours and member list; a joined group's place is left empty.
+struct Clustering {
+    limits: Limits,
+    /// SH coefficients a splat (three channels).
+    dims: usize,
+    sums: Vec<Sums>,
+    /// Each group's Σ w·c over its members' SH coefficients, `dims` a group. In f32, half the
+    /// memory of f64 (a paper-scale model's 250k splats of degree 3: 48 MB), and its rounding
+    /// is far below the colour differences it compares.
+    colour: Vec<f32>,
+    /// Joins the group has taken in: a queued union of an older version is stale.
+    versions: Vec<u32>,
+    /// The neighbouring groups (each list a set: its order is never read).
+    neighbours: Vec<Vec<u32>>,
+    members: Vec<Vec<usize>>,
+    alive: Vec<bool>,
+}
+
+impl Clustering {
+    /// Every splat a group of its own.
+    fn new(splats: &Splats, weights: &[f64], neighbours: Vec<Vec<u32>>, limits: Limits) -> Self {
+        let n = splats.len();
+        let dims = 3 * splats.coeffs_per_splat();
+        Self {
+            limits,
+            dims,
+            sums: (0..n)
+                .map(|i| Sums::of(splats.means[i], weights[i].max(0.0)))
+                .collect(),
+            colour: splats
+                .sh
+                .as_flattened()
+                .chunks_exact(dims)
+                .zip(weights)
+                .flat_map(|(c, &w)| c.iter().map(move |&v| w.max(0.0) as f32 * v))
+                .collect(),
+            versions: vec![0; n],
+            neighbours,
+            members: (0..n).map(|i| vec![i]).collect(),
+            alive: vec![true; n],
+        }
+    }
+
+    /// The union of groups `a` and `b` as they are now, or `None` where it is not allowed.
+    fn union(&self, a: usize, b: usize) -> Option<Union> {
         let (a, b) = (usize::min(a, b), usize::max(a, b));
-        let of = |g: usize| &colour[g * dims..(g + 1) * dims];
-        union_cost(&sums[a], &sums[b], of(a), of(b), limits).map(|(bent, cost)| Union {
+        let of = |g: usize| &self.colour[g * self.dims..(g + 1) * self.dims];
+        let (sa, sb) = (&self.sums[a], &self.sums[b]);
+        union_cost(sa, sb, of(a), of(b), self.limits).map(|(bent, cost)| Union {
             bent,
             cost,
-            size: (sums[a].n + sums[b].n) as u32,
+            size: (sa.n + sb.n) as u32,
             a: a as u32,
             b: b as u32,
-            versions: (versions[a], versions[b]),
+            versions: (self.versions[a], self.versions[b]),
         })
-    };
-    // The first unions costed on rayon's threads; the queue's order is total, so building it
-    // from them in any order gives the same plan.
-    let first: Vec<Union> = neighbours
-        .par_iter()
-        .enumerate()
-        .flat_map_iter(|(a, list)| {
-            let (sums, colour, versions) = (&sums, &colour, &versions);
-            list.iter()
-                .filter(move |&&b| a < b as usize)
-                .filter_map(move |&b| union(sums, colour, versions, a, b as usize))
-        })
-        .collect();
-    // A heap of eight children a node (`dary_heap`) rather than std's binary one: the queue
-    // holds millions of unions, most of them stale by the time they come up, and popping one
-    // walked twenty-odd levels of a 100 MB array; with half as many levels, each reading eight
-    // neighbouring entries, a paper-scale plan took a quarter less time. No two unions in the
-    // queue compare equal (the same pair queued again has grown in size), so any heap pops
-    // them in the same order.
-    let mut queue = OctonaryHeap::from(first);
-    let mut alive = vec![true; n];
-    let mut members: Vec<Vec<usize>> = (0..n).map(|i| vec![i]).collect();
-    let mut groups = n;
-    while groups > target {
-        let Some(u) = queue.pop() else { break };
+    }
+
+    /// The unions of every pair of neighbours, costed on rayon's threads; the queue's order is
+    /// total, so building it from them in any order gives the same plan.
+    fn first_unions(&self) -> Vec<Union> {
+        self.neighbours
+            .par_iter()
+            .enumerate()
+            .flat_map_iter(|(a, list)| {
+                list.iter()
+                    .filter(move |&&b| a < b as usize)
+                    .filter_map(move |&b| self.union(a, b as usize))
+            })
+            .collect()
+    }
+
+    /// Whether both of the union's groups are alive and as they were when it was costed.
+    fn is_current(&self, u: &Union) -> bool {
         let (a, b) = (u.a as usize, u.b as usize);
-        if !(alive[a] && alive[b]) || u.versions != (versions[a], versions[b]) {
-            continue;
-        }
-        // Group b joins group a.
-        alive[b] = false;
-        groups -= 1;
-        sums[a] = sums[a].plus(&sums[b]);
+        self.alive[a] && self.alive[b] && u.versions == (self.versions[a], self.versions[b])
+    }
+
+    /// Group `b` joins group `a`: its sums, colour and members, and its neighbours, which
+    /// now neighbour `a` instead.
+    fn join(&mut self, a: usize, b: usize) {
+        let dims = self.dims;
+        self.alive[b] = false;
+        self.sums[a] = self.sums[a].plus(&self.sums[b]);
         for d in 0..dims {
-            colour[a * dims + d] += colour[b * dims + d];
+            self.colour[a * dims + d] += self.colour[b * dims + d];
         }
-        versions[a] += 1;
-        let joined = std::mem::take(&mut members[b]);
-        members[a].extend(joined);
-        let of_b = std::mem::take(&mut neighbours[b]);
-        // b's neighbours now neighbour a instead (each list a set: its order is never read).
+        self.versions[a] += 1;
+        let joined = std::mem::take(&mut self.members[b]);
+        self.members[a].extend(joined);
+        let of_b = std::mem::take(&mut self.neighbours[b]);
         for &k in of_b.iter().filter(|&&k| k as usize != a) {
-            let list = &mut neighbours[k as usize];
+            let list = &mut self.neighbours[k as usize];
             let had_a = list.contains(&(a as u32));
             if let Some(at) = list.iter().position(|&x| x as usize == b) {
                 if had_a {
@@ -327,23 +388,12 @@ pub(super) fn grow_groups(
                 }
             }
         }
-        let mut of_a: Vec<u32> = neighbours[a].iter().copied().chain(of_b).collect();
+        let mut of_a: Vec<u32> = self.neighbours[a].iter().copied().chain(of_b).collect();
         of_a.retain(|&k| k as usize != a && k as usize != b);
         of_a.sort_unstable();
         of_a.dedup();
-        for &k in &of_a {
-            queue.extend(union(&sums, &colour, &versions, a, k as usize));
-        }
-        neighbours[a] = of_a;
+        self.neighbours[a] = of_a;
     }
-    members
-        .into_iter()
-        .filter(|m| m.len() > 1)
-        .map(|mut m| {
-            m.sort_by(|&a, &b| weights[b].total_cmp(&weights[a]).then(a.cmp(&b)));
-            m
-        })
-        .collect()
 }
 
 #[cfg(test)]
