@@ -46,6 +46,11 @@ pub(crate) struct Bins {
 
 impl Bins {
     /// Bins the splats whose `visible` flag is set; `rects` are [x0, x1, y0, y1) in tiles.
+    ///
+    /// The counting sort runs in parallel over a fixed number of slices of the depth order:
+    /// each slice counts its pairs per tile, every (tile, slice) gets the next run of its
+    /// tile's list, and each slice fills its runs in its own (depth) order. The result is the
+    /// one stable order, whatever the thread count.
     pub fn build(
         &mut self,
         proj: &[Projected],
@@ -54,7 +59,6 @@ impl Bins {
         tiles_x: u32,
         tiles_y: u32,
     ) {
-        let n_tiles = (tiles_x * tiles_y) as usize;
         self.collect_visible(proj, visible);
         sort_by_depth(
             &mut self.order,
@@ -67,12 +71,15 @@ impl Bins {
                 .par_iter()
                 .map(|&key| rects[(key & 0xffff_ffff) as usize]),
         );
-
-        // The counting sort runs in parallel over a fixed number of slices of `order`: each
-        // slice counts its pairs per tile, every (tile, slice) gets the next run of its tile's
-        // list, and each slice fills its runs in its own (depth) order. The result is the one
-        // stable order, whatever the thread count.
         let slice_len = self.order.len().div_ceil(BIN_SLICES).max(1);
+        self.count_pairs(slice_len, tiles_x, tiles_y);
+        let pairs = self.lay_out_runs((tiles_x * tiles_y) as usize);
+        self.scatter(slice_len, pairs, tiles_x);
+    }
+
+    /// Counts each slice's pairs per tile into `slice_counts` (slice-major).
+    fn count_pairs(&mut self, slice_len: usize, tiles_x: u32, tiles_y: u32) {
+        let n_tiles = (tiles_x * tiles_y) as usize;
         let n_slices = self.order.len().div_ceil(slice_len);
         self.slice_counts.clear();
         self.slice_counts.resize(n_slices * n_tiles, 0);
@@ -115,10 +122,14 @@ impl Bins {
                     }
                 }
             });
-        // Turn the counts into each (tile, slice) run's start, tile-major then slice order:
-        // each tile's total, the tiles' starts, then each slice's start within its tile. Every
-        // pass runs along one slice's counts (tile by tile down the slices, the loop read 16
-        // strided cache lines a tile).
+    }
+
+    /// Turns the counts into each (tile, slice) run's start, tile-major then slice order: each
+    /// tile's total, the tiles' starts (`offsets`), then each slice's start within its tile
+    /// (in place of its count in `slice_counts`). Returns the number of pairs.
+    fn lay_out_runs(&mut self, n_tiles: usize) -> usize {
+        // Every pass runs along one slice's counts (tile by tile down the slices, the loop read
+        // 16 strided cache lines a tile).
         self.offsets.clear();
         self.offsets.resize(n_tiles + 1, 0);
         for counts in self.slice_counts.chunks(n_tiles) {
@@ -142,8 +153,14 @@ impl Bins {
                 *start += n;
             }
         }
-        // Not cleared: the scatter below writes every position.
-        self.list.resize(next, 0);
+        next
+    }
+
+    /// Writes each slice's splats into its runs of `list`, in depth order.
+    fn scatter(&mut self, slice_len: usize, pairs: usize, tiles_x: u32) {
+        let n_tiles = self.offsets.len() - 1;
+        // Not cleared: the scatter writes every position.
+        self.list.resize(pairs, 0);
         let list = DisjointWrites::new(&mut self.list);
         self.order
             .par_chunks(slice_len)
