@@ -160,8 +160,23 @@ fn write_model_files(
 
 /// Removes the files of `sparse/0/` that would make the dataset look usable.
 fn remove_stale_model(writer: &DatasetWriter) -> Result<(), Error> {
+    remove_model_files(writer.sparse_dir())
+}
+
+/// Removes the COLMAP model of the dataset in `dir` (the files of `dir/sparse/0/` that make it
+/// usable), where there is one: a run that is about to write the dataset again, or that fails
+/// before it does, must not leave an earlier input's dataset looking complete.
+///
+/// # Errors
+/// [`Error::Io`] naming a file that is there and could not be removed.
+pub fn remove_dataset_model(dir: &Path) -> Result<(), Error> {
+    remove_model_files(&dir.join("sparse").join("0"))
+}
+
+/// Removes the files of [`STALE_MODEL_FILES`] from `sparse_dir` that are there.
+fn remove_model_files(sparse_dir: &Path) -> Result<(), Error> {
     for name in STALE_MODEL_FILES {
-        let path = writer.sparse_dir().join(name);
+        let path = sparse_dir.join(name);
         match std::fs::remove_file(&path) {
             Ok(()) => {}
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}

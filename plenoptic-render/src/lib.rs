@@ -61,7 +61,7 @@ mod zbuffer;
 
 pub use closing::{closing_point_size, surface_spacing};
 pub use cloud::render_cloud;
-pub use dataset::{DatasetOptions, dataset_image_name, write_dataset};
+pub use dataset::{DatasetOptions, dataset_image_name, remove_dataset_model, write_dataset};
 pub use degenerate::DegenerateError;
 pub use error::Error;
 pub use image::ViewImage;

@@ -368,6 +368,12 @@ fn bad_input_fails_clearly_and_leaves_no_complete_looking_output() {
     std::fs::write(out.join("model/splats.spz"), b"old").unwrap();
     std::fs::write(out.join("model/splats-sparse.glb"), b"old").unwrap();
     std::fs::write(out.join("report/report.html"), b"old").unwrap();
+    // The report's viewer (a copy of the model that `transcode view` serves) and the dataset's
+    // COLMAP model of an earlier input must not survive either.
+    std::fs::create_dir_all(out.join("report/viewer")).unwrap();
+    std::fs::write(out.join("report/viewer/model.spz"), b"old").unwrap();
+    std::fs::create_dir_all(out.join("dataset/sparse/0")).unwrap();
+    std::fs::write(out.join("dataset/sparse/0/images.bin"), b"old").unwrap();
     let bad = data().join("bad/pond.0.ply");
     let err = transcode::pipeline::run(&bad, &out, &small_config(), &transcode::progress::ignore)
         .unwrap_err();
@@ -377,6 +383,8 @@ fn bad_input_fails_clearly_and_leaves_no_complete_looking_output() {
     assert!(!out.join("model/splats.spz").exists());
     assert!(!out.join("model/splats-sparse.glb").exists());
     assert!(!out.join("report/report.html").exists());
+    assert!(!out.join("report/viewer").exists());
+    assert!(!out.join("dataset/sparse/0/images.bin").exists());
 
     let missing = tmp.path().join("nope.ply");
     let msg = transcode::pipeline::run(
@@ -388,6 +396,38 @@ fn bad_input_fails_clearly_and_leaves_no_complete_looking_output() {
     .unwrap_err()
     .to_string();
     assert!(msg.contains("nope.ply"), "{msg}");
+}
+
+#[test]
+fn an_input_in_a_folder_the_run_clears_is_refused_and_kept() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    let cloud = std::fs::read(data().join("meshes/misc/points.ply")).unwrap();
+    for inside in ["model/splats.ply", "report/input.ply", "dataset/points.ply"] {
+        let input = out.join(inside);
+        std::fs::create_dir_all(input.parent().unwrap()).unwrap();
+        std::fs::write(&input, &cloud).unwrap();
+        let msg =
+            transcode::pipeline::run(&input, &out, &small_config(), &transcode::progress::ignore)
+                .unwrap_err()
+                .to_string();
+        assert!(msg.contains(inside.split('/').next().unwrap()), "{msg}");
+        assert!(msg.contains("choose another --out"), "{msg}");
+        assert_eq!(
+            std::fs::read(&input).unwrap(),
+            cloud,
+            "{inside} was touched"
+        );
+    }
+    // Beside those folders (as `transcode demo` writes `input/demo.ply`) it is the run's input:
+    // this one fails later, for having too few points, not for where it is.
+    let input = out.join("input/points.ply");
+    std::fs::create_dir_all(input.parent().unwrap()).unwrap();
+    std::fs::write(&input, &cloud).unwrap();
+    let msg = transcode::pipeline::run(&input, &out, &small_config(), &transcode::progress::ignore)
+        .map(|_| String::new())
+        .unwrap_or_else(|e| e.to_string());
+    assert!(!msg.contains("choose another --out"), "{msg}");
 }
 
 /// Runs the pipeline on `input` into a folder holding an earlier run's model, report and dataset,

@@ -70,6 +70,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         depth: args.depth,
     };
 
+    // An earlier dataset in the folder must not look complete if this one fails before it
+    // is written.
+    views::remove_dataset_model(&args.out)
+        .with_context(|| format!("cannot clear the dataset {}", args.out.display()))?;
     let model = plenoptic_io::load(&args.input)
         .with_context(|| format!("cannot read {}", args.input.display()))?;
     plenoptic_render::degenerate::check_model(&args.input, &model)?;

@@ -13,6 +13,17 @@ pub enum PipelineError {
     /// The input could not be read.
     #[error("cannot load the input: {0}")]
     Load(Box<plenoptic_io::Error>),
+    /// The input lies where the run deletes or overwrites files before reading it.
+    #[error(
+        "the input {input} lies in {folder}, which a run in this output folder clears before it \
+         reads its input: move the input out of it, or choose another --out"
+    )]
+    InputInOutput {
+        /// The input, resolved.
+        input: PathBuf,
+        /// The folder the run clears (the output folder itself for its saved state).
+        folder: PathBuf,
+    },
     /// The input holds nothing to render.
     #[error("the input {0} holds no points or triangles")]
     EmptyInput(PathBuf),

@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 use super::error::{PipelineError, io_err};
 use crate::config::{Config, InitMode};
 use crate::progress::{Event, Observer};
+use crate::report::VIEWER_DIR;
 use crate::resume::{self, InputStamp, ResumeError, RunState, Status};
 
 /// Every extension a model file of a run may have: a run deletes them all before it starts.
@@ -66,9 +67,48 @@ impl Layout {
         for marker in models.chain(reports) {
             remove_file_if_present(&marker)?;
         }
+        // The report's viewer holds a copy of the old model: `transcode view` would serve it.
+        remove_dir_if_present(&self.report_dir.join(VIEWER_DIR))?;
         if fresh {
             remove_file_if_present(&self.out.join(resume::STATE_FILE))?;
             remove_dir_if_present(&self.checkpoints)?;
+            // An earlier input's dataset is not this run's (a resumed run keeps its own).
+            plenoptic_render::remove_dataset_model(&self.dataset_dir)
+                .map_err(|e| PipelineError::Views(Box::new(e)))?;
+        }
+        Ok(())
+    }
+
+    /// Refuses an input that lies in one of the folders a run clears (`model/`, `report/`,
+    /// `dataset/`, the checkpoints) or is its saved state: the run would delete or overwrite
+    /// it before reading it. An input that cannot be resolved is left to the loader to report.
+    pub(super) fn check_input_outside(&self, input: &Path) -> Result<(), PipelineError> {
+        let Ok(input) = input.canonicalize() else {
+            return Ok(());
+        };
+        let cleared = [
+            &self.model_dir,
+            &self.report_dir,
+            &self.dataset_dir,
+            &self.checkpoints,
+        ];
+        for folder in cleared {
+            if folder
+                .canonicalize()
+                .is_ok_and(|folder| input.starts_with(folder))
+            {
+                return Err(PipelineError::InputInOutput {
+                    input,
+                    folder: folder.clone(),
+                });
+            }
+        }
+        let state = self.out.join(resume::STATE_FILE);
+        if state.canonicalize().is_ok_and(|state| state == input) {
+            return Err(PipelineError::InputInOutput {
+                input,
+                folder: self.out.clone(),
+            });
         }
         Ok(())
     }

@@ -161,6 +161,7 @@ fn execute(
     cfg.validate()?;
     let started = Instant::now();
     let layout = Layout::new(out);
+    layout.check_input_outside(input)?;
     layout.clear_results(saved.is_none())?;
     let mut clock = StageClock::default();
 
