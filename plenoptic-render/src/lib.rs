@@ -73,4 +73,6 @@ pub use output::{
     BitDepth, ViewFiles, write_alpha_png, write_depth_exr, write_rgb_png, write_view_images,
 };
 pub use render::{ModelRenderer, render_each, render_model, render_views, render_views_with};
-pub use rig::{FramingSphere, Rig, RigConfig, bounding_sphere, build_rig, fibonacci_rig};
+pub use rig::{
+    FramingSphere, MAX_CAMERAS, Rig, RigConfig, bounding_sphere, build_rig, fibonacci_rig,
+};

@@ -143,9 +143,9 @@ impl ViewOptions {
                 self.exponent
             )));
         }
-        if self.background.iter().any(|c| !c.is_finite()) {
+        if !self.background.iter().all(|c| (0.0..=1.0).contains(c)) {
             return Err(Error::InvalidOption(format!(
-                "background must be finite, got {:?}",
+                "background must be a colour with channels in [0, 1], got {:?}",
                 self.background
             )));
         }

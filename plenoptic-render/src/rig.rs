@@ -63,6 +63,11 @@ impl FramingSphere {
     }
 }
 
+/// The most cameras a rig may have, training or held-out: over two hundred times the 44 of the
+/// default rig. A rig and its views are held in memory, and a mistyped count (10⁸) would fill
+/// it before the first view is drawn.
+pub const MAX_CAMERAS: usize = 10_000;
+
 impl RigConfig {
     /// Checks the ranges: cameras and a size, a field of view in (0°, 170°), a margin in
     /// [0, 0.9), held-out distances (when there are held-out cameras) and a framing sphere that
@@ -73,8 +78,20 @@ impl RigConfig {
     /// with it.
     pub fn validate(&self) -> Result<(), (String, String)> {
         let bad = |key: &str, problem: String| Err((format!("rig.{key}"), problem));
-        if self.cameras == 0 {
-            return bad("cameras", "must be at least 1".into());
+        if !(1..=MAX_CAMERAS).contains(&self.cameras) {
+            return bad(
+                "cameras",
+                format!("must be in 1..={MAX_CAMERAS}, got {}", self.cameras),
+            );
+        }
+        if self.heldout_cameras > MAX_CAMERAS {
+            return bad(
+                "heldout_cameras",
+                format!(
+                    "must be at most {MAX_CAMERAS}, got {}",
+                    self.heldout_cameras
+                ),
+            );
         }
         if !((1..=16_384).contains(&self.width) && (1..=16_384).contains(&self.height)) {
             return bad(
@@ -309,7 +326,14 @@ mod tests {
                     cameras: 0,
                     ..RigConfig::default()
                 },
-                "`rig.cameras` must be at least 1",
+                "`rig.cameras` must be in 1..=10000, got 0",
+            ),
+            (
+                RigConfig {
+                    cameras: 100_000_000,
+                    ..RigConfig::default()
+                },
+                "`rig.cameras` must be in 1..=10000, got 100000000",
             ),
             (
                 RigConfig {

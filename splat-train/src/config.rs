@@ -47,6 +47,45 @@ impl Default for LearningRates {
     }
 }
 
+impl LearningRates {
+    /// Checks the ranges: every rate in [0, 1], the higher bands' divisor at least 1.
+    ///
+    /// # Errors
+    /// The offending key (`lr.…`) and what is wrong with it.
+    pub fn validate(&self) -> Result<(), (String, String)> {
+        let rates = [
+            ("position_init", self.position_init),
+            ("position_final", self.position_final),
+            ("sh_dc", self.sh_dc),
+            ("opacity", self.opacity),
+            ("scale", self.scale),
+            ("rotation", self.rotation),
+        ];
+        for (key, v) in rates {
+            if !(v.is_finite() && (0.0..=1.0).contains(&v)) {
+                return Err((
+                    format!("lr.{key}"),
+                    format!("must be a learning rate in [0, 1], got {v}"),
+                ));
+            }
+        }
+        let d = self.sh_rest_divisor;
+        if !(d.is_finite() && d >= 1.0) {
+            return Err((
+                "lr.sh_rest_divisor".into(),
+                format!("must be a finite number ≥ 1, got {d}"),
+            ));
+        }
+        if self.position_max_steps == Some(0) {
+            return Err((
+                "lr.position_max_steps".into(),
+                "must be at least 1 (leave it out for the run's step count)".into(),
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// Attribute groups held fixed during training: a frozen group is never written.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(default)]
@@ -85,6 +124,38 @@ pub struct DensifyConfig {
     pub max_world_scale: f32,
     /// Never grow beyond this many splats; candidates with the largest gradients go first.
     pub max_splats: usize,
+}
+
+impl DensifyConfig {
+    /// Checks the ranges: a step interval of at least 1, finite positive thresholds, room for
+    /// at least one splat.
+    ///
+    /// # Errors
+    /// The offending key (`densify.…`) and what is wrong with it.
+    pub fn validate(&self) -> Result<(), (String, String)> {
+        let bad = |key: &str, problem: String| Err((format!("densify.{key}"), problem));
+        if self.interval == 0 {
+            return bad("interval", "must be at least 1".into());
+        }
+        let positive = [
+            ("grad_threshold", self.grad_threshold),
+            ("percent_dense", self.percent_dense),
+            ("max_world_scale", self.max_world_scale),
+        ];
+        for (key, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return bad(key, format!("must be a finite number > 0, got {v}"));
+            }
+        }
+        let m = self.min_opacity;
+        if !(m.is_finite() && (0.0..1.0).contains(&m)) {
+            return bad("min_opacity", format!("must be in [0, 1), got {m}"));
+        }
+        if self.max_splats == 0 {
+            return bad("max_splats", "must be at least 1".into());
+        }
+        Ok(())
+    }
 }
 
 impl Default for DensifyConfig {
@@ -211,33 +282,13 @@ impl TrainConfig {
     /// # Errors
     /// [`Error::Config`] naming the field and the value.
     pub fn validate(&self) -> Result<(), Error> {
-        let rate = |name: &str, v: f32| {
-            if v.is_finite() && (0.0..=1.0).contains(&v) {
-                Ok(())
-            } else {
-                Err(Error::Config(format!(
-                    "{name} = {v} is not a learning rate in [0, 1]"
-                )))
-            }
-        };
-        let lr = &self.lr;
-        rate("lr.position_init", lr.position_init)?;
-        rate("lr.position_final", lr.position_final)?;
-        rate("lr.sh_dc", lr.sh_dc)?;
-        rate("lr.opacity", lr.opacity)?;
-        rate("lr.scale", lr.scale)?;
-        rate("lr.rotation", lr.rotation)?;
-        if !(lr.sh_rest_divisor.is_finite() && lr.sh_rest_divisor >= 1.0) {
-            return Err(Error::Config(format!(
-                "lr.sh_rest_divisor = {} must be at least 1",
-                lr.sh_rest_divisor
-            )));
-        }
+        let field = |(key, problem): (String, String)| Error::Config(format!("{key}: {problem}"));
+        self.lr.validate().map_err(field)?;
         let a = &self.adam;
         if !((0.0..1.0).contains(&a.beta1) && (0.0..1.0).contains(&a.beta2) && a.eps > 0.0) {
             return Err(Error::Config(format!("Adam parameters {a:?} out of range")));
         }
-        if !(0.0..=1.0).contains(&self.ssim_weight) {
+        if !(self.ssim_weight.is_finite() && (0.0..=1.0).contains(&self.ssim_weight)) {
             return Err(Error::Config(format!(
                 "ssim_weight = {} not in [0, 1]",
                 self.ssim_weight
@@ -266,20 +317,7 @@ impl TrainConfig {
                         .into(),
                 ));
             }
-            if d.interval == 0 {
-                return Err(Error::Config("densify.interval must be at least 1".into()));
-            }
-            if !(d.grad_threshold.is_finite() && d.grad_threshold > 0.0) {
-                return Err(Error::Config(format!(
-                    "densify.grad_threshold = {} must be positive",
-                    d.grad_threshold
-                )));
-            }
-            if d.max_splats == 0 {
-                return Err(Error::Config(
-                    "densify.max_splats must be at least 1".into(),
-                ));
-            }
+            d.validate().map_err(field)?;
         }
         if let Some(w) = self.warmup
             && w.factor < 2

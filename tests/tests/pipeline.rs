@@ -430,6 +430,23 @@ fn an_input_in_a_folder_the_run_clears_is_refused_and_kept() {
     assert!(!msg.contains("choose another --out"), "{msg}");
 }
 
+#[test]
+fn a_run_without_held_out_views_is_refused_before_it_renders() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    let mut cfg = small_config();
+    cfg.rig.heldout_cameras = 0;
+    let input = data().join("meshes/misc/cube_binary.ply");
+    let msg = transcode::pipeline::run(&input, &out, &cfg, &transcode::progress::ignore)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        msg.contains("`rig.heldout_cameras` must be at least 1"),
+        "{msg}"
+    );
+    assert!(!out.join("dataset").exists(), "rendered before refusing");
+}
+
 /// Runs the pipeline on `input` into a folder holding an earlier run's model, report and dataset,
 /// expects an error containing `expected`, and checks that nothing complete-looking is left.
 fn refused(input: &Path, out: &Path, cfg: &Config, expected: &str) -> String {

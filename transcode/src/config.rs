@@ -388,7 +388,35 @@ impl Config {
         self.budget.validate().map_err(invalid)?;
         self.init.validate().map_err(invalid)?;
         self.training.validate().map_err(invalid)?;
+        self.eval.validate().map_err(invalid)?;
         self.output.validate().map_err(invalid)
+    }
+}
+
+/// The longest time a budget or an interval may be given, in seconds: about 32 years. Anything
+/// longer is a typo, and past about 1.8 × 10¹⁹ s a `Duration` cannot hold it.
+pub const MAX_SECONDS: f64 = 1e9;
+
+/// Checks a number of seconds: finite, at most [`MAX_SECONDS`], and positive (or zero where
+/// `zero_allowed`).
+///
+/// # Errors
+/// What is wrong with it, as the end of a sentence naming the setting.
+pub fn check_seconds(s: f64, zero_allowed: bool) -> Result<(), String> {
+    let low_ok = s > 0.0 || (zero_allowed && s == 0.0);
+    if s.is_finite() && low_ok && s <= MAX_SECONDS {
+        Ok(())
+    } else {
+        // (Exponent form for the large values: 1e300 written out is 301 digits.)
+        let got = if s.abs() < 1e12 {
+            format!("{s}")
+        } else {
+            format!("{s:e}")
+        };
+        Err(format!(
+            "must be a number of seconds {} and at most {MAX_SECONDS:e}, got {got}",
+            if zero_allowed { "≥ 0" } else { "> 0" }
+        ))
     }
 }
 
@@ -406,14 +434,26 @@ impl TrainingConfig {
         if self.iterations == 0 {
             return bad("training.iterations", "must be at least 1");
         }
-        if let Some(b) = self.time_budget_s
-            && !(b > 0.0 && b.is_finite())
-        {
+        if let Some(b) = self.time_budget_s {
+            check_seconds(b, false).or_else(|p| bad("training.time_budget_s", p))?;
+        }
+        let w = self.ssim_weight;
+        if !(w.is_finite() && (0.0..=1.0).contains(&w)) {
             return bad(
-                "training.time_budget_s",
-                format!("must be positive, got {b}"),
+                "training.ssim_weight",
+                format!("must be in [0, 1], got {w}"),
             );
         }
+        let w = self.alpha_loss;
+        if !(w.is_finite() && w >= 0.0) {
+            return bad(
+                "training.alpha_loss",
+                format!("must be a finite number ≥ 0, got {w}"),
+            );
+        }
+        let training = |(key, problem): (String, String)| (format!("training.{key}"), problem);
+        self.lr.validate().map_err(training)?;
+        self.densify.validate().map_err(training)?;
         if self.history_every == 0 {
             return bad("training.history_every", "must be at least 1");
         }
@@ -433,6 +473,30 @@ impl TrainingConfig {
     }
 }
 
+impl EvalConfig {
+    /// Checks the ranges.
+    ///
+    /// # Errors
+    /// The offending key (`eval.…`) and what is wrong with it.
+    pub fn validate(&self) -> Result<(), (String, String)> {
+        let f = self.floater_spacings;
+        if !(f.is_finite() && f > 0.0) {
+            return bad(
+                "eval.floater_spacings",
+                format!("must be a finite number of point spacings > 0, got {f}"),
+            );
+        }
+        let a = self.alpha_threshold;
+        if !(a.is_finite() && (0.0..1.0).contains(&a)) {
+            return bad(
+                "eval.alpha_threshold",
+                format!("must be in [0, 1) (alpha above it counts as covered), got {a}"),
+            );
+        }
+        Ok(())
+    }
+}
+
 impl OutputConfig {
     /// Checks the ranges.
     ///
@@ -446,14 +510,8 @@ impl OutputConfig {
                 format!("must be 3 (gzip) or 4 (zstd streams), got {spz}"),
             );
         }
-        let every = self.checkpoint_interval_s;
-        if !(every >= 0.0 && every.is_finite()) {
-            return bad(
-                "output.checkpoint_interval_s",
-                format!("must be a number of seconds ≥ 0, got {every}"),
-            );
-        }
-        Ok(())
+        check_seconds(self.checkpoint_interval_s, true)
+            .or_else(|p| bad("output.checkpoint_interval_s", p))
     }
 }
 
@@ -583,6 +641,11 @@ mod tests {
     fn every_section_is_checked_naming_its_key() {
         for (text, key) in [
             ("[rig]\ncameras = 0\n", "`rig.cameras`"),
+            ("[rig]\ncameras = 100000000\n", "`rig.cameras`"),
+            (
+                "[rig]\nheldout_cameras = 100000000\n",
+                "`rig.heldout_cameras`",
+            ),
             ("[rig]\nheldout_distances = []\n", "`rig.heldout_distances`"),
             ("[sequence]\nwarm_share = 0.0\n", "`sequence.warm_share`"),
             ("[renderer]\nsupersample = 9\n", "`renderer`"),
@@ -596,6 +659,50 @@ mod tests {
                 "`training.history_every`",
             ),
             ("[output]\nspz_version = 2\n", "`output.spz_version`"),
+            // Found by an adversarial sweep: NaN, infinities and negatives that passed
+            // `config --check` (two of them panicked the run, the eval ones gave wrong metrics).
+            (
+                "[training]\ntime_budget_s = 1e300\n",
+                "`training.time_budget_s`",
+            ),
+            ("[training]\nssim_weight = nan\n", "`training.ssim_weight`"),
+            ("[training]\nalpha_loss = -1.0\n", "`training.alpha_loss`"),
+            ("[training.lr]\nsh_dc = inf\n", "`training.lr.sh_dc`"),
+            (
+                "[training.lr]\nposition_final = nan\n",
+                "`training.lr.position_final`",
+            ),
+            (
+                "[training.densify]\ngrad_threshold = nan\n",
+                "`training.densify.grad_threshold`",
+            ),
+            (
+                "[training.densify]\npercent_dense = -1.0\n",
+                "`training.densify.percent_dense`",
+            ),
+            (
+                "[training.densify]\nmin_opacity = inf\n",
+                "`training.densify.min_opacity`",
+            ),
+            (
+                "[training.densify]\nmax_world_scale = nan\n",
+                "`training.densify.max_world_scale`",
+            ),
+            (
+                "[training.densify]\ninterval = 0\n",
+                "`training.densify.interval`",
+            ),
+            ("[eval]\nalpha_threshold = nan\n", "`eval.alpha_threshold`"),
+            ("[eval]\nalpha_threshold = 5.0\n", "`eval.alpha_threshold`"),
+            (
+                "[eval]\nfloater_spacings = -1.0\n",
+                "`eval.floater_spacings`",
+            ),
+            ("[renderer]\nbackground = [0.5, 2.0, -1.0]\n", "`renderer`"),
+            (
+                "[output]\ncheckpoint_interval_s = 1e300\n",
+                "`output.checkpoint_interval_s`",
+            ),
             (
                 "[output]\ncheckpoint_interval_s = -1.0\n",
                 "`output.checkpoint_interval_s`",

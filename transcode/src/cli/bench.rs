@@ -44,9 +44,9 @@ pub struct Args {
     steps: u32,
     /// Thread counts to time the rasteriser and the training step at, comma-separated (default:
     /// 1 and all of the machine's, which gives the serial fraction); the step is timed at each
-    /// count in rounds, the counts in turn.
-    #[arg(long, value_delimiter = ',')]
-    threads: Vec<usize>,
+    /// count in rounds, the counts in turn. Each in 1..=1024.
+    #[arg(long, value_delimiter = ',', value_parser = clap::value_parser!(u16).range(1..=1024))]
+    threads: Vec<u16>,
     /// Keep the generated frame at this path (default: a temporary file, removed after).
     #[arg(long)]
     frame: Option<PathBuf>,
@@ -123,7 +123,7 @@ fn options(args: &Args) -> BenchOptions {
         threads: if args.threads.is_empty() {
             vec![1, machine]
         } else {
-            args.threads.clone()
+            args.threads.iter().map(|&t| usize::from(t)).collect()
         },
     }
 }

@@ -77,7 +77,7 @@ pub struct Overrides {
     pub iterations: Option<u32>,
     /// Training time budget in seconds: the wall time from the speed probe to the last step,
     /// the splat budget's rounds and the checkpoints included (the schedule is fitted to it).
-    #[arg(long, value_name = "SECONDS")]
+    #[arg(long, value_name = "SECONDS", value_parser = parse_budget_seconds)]
     pub time_budget: Option<f64>,
     /// Score the held-out views every K training steps for the report's held-out curve.
     #[arg(long, value_name = "K")]
@@ -221,6 +221,20 @@ pub fn require_file(path: &Path, what: &str) -> anyhow::Result<()> {
         anyhow::bail!("{what} {} does not exist", path.display());
     }
     Ok(())
+}
+
+/// A time budget in seconds (`--time-budget`): finite, positive, at most
+/// [`transcode::config::MAX_SECONDS`].
+pub fn parse_budget_seconds(s: &str) -> Result<f64, String> {
+    let v: f64 = s.parse().map_err(|e| format!("{e}"))?;
+    transcode::config::check_seconds(v, false).map(|()| v)
+}
+
+/// An interval in seconds (`--checkpoint-interval`): finite, at least 0, at most
+/// [`transcode::config::MAX_SECONDS`].
+pub fn parse_interval_seconds(s: &str) -> Result<f64, String> {
+    let v: f64 = s.parse().map_err(|e| format!("{e}"))?;
+    transcode::config::check_seconds(v, true).map(|()| v)
 }
 
 fn parse_resolution(s: &str) -> Result<(u32, u32), String> {

@@ -26,7 +26,7 @@ pub struct Args {
     resume: bool,
     /// Save the training state at most this many seconds apart (`output.checkpoint_interval_s`,
     /// default 60; 0 = after every step).
-    #[arg(long, value_name = "SECONDS")]
+    #[arg(long, value_name = "SECONDS", value_parser = super::config::parse_interval_seconds)]
     checkpoint_interval: Option<f64>,
     /// Print nothing but errors.
     #[arg(long)]

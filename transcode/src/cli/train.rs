@@ -95,7 +95,12 @@ pub struct Args {
     pub checkpoint_every: u32,
     /// Also write `OUT/checkpoint.bin` whenever this many seconds of wall time have passed since
     /// the last one (0: after every step).
-    #[arg(long, value_name = "SECONDS", default_value_t = transcode::config::DEFAULT_CHECKPOINT_INTERVAL_S)]
+    #[arg(
+        long,
+        value_name = "SECONDS",
+        default_value_t = transcode::config::DEFAULT_CHECKPOINT_INTERVAL_S,
+        value_parser = super::config::parse_interval_seconds
+    )]
     pub checkpoint_interval: f64,
     /// Divide the image size by this factor (intrinsics are scaled to match).
     #[arg(long, default_value_t = 1.0)]
@@ -115,7 +120,7 @@ pub struct Args {
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Stop after this many seconds of training.
-    #[arg(long)]
+    #[arg(long, value_name = "SECONDS", value_parser = super::config::parse_budget_seconds)]
     pub time_budget: Option<f64>,
     /// Warm up on views reduced by this integer factor (≥ 2; 1 = no warm-up).
     #[arg(long, default_value_t = 1)]
@@ -272,12 +277,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 fn check_args(args: &Args) -> anyhow::Result<()> {
     if !(args.downscale.is_finite() && args.downscale >= 1.0) {
         bail!("--downscale {} must be at least 1", args.downscale);
-    }
-    if !(args.checkpoint_interval.is_finite() && args.checkpoint_interval >= 0.0) {
-        bail!(
-            "--checkpoint-interval {} must be a number of seconds ≥ 0",
-            args.checkpoint_interval
-        );
     }
     Ok(())
 }

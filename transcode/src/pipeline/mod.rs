@@ -159,6 +159,15 @@ fn execute(
     warm_start: Option<&WarmStart>,
 ) -> Result<Outcome, PipelineError> {
     cfg.validate()?;
+    if cfg.rig.heldout_cameras == 0 {
+        // The model is scored, and the splat budget judged, on the held-out views.
+        return Err(crate::config::ConfigError::Invalid {
+            path: None,
+            key: "rig.heldout_cameras".into(),
+            problem: "must be at least 1: a run scores its model on the held-out views".into(),
+        }
+        .into());
+    }
     let started = Instant::now();
     let layout = Layout::new(out);
     layout.check_input_outside(input)?;
