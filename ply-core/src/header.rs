@@ -123,6 +123,17 @@ impl Header {
             .enumerate()
             .find(|(_, e)| e.name == name)
     }
+
+    /// Whether the vertices carry 3D Gaussian Splatting's properties (`f_dc_0`, `opacity`,
+    /// `scale_0`, `rot_0`): a splat model rather than a point cloud or a mesh.
+    #[must_use]
+    pub fn holds_gaussian_splats(&self) -> bool {
+        self.element("vertex").is_some_and(|(_, v)| {
+            ["f_dc_0", "opacity", "scale_0", "rot_0"]
+                .iter()
+                .all(|n| v.properties.iter().any(|p| p.name == *n))
+        })
+    }
 }
 
 /// Parses the header at the start of `bytes` (the whole file, or at least its header).

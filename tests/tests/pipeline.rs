@@ -447,6 +447,19 @@ fn a_run_without_held_out_views_is_refused_before_it_renders() {
     assert!(!out.join("dataset").exists(), "rendered before refusing");
 }
 
+#[test]
+fn a_splat_model_as_input_is_refused_by_name() {
+    // Its vertices used to be read as a grey point cloud (the colour is in f_dc_*).
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    let model = data().join("splat-scene/gt.ply");
+    let msg = transcode::pipeline::run(&model, &out, &small_config(), &transcode::progress::ignore)
+        .unwrap_err()
+        .to_string();
+    assert!(msg.contains("gt.ply is a 3DGS splat model"), "{msg}");
+    assert!(!out.join("dataset").exists());
+}
+
 /// Runs the pipeline on `input` into a folder holding an earlier run's model, report and dataset,
 /// expects an error containing `expected`, and checks that nothing complete-looking is left.
 fn refused(input: &Path, out: &Path, cfg: &Config, expected: &str) -> String {

@@ -191,15 +191,8 @@ impl SplatSummary {
         let Ok(format) = Format::of(path) else {
             return Ok(None);
         };
-        let splat_ply = |path| {
-            plenoptic_io::ply::read_header(path).is_ok_and(|h| {
-                h.element("vertex").is_some_and(|(_, v)| {
-                    ["f_dc_0", "opacity", "scale_0", "rot_0"]
-                        .iter()
-                        .all(|n| v.properties.iter().any(|p| p.name == *n))
-                })
-            })
-        };
+        let splat_ply =
+            |path| plenoptic_io::ply::read_header(path).is_ok_and(|h| h.holds_gaussian_splats());
         // A PLY without 3DGS properties is a cloud or a mesh, and so is a .glb whose reader
         // finds no splat primitive.
         let file = match format {

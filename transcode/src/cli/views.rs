@@ -74,6 +74,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // is written.
     views::remove_dataset_model(&args.out)
         .with_context(|| format!("cannot clear the dataset {}", args.out.display()))?;
+    transcode::pipeline::refuse_splat_model(&args.input)?;
     let model = plenoptic_io::load(&args.input)
         .with_context(|| format!("cannot read {}", args.input.display()))?;
     plenoptic_render::degenerate::check_model(&args.input, &model)?;

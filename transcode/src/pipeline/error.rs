@@ -24,6 +24,13 @@ pub enum PipelineError {
         /// The folder the run clears (the output folder itself for its saved state).
         folder: PathBuf,
     },
+    /// The input is a 3DGS model, not a cloud or a mesh.
+    #[error(
+        "{0} is a 3DGS splat model (its vertices have f_dc_0, opacity, scale_0 and rot_0), not a \
+         point cloud or a mesh: the pipeline makes splats from clouds and meshes; `transcode \
+         render`, `eval`, `view` and `convert` take splat models"
+    )]
+    SplatModelInput(PathBuf),
     /// The input holds nothing to render.
     #[error("the input {0} holds no points or triangles")]
     EmptyInput(PathBuf),

@@ -28,6 +28,7 @@ pub fn load(input: &Path, observer: Observer<'_>) -> Result<Loaded, PipelineErro
         of: STAGES,
         what: format!("loading {}", input.display()),
     });
+    refuse_splat_model(input)?;
     let model = plenoptic_io::load(input)?;
     let info = input_info(input, &model);
     if info.points == 0 {
@@ -35,6 +36,21 @@ pub fn load(input: &Path, observer: Observer<'_>) -> Result<Loaded, PipelineErro
     }
     plenoptic_render::degenerate::check_model(input, &model)?;
     Ok(Loaded { model, info })
+}
+
+/// Refuses a 3DGS PLY as input: its vertices would be read as a grey point cloud (their colour
+/// is in `f_dc_*`), and a model of a model is not what anyone asks for.
+///
+/// # Errors
+/// [`PipelineError::SplatModelInput`] naming the file.
+pub fn refuse_splat_model(input: &Path) -> Result<(), PipelineError> {
+    let is_ply = input
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("ply"));
+    if is_ply && plenoptic_io::ply::read_header(input).is_ok_and(|h| h.holds_gaussian_splats()) {
+        return Err(PipelineError::SplatModelInput(input.to_path_buf()));
+    }
+    Ok(())
 }
 
 /// The input's surface as initialisation and the distance metric use it.

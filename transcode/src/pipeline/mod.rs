@@ -29,7 +29,7 @@ mod schedule;
 mod train;
 
 pub use error::PipelineError;
-pub use input::{Loaded, Surfaces, input_info, load};
+pub use input::{Loaded, Surfaces, input_info, load, refuse_splat_model};
 pub use references::{References, training_view};
 
 use std::path::{Path, PathBuf};
