@@ -74,6 +74,15 @@ pub enum Error {
         /// The value as read from the file.
         value: f64,
     },
+    /// Splats that the output file's format cannot hold (a linear scale that overflows or
+    /// vanishes in f32, an empty model where the format needs a record).
+    #[error("{path}: cannot be written: {message}")]
+    Unwritable {
+        /// The file.
+        path: PathBuf,
+        /// What cannot be stored, naming the splat.
+        message: String,
+    },
     /// A [`crate::Splats`] value whose arrays disagree in length or whose degree is unsupported.
     #[error("inconsistent splats: {0}")]
     Inconsistent(String),

@@ -42,6 +42,7 @@ pub fn encode_record(splats: &Splats, i: usize) -> [u8; SPLAT_RECORD_BYTES] {
 /// exp(Σ log-scale)·sigmoid(opacity), largest first; atomic.
 pub fn write_splat(path: &Path, splats: &Splats) -> Result<(), Error> {
     splats.validate()?;
+    check_storable(path, splats, ".splat")?;
     let mut order: Vec<usize> = (0..splats.len()).collect();
     let key = |i: usize| {
         let l = splats.log_scales[i];
@@ -55,6 +56,30 @@ pub fn write_splat(path: &Path, splats: &Splats) -> Result<(), Error> {
         Ok(())
     })
     .map_err(|e| Error::io(path, e))
+}
+
+/// Refuses what a format that stores linear scales cannot hold, naming `path` and the
+/// splat: a scale that overflows or vanishes in f32 (its reader would refuse the infinity or
+/// the zero), or an empty model (an empty `.splat` cannot be told from a file cut to nothing,
+/// and a glTF accessor holds at least one element).
+pub(crate) fn check_storable(path: &Path, splats: &Splats, format: &str) -> Result<(), Error> {
+    let unwritable = |message: String| Error::Unwritable {
+        path: path.to_path_buf(),
+        message,
+    };
+    if splats.is_empty() {
+        return Err(unwritable(format!(
+            "the model holds no splats, and a {format} file needs at least one"
+        )));
+    }
+    if let Some((i, axis, log)) = splats.first_unstorable_linear_scale() {
+        return Err(unwritable(format!(
+            "splat {i}: scale_{axis} (log-scale {log:e}) is {} as a linear scale in f32, which \
+             {format} stores and its readers refuse",
+            if log > 0.0 { "infinite" } else { "zero" }
+        )));
+    }
+    Ok(())
 }
 
 /// Reads a `.splat` file (see [`decode_splat`]).

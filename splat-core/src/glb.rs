@@ -139,13 +139,14 @@ pub fn encode_glb(splats: &Splats) -> Result<Vec<u8>, Error> {
     if let Some(i) = (0..splats.len()).find(|&i| {
         !(splats.means[i].is_finite()
             && splats.scale(i).is_finite()
+            && splats.scale(i).min_element() > 0.0
             && splats.opacity_logits[i].is_finite()
             && splats.rotations[i].iter().all(|v| v.is_finite())
             && splats.sh_of(i).iter().flatten().all(|v| v.is_finite()))
     }) {
         return Err(Error::Inconsistent(format!(
-            "splat {i} has a non-finite value (or a log-scale whose exponential overflows), which \
-             glTF does not allow"
+            "splat {i} has a non-finite value (or a log-scale whose exponential overflows or \
+             vanishes), which glTF does not allow"
         )));
     }
     let s = y_up_frame(splats);
@@ -230,7 +231,15 @@ pub fn encode_glb(splats: &Splats) -> Result<Vec<u8>, Error> {
 
 /// Writes `splats` as a `.glb` file with `KHR_gaussian_splatting`, atomically.
 pub fn write_glb(path: &Path, splats: &Splats) -> Result<(), Error> {
-    let bytes = encode_glb(splats)?;
+    splats.validate()?;
+    crate::export::check_storable(path, splats, ".glb")?;
+    let bytes = encode_glb(splats).map_err(|e| match e {
+        Error::Inconsistent(message) => Error::Unwritable {
+            path: path.to_path_buf(),
+            message,
+        },
+        other => other,
+    })?;
     atomic_output::write_atomic(path, &bytes).map_err(|e| Error::io(path, e))
 }
 

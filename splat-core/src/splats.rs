@@ -265,6 +265,22 @@ impl Splats {
         Ok(s)
     }
 
+    /// The first splat whose linear scale (the exponential of its log-scale, in f32) is not a
+    /// finite positive number, as `(splat, axis, log-scale)`: formats that store linear scales
+    /// (`.splat`, glTF) cannot hold it, and their readers would refuse the zero or infinity.
+    #[must_use]
+    pub fn first_unstorable_linear_scale(&self) -> Option<(usize, usize, f32)> {
+        self.log_scales.iter().enumerate().find_map(|(i, l)| {
+            let l = l.to_array();
+            (0..3)
+                .find(|&axis| {
+                    let s = l[axis].exp();
+                    !(s.is_finite() && s > 0.0)
+                })
+                .map(|axis| (i, axis, l[axis]))
+        })
+    }
+
     /// Checks that all arrays agree with `len()` and the degree is at most 3.
     pub fn validate(&self) -> Result<(), Error> {
         let n = self.len();

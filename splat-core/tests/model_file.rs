@@ -77,3 +77,41 @@ fn an_unknown_extension_writes_nothing() {
     assert!(read_model(&p).is_err());
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
 }
+
+/// Found by an adversarial sweep: `.splat` and `.glb` store linear scales, so a log-scale of
+/// 100 (e¹⁰⁰ overflows f32) or −1e30 (e⁻¹⁰³⁰ is 0) was written as ∞ or 0, which the readers then
+/// refused; and an empty model made a 0-byte `.splat` that its reader takes for a cut file.
+#[test]
+fn what_a_linear_scale_format_cannot_hold_is_refused_before_writing() {
+    let gt = ply::read_splats(&gt_path()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    for (log_scale, says) in [(100.0_f32, "infinite"), (-1e30, "zero")] {
+        let mut s = gt.clone();
+        s.log_scales[7].y = log_scale;
+        for ext in ["splat", "glb"] {
+            let p = dir.path().join(format!("m.{ext}"));
+            let e = write_model(&p, &s, false, &spz::SpzOptions::default()).unwrap_err();
+            assert!(matches!(e, Error::Unwritable { .. }), "{e:?}");
+            let msg = e.to_string();
+            assert!(msg.contains(&format!("m.{ext}")), "{msg}");
+            assert!(msg.contains("splat 7: scale_1"), "{msg}");
+            assert!(msg.contains(says), "{msg}");
+            assert!(!p.exists(), "{ext} written");
+        }
+        // PLY and SPZ store log-scales: both take the value and read it back.
+        for ext in ["ply", "spz"] {
+            let p = dir.path().join(format!("m.{ext}"));
+            write_model(&p, &s, false, &spz::SpzOptions::default()).unwrap();
+            assert_eq!(read_model(&p).unwrap().splats.len(), s.len());
+        }
+    }
+    let empty = splat_core::Splats::new(gt.sh_degree);
+    for ext in ["splat", "glb"] {
+        let p = dir.path().join(format!("empty.{ext}"));
+        let msg = write_model(&p, &empty, false, &spz::SpzOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(msg.contains("the model holds no splats"), "{msg}");
+        assert!(!p.exists());
+    }
+}

@@ -264,14 +264,17 @@ impl SplatSummary {
         if let Some(b) = &self.bounds {
             line("bounds", bounds(b));
         }
-        line("opacity", format!("median {:.3}", self.opacity_median));
-        line(
-            "sigma",
-            format!(
-                "median of the largest axis {:.6}, of the smallest {:.6}",
-                self.sigma_largest_median, self.sigma_smallest_median
-            ),
-        );
+        // (An empty model has no medians: its NaNs are not printed.)
+        if self.splats > 0 {
+            line("opacity", format!("median {:.3}", self.opacity_median));
+            line(
+                "sigma",
+                format!(
+                    "median of the largest axis {:.6}, of the smallest {:.6}",
+                    self.sigma_largest_median, self.sigma_smallest_median
+                ),
+            );
+        }
         out
     }
 }
