@@ -19,8 +19,43 @@ const CHUNK: usize = 4_096;
 /// (the z-buffer keeps one) instead of by neither through rounding.
 const EDGE_EPS: f32 = 1e-5;
 
-/// Nearest depth (camera z) a surface may have; geometry at or behind the camera is clipped.
+/// Nearest depth (camera z) a surface may have, in units of the camera's [`SceneScale`];
+/// geometry at or behind the camera is clipped.
 const NEAR: f32 = 1e-4;
+
+/// A power of two near the distance from the camera to the farthest vertex: the triangle
+/// tests run on camera-space positions divided by it, so that their products neither overflow
+/// nor underflow f32 at any scale the degeneracy checks accept (a tetrahedron of side 3e-5
+/// drew 6 pixels under an absolute near plane, one of side 1e19 overflowed the determinant),
+/// and the near plane is a fixed share of the scene's depth. Dividing by a power of two is
+/// exact, so a scene of unit size renders the same bits as it did unscaled.
+#[derive(Debug, Clone, Copy)]
+struct SceneScale {
+    /// The power of two.
+    factor: f32,
+}
+
+impl SceneScale {
+    /// The scale of camera-space positions `cam_space` (1 when there are none to measure).
+    fn of(cam_space: &[Vec3]) -> Self {
+        let farthest = cam_space
+            .iter()
+            .map(|p| p.abs().max_element())
+            .fold(0.0_f32, f32::max);
+        let factor = if farthest.is_finite() && farthest > 0.0 {
+            2.0_f32.powi(farthest.log2().ceil() as i32)
+        } else {
+            1.0
+        };
+        Self {
+            factor: if factor.is_finite() && factor > 0.0 {
+                factor
+            } else {
+                1.0
+            },
+        }
+    }
+}
 
 /// Renders a triangle mesh from `camera`.
 ///
@@ -124,13 +159,15 @@ pub fn check_mesh(mesh: &Mesh) -> Result<(), Error> {
 /// One render at the camera's own resolution, filtered down to the output's.
 fn render_once(mesh: &Mesh, camera: &Camera, opts: &ViewOptions) -> Result<ViewImage, Error> {
     let view = ViewCamera::new(camera)?;
-    let cam_space: Vec<Vec3> = mesh
+    let mut cam_space: Vec<Vec3> = mesh
         .positions
         .par_iter()
         .map(|&p| view.rotation * p + view.translation)
         .collect();
+    let scale = SceneScale::of(&cam_space);
+    cam_space.par_iter_mut().for_each(|p| *p /= scale.factor);
     let zbuf = ZBuffer::new(view.width as usize, view.height as usize);
-    draw_triangles(&mesh.triangles, &cam_space, &view, &zbuf);
+    draw_triangles(&mesh.triangles, &cam_space, scale, &view, &zbuf);
     let plenoptic = vertex_view_colors(mesh, view.center, opts.exponent);
     Ok(resolve(&view, &zbuf, opts, |id, x, y| {
         let t = id as usize;
@@ -170,8 +207,15 @@ fn vertex_view_colors(mesh: &Mesh, viewer: Vec3, exponent: i32) -> Option<Vec<[f
     )
 }
 
-/// Visibility pass: the nearest triangle under each pixel centre.
-fn draw_triangles(triangles: &[[u32; 3]], cam_space: &[Vec3], view: &ViewCamera, zbuf: &ZBuffer) {
+/// Visibility pass: the nearest triangle under each pixel centre; `cam_space` is divided by
+/// `scale`, the depths kept in the camera's own units.
+fn draw_triangles(
+    triangles: &[[u32; 3]],
+    cam_space: &[Vec3],
+    scale: SceneScale,
+    view: &ViewCamera,
+    zbuf: &ZBuffer,
+) {
     triangles
         .par_chunks(CHUNK)
         .enumerate()
@@ -185,7 +229,7 @@ fn draw_triangles(triangles: &[[u32; 3]], cam_space: &[Vec3], view: &ViewCamera,
                 for y in y0..=y1 {
                     for x in x0..=x1 {
                         if let Some((t, _)) = intersect(view.camera_ray(x, y), a, b, c) {
-                            zbuf.insert(x, y, t, id);
+                            zbuf.insert(x, y, t * scale.factor, id);
                         }
                     }
                 }
@@ -439,6 +483,61 @@ mod tests {
                 assert!(
                     (got[k] - expected[k]).abs() < 1e-3,
                     "({x}, {y}): {got:?} vs {expected:?}"
+                );
+            }
+        }
+    }
+
+    /// Found by an adversarial sweep: a tetrahedron of side 3e-5 drew 6 pixels a view, one of
+    /// 1e-5 none (an absolute near plane, and a floor of 10⁻³ on the framing radius), and one
+    /// of 1e19 left views empty (the determinant overflowed f32). Framed by its own bounding
+    /// sphere, the same shape must cover the same pixels at every scale the checks accept,
+    /// with depths in proportion.
+    #[test]
+    fn a_shape_renders_the_same_at_every_scale() {
+        let tetrahedron = |side: f32| Mesh {
+            positions: vec![
+                Vec3::ZERO,
+                Vec3::new(side, 0.0, 0.0),
+                Vec3::new(0.0, side, 0.0),
+                Vec3::new(0.0, 0.0, side),
+            ],
+            triangles: vec![[0, 1, 2], [0, 2, 3], [0, 1, 3], [1, 2, 3]],
+            ..Default::default()
+        };
+        let rig = crate::RigConfig {
+            cameras: 6,
+            width: 48,
+            height: 48,
+            ..crate::RigConfig::default()
+        };
+        let views = |side: f32| {
+            let mesh = tetrahedron(side);
+            let (center, radius) =
+                crate::bounding_sphere(&plenoptic_io::Model::Mesh(mesh.clone())).unwrap();
+            crate::fibonacci_rig(center, radius, &rig)
+                .unwrap()
+                .iter()
+                .map(|cam| render_mesh(&mesh, cam, &ViewOptions::default()).unwrap())
+                .collect::<Vec<_>>()
+        };
+        let unit = views(1.0);
+        assert!(unit.iter().all(|v| v.alpha.iter().any(|&a| a > 0.0)));
+        for side in [1e-18_f32, 1e-9, 3e-5, 1e-5, 1e19, 1e30] {
+            for (k, (got, want)) in views(side).iter().zip(&unit).enumerate() {
+                let covered = |v: &ViewImage| v.alpha.iter().filter(|&&a| a > 0.5).count();
+                let (g, w) = (covered(got), covered(want));
+                // The rig's poses round differently at each scale: a pixel or two of the
+                // outline may change.
+                assert!(
+                    g.abs_diff(w) <= 3,
+                    "side {side}, view {k}: {g} against {w} pixels"
+                );
+                let depth = |v: &ViewImage| v.depth.iter().copied().fold(0.0_f32, f32::max);
+                let ratio = depth(got) / (depth(want) * side);
+                assert!(
+                    (ratio - 1.0).abs() < 1e-3,
+                    "side {side}, view {k}: depth × {ratio}"
                 );
             }
         }

@@ -227,8 +227,14 @@ pub fn bounding_sphere(model: &Model) -> Result<(DVec3, f64), Error> {
         .iter()
         .map(|p| p.as_dvec3().distance(center))
         .fold(0.0f64, f64::max);
-    // A single point still needs a sphere to frame.
-    Ok((center, radius.max(1e-3 * center.length().max(1.0))))
+    // A single point still needs a sphere to frame. Only it: a floor for every input (it was
+    // 10⁻³ units) framed an object smaller than it as a speck in an empty view.
+    let radius = if radius > 0.0 {
+        radius
+    } else {
+        1e-3 * center.length().max(1.0)
+    };
+    Ok((center, radius))
 }
 
 /// `rig.cameras` cameras on a Fibonacci sphere around (`center`, `radius`), each looking at the
