@@ -389,7 +389,19 @@ impl Config {
         self.init.validate().map_err(invalid)?;
         self.training.validate().map_err(invalid)?;
         self.eval.validate().map_err(invalid)?;
-        self.output.validate().map_err(invalid)
+        self.output.validate().map_err(invalid)?;
+        if self.init.points3d.is_some()
+            && self.init.mode != InitMode::Sparse
+            && !self.output.compare_init
+        {
+            return Err(invalid((
+                "init.points3d".into(),
+                "is set, but only sparse init reads it and no run here is one: add `--init \
+                 sparse` (init.mode = \"sparse\") or `--compare-init`, or leave it out"
+                    .into(),
+            )));
+        }
+        Ok(())
     }
 }
 
@@ -659,6 +671,7 @@ mod tests {
                 "`training.history_every`",
             ),
             ("[output]\nspz_version = 2\n", "`output.spz_version`"),
+            ("[init]\npoints3d = \"sparse/0\"\n", "`init.points3d`"),
             // Found by an adversarial sweep: NaN, infinities and negatives that passed
             // `config --check` (two of them panicked the run, the eval ones gave wrong metrics).
             (

@@ -27,8 +27,8 @@ pub struct Args {
     /// Render only these images (names as in the model), comma-separated.
     #[arg(long, value_delimiter = ',')]
     pub images: Option<Vec<String>>,
-    /// Highest SH degree to evaluate (default: the model's).
-    #[arg(long)]
+    /// Highest SH degree to evaluate, 0..=3 (default: the model's).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=3))]
     pub sh_degree: Option<u32>,
     #[command(flatten)]
     pub drawing: Drawing,
@@ -84,7 +84,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         selected.retain(|id| names.contains(&rec.images[id].name));
     }
     let bg = glam::Vec3::from_slice(&args.background);
-    if !(0.0..=1.0).contains(&bg.min_element()) || bg.max_element() > 1.0 {
+    // (Not through min/max_element, which pass over a NaN.)
+    if !args.background.iter().all(|c| (0.0..=1.0).contains(c)) {
         bail!("--background components must lie in [0, 1], got {bg}");
     }
     let opts = RenderOptions {

@@ -21,7 +21,7 @@ pub struct Args {
     pub out: PathBuf,
     /// Number of frames: above 1, a sequence of the mesh turning, shifting and bending on one
     /// voxel grid with one capture rig (see `--turn`, `--shift`, `--bend`).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, value_parser = parse_frames)]
     pub frames: usize,
     /// Turn about the vertical axis over the sequence, in degrees.
     #[arg(long, default_value_t = Motion::default().turn_deg)]
@@ -187,5 +187,14 @@ mod tests {
         assert_eq!(parse(&["--grid", "256"]).unwrap(), Grid(Some(256)));
         let e = parse(&["--grid", "fine"]).unwrap_err().to_string();
         assert!(e.contains("fine"), "{e}");
+    }
+}
+
+/// `--frames`: at least one.
+fn parse_frames(s: &str) -> Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(0) => Err("a sequence has at least 1 frame".into()),
+        Ok(n) => Ok(n),
+        Err(e) => Err(e.to_string()),
     }
 }
