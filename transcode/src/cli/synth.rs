@@ -163,6 +163,15 @@ impl std::str::FromStr for Grid {
     }
 }
 
+/// `--frames`: at least one.
+fn parse_frames(s: &str) -> Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(0) => Err("a sequence has at least 1 frame".into()),
+        Ok(n) => Ok(n),
+        Err(e) => Err(e.to_string()),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use clap::Parser;
@@ -187,14 +196,5 @@ mod tests {
         assert_eq!(parse(&["--grid", "256"]).unwrap(), Grid(Some(256)));
         let e = parse(&["--grid", "fine"]).unwrap_err().to_string();
         assert!(e.contains("fine"), "{e}");
-    }
-}
-
-/// `--frames`: at least one.
-fn parse_frames(s: &str) -> Result<usize, String> {
-    match s.parse::<usize>() {
-        Ok(0) => Err("a sequence has at least 1 frame".into()),
-        Ok(n) => Ok(n),
-        Err(e) => Err(e.to_string()),
     }
 }
