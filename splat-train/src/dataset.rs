@@ -67,6 +67,23 @@ pub enum DatasetError {
     /// The reduction factor is not a finite number ≥ 1.
     #[error("downscale factor {0} must be at least 1")]
     Downscale(f64),
+    /// The reduction would leave an image less than a pixel on a side.
+    #[error(
+        "{path}: its {width}×{height} pixels reduced by {downscale} are less than a pixel on a \
+         side; use a factor of at most {most}"
+    )]
+    ReducedAway {
+        /// The image.
+        path: PathBuf,
+        /// Its width.
+        width: u32,
+        /// Its height.
+        height: u32,
+        /// The factor asked for.
+        downscale: f64,
+        /// The largest factor that leaves a pixel.
+        most: u32,
+    },
 }
 
 /// A dataset folder read into memory.
@@ -163,8 +180,17 @@ fn read_view(
     }
     let mut intrinsics = k;
     if downscale > 1.0 {
-        let w = ((f64::from(k.width) / downscale).round() as u32).max(1);
-        let h = ((f64::from(k.height) / downscale).round() as u32).max(1);
+        let w = (f64::from(k.width) / downscale).round() as u32;
+        let h = (f64::from(k.height) / downscale).round() as u32;
+        if w == 0 || h == 0 {
+            return Err(DatasetError::ReducedAway {
+                path: path.to_path_buf(),
+                width: k.width,
+                height: k.height,
+                downscale,
+                most: k.width.min(k.height),
+            });
+        }
         // The triangle filter widens its kernel by the reduction factor, so it averages.
         rgba = image::imageops::resize(&rgba, w, h, image::imageops::FilterType::Triangle);
         intrinsics = scale_intrinsics(&k, w, h);
@@ -419,6 +445,20 @@ mod tests {
         // The corner is far from the square: still uncovered and black; the centre covered.
         assert_eq!((mask[0], &v.image[..3]), (0, &[0u16; 3][..]));
         assert_eq!(mask[3 * 8 + 4], u16::MAX);
+        // 16×12 images reduced by 100 would be 0×0 (they were made 1×1 before).
+        let e = read_dataset(dir.path(), 100.0).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                DatasetError::ReducedAway {
+                    width: 16,
+                    height: 12,
+                    most: 12,
+                    ..
+                }
+            ),
+            "{e}"
+        );
         assert!(matches!(
             read_dataset(dir.path(), 0.5),
             Err(DatasetError::Downscale(f)) if f == 0.5

@@ -66,7 +66,7 @@ pub struct Args {
     #[arg(long, default_value_t = 10_000)]
     pub random_points: usize,
     /// Keep splat positions fixed (implies no densification).
-    #[arg(long)]
+    #[arg(long, conflicts_with = "densify")]
     pub freeze_positions: bool,
     /// Grow and prune splats with Inria's adaptive density control (the default).
     #[arg(long, overrides_with = "no_densify")]
@@ -123,7 +123,7 @@ pub struct Args {
     #[arg(long, value_name = "SECONDS", value_parser = super::config::parse_budget_seconds)]
     pub time_budget: Option<f64>,
     /// Warm up on views reduced by this integer factor (≥ 2; 1 = no warm-up).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
     pub warmup_factor: u32,
     /// Number of warm-up steps at the reduced size.
     #[arg(long, default_value_t = 0)]
@@ -277,6 +277,28 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 fn check_args(args: &Args) -> anyhow::Result<()> {
     if !(args.downscale.is_finite() && args.downscale >= 1.0) {
         bail!("--downscale {} must be at least 1", args.downscale);
+    }
+    if args.warmup_steps > 0 && args.warmup_factor < 2 {
+        bail!(
+            "--warmup-steps {} needs --warmup-factor 2 or more (1 is no warm-up)",
+            args.warmup_steps
+        );
+    }
+    if args.warmup_steps > 0 && args.warmup_steps >= args.iterations {
+        bail!(
+            "--warmup-steps {} must be fewer than --iterations {}: the run would end before it \
+             trained on full-size views",
+            args.warmup_steps,
+            args.iterations
+        );
+    }
+    let densifies = !args.no_densify && !args.freeze_positions;
+    if args.init == Init::Random && densifies && args.random_points > args.max_splats {
+        bail!(
+            "--random-points {} is above --max-splats {}: densification would never add one",
+            args.random_points,
+            args.max_splats
+        );
     }
     Ok(())
 }
