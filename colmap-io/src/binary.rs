@@ -227,7 +227,7 @@ pub(crate) fn read_images(path: &Path) -> Result<ImagesRead, Error> {
             name,
             points2d,
         };
-        if let Some((i, problem)) = image.non_finite() {
+        if let Some((i, problem)) = image.bad_pose() {
             // The pose follows the 4-byte image id: QW QX QY QZ TX TY TZ, 8 bytes each.
             return Err(r.error_at(at + 4 + 8 * i as u64, problem));
         }

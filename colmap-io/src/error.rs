@@ -80,6 +80,14 @@ pub enum Problem {
         /// The value read.
         value: f64,
     },
+    /// An image whose rotation quaternion is zero (or too close to it to normalise).
+    #[error("image {id}, QW QX QY QZ: {qvec:?} is not a rotation; a pose needs a unit quaternion")]
+    ZeroRotation {
+        /// The image's id.
+        id: u64,
+        /// The quaternion read.
+        qvec: [f64; 4],
+    },
     /// A field that is missing from a text line.
     #[error("missing {0}")]
     Missing(&'static str),

@@ -80,11 +80,24 @@ pub struct ImageRecord {
 }
 
 impl ImageRecord {
-    /// The first pose number that is NaN or infinite (its index in QW QX QY QZ TX TY TZ).
-    pub(crate) fn non_finite(&self) -> Option<(usize, Problem)> {
+    /// The first pose number that is NaN or infinite (its index in QW QX QY QZ TX TY TZ), or a
+    /// quaternion too close to zero to normalise (index 0): either makes every projection NaN.
+    pub(crate) fn bad_pose(&self) -> Option<(usize, Problem)> {
         const FIELDS: [&str; 7] = ["QW", "QX", "QY", "QZ", "TX", "TY", "TZ"];
         let pose = [self.qvec.as_slice(), &self.tvec].concat();
-        first_non_finite("image", self.id.into(), &pose, |i| FIELDS[i].to_string())
+        first_non_finite("image", self.id.into(), &pose, |i| FIELDS[i].to_string()).or_else(|| {
+            // Files round their unit quaternions to a few digits; a norm of 10⁻⁶ is no rotation.
+            let norm2: f64 = self.qvec.iter().map(|v| v * v).sum();
+            (norm2 < 1e-12).then(|| {
+                (
+                    0,
+                    Problem::ZeroRotation {
+                        id: self.id.into(),
+                        qvec: self.qvec,
+                    },
+                )
+            })
+        })
     }
 }
 

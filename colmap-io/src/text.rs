@@ -189,7 +189,7 @@ fn parse_image(line: &str) -> Result<ImageRecord, Problem> {
         name,
         points2d: Vec::new(),
     };
-    match image.non_finite() {
+    match image.bad_pose() {
         Some((_, problem)) => Err(problem),
         None => Ok(image),
     }

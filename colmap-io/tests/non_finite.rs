@@ -146,3 +146,41 @@ fn binary_model_refuses_nan_and_inf_at_the_field_offset() {
         "{m}"
     );
 }
+
+/// Found by an adversarial sweep: an image whose quaternion is `0 0 0 0` was read, and training
+/// then normalised it into NaNs. Text and binary refuse it at the image's line or QW's offset.
+#[test]
+fn a_zero_quaternion_is_refused_in_both_formats() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    // images.txt line 5: `4 QW QX QY QZ TX TY TZ 1 03.jpg`; the quaternion becomes zero.
+    text_with(dir, "images.txt", 5, 1, "0");
+    let text = std::fs::read_to_string(dir.join("images.txt")).unwrap();
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    let mut words: Vec<String> = lines[4].split(' ').map(str::to_string).collect();
+    for w in &mut words[1..=4] {
+        *w = "0".into();
+    }
+    lines[4] = words.join(" ");
+    std::fs::write(dir.join("images.txt"), lines.join("\n") + "\n").unwrap();
+    let err = read_model_as(dir, Format::Text).unwrap_err();
+    let m = err.to_string();
+    assert!(
+        m.contains(
+            "images.txt: line 5: image 4, QW QX QY QZ: [0.0, 0.0, 0.0, 0.0] is not a rotation"
+        ),
+        "{m}"
+    );
+
+    let bin = tmp.path().join("bin");
+    std::fs::create_dir(&bin).unwrap();
+    let mut rec = read_model(&maupertuis()).unwrap();
+    let first = *rec.images.keys().next().unwrap();
+    rec.images.get_mut(&first).unwrap().qvec = [0.0; 4];
+    write_model(&bin, &rec, Format::Binary).unwrap();
+    let err = read_model_as(&bin, Format::Binary).unwrap_err();
+    let m = err.to_string();
+    // QW follows the count (8 bytes) and the image id (4 bytes).
+    assert!(m.contains("images.bin: byte offset 12"), "{m}");
+    assert!(m.contains("is not a rotation"), "{m}");
+}
