@@ -212,7 +212,8 @@ pub fn decode_spz(path: &Path, data: &[u8]) -> Result<SpzModel, Error> {
             "{} bytes of attributes after the header where {n} splats of SH degree {sh_degree} \
              (version {version}) need {}",
             if body.len() > layout.total {
-                "more than".to_string()
+                // (Reading stops one byte past the promise: how many more is not known.)
+                format!("more than {}", layout.total)
             } else {
                 body.len().to_string()
             },
