@@ -42,7 +42,12 @@ pub fn encode_record(splats: &Splats, i: usize) -> [u8; SPLAT_RECORD_BYTES] {
 /// exp(Σ log-scale)·sigmoid(opacity), largest first; atomic.
 pub fn write_splat(path: &Path, splats: &Splats) -> Result<(), Error> {
     splats.validate()?;
-    check_storable(path, splats, ".splat")?;
+    if let Some(message) = linear_scale_problem(splats, ".splat") {
+        return Err(Error::Unwritable {
+            path: path.to_path_buf(),
+            message,
+        });
+    }
     let mut order: Vec<usize> = (0..splats.len()).collect();
     let key = |i: usize| {
         let l = splats.log_scales[i];
@@ -58,28 +63,28 @@ pub fn write_splat(path: &Path, splats: &Splats) -> Result<(), Error> {
     .map_err(|e| Error::io(path, e))
 }
 
-/// Refuses what a format that stores linear scales cannot hold, naming `path` and the
-/// splat: a scale that overflows or vanishes in f32 (its reader would refuse the infinity or
+/// What a format that stores linear scales (`format`: `.splat`, `.glb`) cannot hold, naming
+/// the splat: a scale that overflows or vanishes in f32 (its reader would refuse the infinity or
 /// the zero), or an empty model (an empty `.splat` cannot be told from a file cut to nothing,
-/// and a glTF accessor holds at least one element).
-pub(crate) fn check_storable(path: &Path, splats: &Splats, format: &str) -> Result<(), Error> {
-    let unwritable = |message: String| Error::Unwritable {
-        path: path.to_path_buf(),
-        message,
-    };
+/// and a glTF accessor holds at least one element). `None` when it can hold them all.
+pub(crate) fn linear_scale_problem(splats: &Splats, format: &str) -> Option<String> {
     if splats.is_empty() {
-        return Err(unwritable(format!(
-            "the model holds no splats, and a {format} file needs at least one"
-        )));
+        return Some(format!(
+            "the model holds no splats (an empty model), and a {format} file needs at least one"
+        ));
     }
-    if let Some((i, axis, log)) = splats.first_unstorable_linear_scale() {
-        return Err(unwritable(format!(
-            "splat {i}: scale_{axis} (log-scale {log:e}) is {} as a linear scale in f32, which \
-             {format} stores and its readers refuse",
-            if log > 0.0 { "infinite" } else { "zero" }
-        )));
-    }
-    Ok(())
+    let (i, axis, log) = splats.first_unstorable_linear_scale()?;
+    Some(format!(
+        "splat {i}: scale_{axis} (log-scale {log:e}) is {} as a linear scale in f32, which \
+         {format} stores and its readers refuse",
+        if log.is_nan() {
+            "not a number"
+        } else if log > 0.0 {
+            "infinite"
+        } else {
+            "zero"
+        }
+    ))
 }
 
 /// Reads a `.splat` file (see [`decode_splat`]).

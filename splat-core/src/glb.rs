@@ -130,24 +130,20 @@ fn attributes(s: &Splats) -> Vec<Attribute> {
 /// Returns the `.glb` bytes of `splats`.
 pub fn encode_glb(splats: &Splats) -> Result<Vec<u8>, Error> {
     splats.validate()?;
-    if splats.is_empty() {
-        return Err(Error::Inconsistent(
-            "a glTF accessor holds at least one element, so an empty model cannot be written"
-                .into(),
-        ));
-    }
     if let Some(i) = (0..splats.len()).find(|&i| {
         !(splats.means[i].is_finite()
-            && splats.scale(i).is_finite()
-            && splats.scale(i).min_element() > 0.0
+            && splats.log_scales[i].is_finite()
             && splats.opacity_logits[i].is_finite()
             && splats.rotations[i].iter().all(|v| v.is_finite())
             && splats.sh_of(i).iter().flatten().all(|v| v.is_finite()))
     }) {
         return Err(Error::Inconsistent(format!(
-            "splat {i} has a non-finite value (or a log-scale whose exponential overflows or \
-             vanishes), which glTF does not allow"
+            "splat {i} has a non-finite value, which glTF does not allow"
         )));
+    }
+    // (After the finiteness check, so a NaN is named as one; an empty model is refused here.)
+    if let Some(problem) = crate::export::linear_scale_problem(splats, ".glb") {
+        return Err(Error::Inconsistent(problem));
     }
     let s = y_up_frame(splats);
     let n = s.len();
@@ -231,8 +227,7 @@ pub fn encode_glb(splats: &Splats) -> Result<Vec<u8>, Error> {
 
 /// Writes `splats` as a `.glb` file with `KHR_gaussian_splatting`, atomically.
 pub fn write_glb(path: &Path, splats: &Splats) -> Result<(), Error> {
-    splats.validate()?;
-    crate::export::check_storable(path, splats, ".glb")?;
+    // The encoder's refusals name no file: this one names it.
     let bytes = encode_glb(splats).map_err(|e| match e {
         Error::Inconsistent(message) => Error::Unwritable {
             path: path.to_path_buf(),
