@@ -10,6 +10,10 @@
 //! surface, so the reference renderer grows the cubes with the cloud's spacing
 //! ([`closing_point_size`]).
 //!
+//! A cloud that lies on no grid of the configured voxel size (arbitrary floats: a cloud in
+//! metres, or a tenth of a unit across) has no voxel to draw; it is drawn at its own measured
+//! spacing, so its views do not depend on its units ([`point_sizing`]).
+//!
 //! The spacing is measured, not guessed from the point count: around up to
 //! [`SPACING_SAMPLES`] evenly strided points, the points within a radius R are counted, and
 //! the area each point stands for is πR² over the median count (the surface is locally a plane at
@@ -41,18 +45,152 @@ const CLOSING_WIDTH: f32 = 1.5;
 /// dense: the measurement reads a regular grid up to 10 % wide.
 const DENSE_TOLERANCE: f32 = 1.25;
 
-/// The side of the cubes (in the cloud's units) that draws the surface of `positions` closed:
-/// `base` (the configured voxel size) for a cloud about as dense as one point per `base`-wide
-/// cell of its surface (measured spacing `s` ≤ 1.25 `base`), else 1.5 `s`, where `s` is the side
-/// of the square of surface each point stands for. So a dense voxelised capture is drawn exactly
-/// as PccAppRenderer draws it and a sparse one with cubes about 1.5 spacings wide. Clouds too
-/// small to measure keep `base`.
+/// How much of a voxel a coordinate may stray from its grid point and still lie on the grid
+/// ([`lies_on_grid`]): a voxelised capture stores exact grid coordinates, and a cloud of
+/// unrelated floats has all three of a point's coordinates this close to a grid point by chance
+/// about once in 15,000 points.
+const GRID_TOLERANCE: f64 = 0.02;
+
+/// Share of the sampled points that must lie on the grid for the cloud to count as voxelised at
+/// it (a few strays, such as points a capture added between voxels, do not change its nature).
+const ON_GRID_SHARE: f64 = 0.9;
+
+/// Fewest voxels a cloud must span to count as voxelised: a cloud a fraction of a voxel across
+/// lies within [`GRID_TOLERANCE`] of one grid point whatever its points are, and a capture
+/// spans hundreds (8iVSLF: 1024 or 4096 a side).
+const MIN_GRID_SPAN: f32 = 8.0;
+
+/// How many of the first samples are tried as the grid's origin, so that a stray first point
+/// cannot place the grid.
+const ORIGIN_CANDIDATES: usize = 8;
+
+/// How a cloud's points are sized for drawing ([`point_sizing`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum PointSizing {
+    /// At the configured size: a cloud voxelised at it about one point per voxel of its
+    /// surface, or one too small to measure.
+    AsConfigured,
+    /// Voxelised at the configured size but sparser than one point per voxel: grown to this
+    /// side (1.5 measured spacings) so the surface is closed.
+    Grown(f32),
+    /// Not on a grid of the configured size at all (a cloud in metres, say, whose points are
+    /// arbitrary floats): the configured size says nothing about it, so its points are drawn
+    /// 1.5 measured spacings wide, whatever the cloud's scale.
+    OffGrid(f32),
+}
+
+impl PointSizing {
+    /// The cube side (the disc's half-size) this sizing draws with, given the configured one.
+    #[must_use]
+    pub fn size(self, base: f32) -> f32 {
+        match self {
+            Self::AsConfigured => base,
+            Self::Grown(size) | Self::OffGrid(size) => size,
+        }
+    }
+}
+
+impl std::fmt::Display for PointSizing {
+    /// What the choice was and why, for the person running the tool.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::AsConfigured => write!(f, "its points are drawn at the configured size"),
+            Self::Grown(size) => write!(
+                f,
+                "the cloud samples its surface more sparsely than one point per voxel: its \
+                 points are drawn {size:.2} voxels wide so the surface is closed"
+            ),
+            Self::OffGrid(size) => {
+                // Four significant digits at any scale: 0.002714, 27.14, 2714.
+                let decimals = (3.0 - f64::from(*size).log10().floor()).clamp(0.0, 40.0) as usize;
+                write!(
+                    f,
+                    "the cloud's points lie on no grid of the configured voxel size: they are \
+                     drawn {size:.decimals$} units wide, 1.5 times their measured spacing, so the \
+                     surface is closed"
+                )
+            }
+        }
+    }
+}
+
+/// The side of the cubes (in the cloud's units) that draws the surface of `positions` closed,
+/// [`point_sizing`]'s choice.
 #[must_use]
 pub fn closing_point_size(positions: &[Vec3], base: f32) -> f32 {
-    match surface_spacing(positions) {
-        Some(s) if s > DENSE_TOLERANCE * base => (CLOSING_WIDTH * s).max(base),
-        _ => base,
+    point_sizing(positions, base).size(base)
+}
+
+/// How the points of `positions` are drawn given the configured voxel size `base`. A cloud
+/// voxelised at `base` ([`lies_on_grid`]) keeps `base` while it is about as dense as one point
+/// per voxel of its surface (measured spacing `s` ≤ 1.25 `base`), else it grows to 1.5 `s`,
+/// where `s` is the side of the square of surface each point stands for; so a dense voxelised
+/// capture is drawn exactly as PccAppRenderer draws it and a sparse one with cubes about 1.5
+/// spacings wide. A cloud off that grid is drawn 1.5 `s` wide whatever its density: cubes one
+/// unit wide would swallow a cloud a tenth of a unit across (the cameras inside them) and
+/// blur one in thousands of units. Clouds too small to measure (under 24 points) use their
+/// extent over √n as the spacing when off the grid, else keep `base`.
+#[must_use]
+pub fn point_sizing(positions: &[Vec3], base: f32) -> PointSizing {
+    let finite: Vec<Vec3> = positions
+        .iter()
+        .copied()
+        .filter(|p| p.is_finite())
+        .collect();
+    let on_grid = lies_on_grid(&finite, base);
+    match surface_spacing(&finite) {
+        Some(s) if !on_grid => PointSizing::OffGrid(CLOSING_WIDTH * s),
+        Some(s) if s > DENSE_TOLERANCE * base => PointSizing::Grown((CLOSING_WIDTH * s).max(base)),
+        Some(_) => PointSizing::AsConfigured,
+        None if on_grid => PointSizing::AsConfigured,
+        None => match bounds(&finite) {
+            Some((_, e)) if e > 0.0 => {
+                PointSizing::OffGrid(CLOSING_WIDTH * e / (finite.len() as f32).sqrt())
+            }
+            _ => PointSizing::AsConfigured,
+        },
     }
+}
+
+/// Whether at least [`ON_GRID_SHARE`] of up to [`SPACING_SAMPLES`] evenly strided points have
+/// every coordinate within [`GRID_TOLERANCE`] voxels of a grid of pitch `base` (its origin
+/// anywhere: one of the first samples is taken as a grid point), over a box at least
+/// [`MIN_GRID_SPAN`] voxels across.
+#[must_use]
+pub fn lies_on_grid(finite: &[Vec3], base: f32) -> bool {
+    match bounds(finite) {
+        Some((_, extent)) if extent >= MIN_GRID_SPAN * base => {}
+        _ => return false,
+    }
+    let stride = finite.len().div_ceil(SPACING_SAMPLES).max(1);
+    let samples: Vec<[f64; 3]> = finite
+        .iter()
+        .step_by(stride)
+        .map(|p| p.to_array().map(|c| f64::from(c) / f64::from(base)))
+        .collect();
+    // Distance to the nearest grid point, in voxels, of a coordinate on a grid through `origin`.
+    let off = |c: f64, origin: f64| {
+        let d = (c - origin).rem_euclid(1.0);
+        d.min(1.0 - d)
+    };
+    let needed = (ON_GRID_SHARE * samples.len() as f64).ceil() as usize;
+    samples.iter().take(ORIGIN_CANDIDATES).any(|origin| {
+        let on = samples
+            .iter()
+            .filter(|p| (0..3).all(|a| off(p[a], origin[a]) <= GRID_TOLERANCE))
+            .count();
+        on >= needed
+    })
+}
+
+/// The low corner of the finite points' bounding box and its longest side; `None` for no
+/// points.
+fn bounds(finite: &[Vec3]) -> Option<(Vec3, f32)> {
+    let first = *finite.first()?;
+    let (lo, hi) = finite
+        .iter()
+        .fold((first, first), |(lo, hi), &p| (lo.min(p), hi.max(p)));
+    Some((lo, (hi - lo).max_element()))
 }
 
 /// The side of the square of surface each point stands for, √(area / points), measured as the
@@ -68,12 +206,8 @@ pub fn surface_spacing(positions: &[Vec3]) -> Option<f32> {
     if finite.len() < *COUNT_RANGE.start() {
         return None;
     }
-    let (lo, hi) = finite.iter().fold(
-        (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
-        |(lo, hi), &p| (lo.min(p), hi.max(p)),
-    );
-    let extent = (hi - lo).max_element();
-    if extent.is_nan() || extent <= 0.0 {
+    let (lo, extent) = bounds(&finite)?;
+    if extent <= 0.0 {
         return None;
     }
     // A surface of area ≈ extent² sampled by n points has spacing ≈ extent / √n; a radius of
@@ -258,6 +392,60 @@ mod tests {
         assert!((size - 3.0).abs() < 0.3, "size {size}");
         // Measured against a coarser voxel size the same cloud is dense.
         assert_eq!(closing_point_size(&sparse, 2.0), 2.0);
+    }
+
+    #[test]
+    fn grids_are_recognised_at_their_pitch_and_offset_only() {
+        let plane = grid(200, 1.0);
+        assert!(lies_on_grid(&plane, 1.0));
+        // Shifted by half a voxel (the origin is taken from the points), and at a pitch of 0.1
+        // (f32 multiples of 0.1 are not exact).
+        let shifted: Vec<Vec3> = plane.iter().map(|&p| p + Vec3::splat(0.5)).collect();
+        assert!(lies_on_grid(&shifted, 1.0));
+        let fine = grid(200, 0.1);
+        assert!(lies_on_grid(&fine, 0.1));
+        assert!(!lies_on_grid(&fine, 1.0));
+        // Arbitrary floats: a Fibonacci sphere.
+        let sphere: Vec<Vec3> = (0..20_000)
+            .map(|i| {
+                let t = i as f32 * 2.399_963;
+                let y = 1.0 - 2.0 * (i as f32 + 0.5) / 20_000.0;
+                let r = (1.0 - y * y).sqrt();
+                37.3 * Vec3::new(r * t.cos(), y, r * t.sin())
+            })
+            .collect();
+        assert!(!lies_on_grid(&sphere, 1.0));
+        // A few strays, the first point among them, do not take a grid away.
+        let mut strays = plane.clone();
+        for p in strays.iter_mut().step_by(25) {
+            *p += Vec3::new(0.31, 0.47, 0.0);
+        }
+        assert!(lies_on_grid(&strays, 1.0));
+    }
+
+    #[test]
+    fn off_grid_clouds_are_drawn_at_their_own_spacing_at_every_scale() {
+        // A plane at pitch 0.7 measures 0.7 against a voxel of 1 and is drawn 1.05 wide; at
+        // 1/1000 of the scale (denser than one point per voxel) and at 1234.567 times it, the
+        // same in proportion.
+        for scale in [1.0, 1e-3, 1234.567] {
+            let pts = grid(300, 0.7 * scale);
+            match point_sizing(&pts, 1.0) {
+                PointSizing::OffGrid(size) => {
+                    assert!(
+                        (size / scale - 1.05).abs() < 0.1,
+                        "scale {scale}: size {size}"
+                    )
+                }
+                other => panic!("scale {scale}: {other:?}"),
+            }
+        }
+        // Too few points to measure: the extent over √n.
+        let few = [Vec3::ZERO, Vec3::X * 0.2, Vec3::Y * 0.2, Vec3::Z * 0.2];
+        match point_sizing(&few, 1.0) {
+            PointSizing::OffGrid(size) => assert!((size - 0.15).abs() < 1e-6, "size {size}"),
+            other => panic!("{other:?}"),
+        }
     }
 
     #[test]

@@ -18,7 +18,8 @@
 //!   [`render_each`]:
 //!   one view or many, into a [`ViewImage`], with [`ViewOptions`]; [`ModelRenderer`] prepares a
 //!   model once for views rendered one at a time.
-//! - [`closing_point_size`]: how large a sparse cloud's points are drawn so its surface is closed.
+//! - [`point_sizing`]: how large a cloud's points are drawn so its surface is closed, on its
+//!   voxel grid or off any grid.
 //! - [`rig`]: the bounding sphere and the Fibonacci-sphere rig of training and held-out cameras.
 //! - [`dataset`]: the reference views written as a COLMAP dataset (images, masks, depth, model).
 //! - [`output`]: PNG and EXR writers of one view.
@@ -59,7 +60,7 @@ pub mod rig;
 mod shading;
 mod zbuffer;
 
-pub use closing::{closing_point_size, surface_spacing};
+pub use closing::{PointSizing, closing_point_size, lies_on_grid, point_sizing, surface_spacing};
 pub use cloud::render_cloud;
 pub use dataset::{DatasetOptions, dataset_image_name, remove_dataset_model, write_dataset};
 pub use degenerate::DegenerateError;

@@ -39,8 +39,9 @@ pub struct ViewOptions {
     /// Point size in voxel (file) units: the cube side, or the disc's quad half-size.
     pub point_size: f32,
     /// Grow the points of a cloud that samples its surface more sparsely than one point per
-    /// `point_size`-wide cell until the surface is closed ([`crate::closing_point_size`]); a
-    /// dense voxelised cloud is drawn at `point_size` either way.
+    /// `point_size`-wide cell until the surface is closed, and draw a cloud that does not lie on
+    /// a grid of `point_size` at its own measured spacing ([`crate::point_sizing`]); a dense
+    /// voxelised cloud is drawn at `point_size` either way.
     pub close_surface: bool,
     /// Exponent n of the view interpolation weight max(0, cos)^n.
     pub exponent: i32,
@@ -104,22 +105,41 @@ impl ViewOptions {
     /// and the choice switched off, so the many views of one cloud measure its spacing once.
     #[must_use]
     pub fn for_cloud(&self, cloud: &plenoptic_io::PlenopticCloud) -> Self {
-        if !self.close_surface {
-            return self.clone();
-        }
-        Self {
-            point_size: crate::closing_point_size(&cloud.positions, self.point_size),
-            close_surface: false,
-            ..self.clone()
-        }
+        self.sized(self.cloud_sizing(cloud))
     }
 
     /// [`ViewOptions::for_cloud`] for a model; a mesh has no points and keeps the options.
     #[must_use]
     pub fn for_model(&self, model: &plenoptic_io::Model) -> Self {
+        self.sized(self.point_sizing(model))
+    }
+
+    /// How these options size the points of `model` ([`crate::point_sizing`] when
+    /// [`ViewOptions::close_surface`] is set and the model is a cloud), for the caller to
+    /// apply with [`ViewOptions::sized`] and tell its user about.
+    #[must_use]
+    pub fn point_sizing(&self, model: &plenoptic_io::Model) -> crate::PointSizing {
         match model {
-            plenoptic_io::Model::Cloud(cloud) => self.for_cloud(cloud),
-            plenoptic_io::Model::Mesh(_) => self.clone(),
+            plenoptic_io::Model::Cloud(cloud) => self.cloud_sizing(cloud),
+            plenoptic_io::Model::Mesh(_) => crate::PointSizing::AsConfigured,
+        }
+    }
+
+    fn cloud_sizing(&self, cloud: &plenoptic_io::PlenopticCloud) -> crate::PointSizing {
+        if self.close_surface {
+            crate::point_sizing(&cloud.positions, self.point_size)
+        } else {
+            crate::PointSizing::AsConfigured
+        }
+    }
+
+    /// These options with `sizing` applied and the choice switched off.
+    #[must_use]
+    pub fn sized(&self, sizing: crate::PointSizing) -> Self {
+        Self {
+            point_size: sizing.size(self.point_size),
+            close_surface: false,
+            ..self.clone()
         }
     }
 

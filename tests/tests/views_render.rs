@@ -371,3 +371,86 @@ fn views_kept_one_at_a_time_are_the_views_rendered_alone() {
         assert_eq!(a.alpha, b.alpha);
     }
 }
+
+/// A cloud that lies on no voxel grid is drawn at its own spacing: the same sphere of 20,000
+/// points (arbitrary floats) at radius 0.01, 1 and 1000 gives the same views. Cubes one unit
+/// wide, as a voxelised capture's are drawn, left the small sphere's views empty (the cameras
+/// inside the cubes) and spilled the unit one past its frame.
+#[test]
+fn an_off_grid_cloud_looks_the_same_at_every_scale() {
+    let n = 20_000;
+    let golden = std::f32::consts::PI * (3.0 - 5.0_f32.sqrt());
+    let unit: Vec<Vec3> = (0..n)
+        .map(|i| {
+            let y = 1.0 - 2.0 * (i as f32 + 0.5) / n as f32;
+            let r = (1.0 - y * y).sqrt();
+            let t = golden * i as f32;
+            Vec3::new(r * t.cos(), y, r * t.sin())
+        })
+        .collect();
+    let coverage = |scale: f32| -> Vec<f32> {
+        let cloud = PlenopticCloud {
+            colors: unit.iter().map(|p| (0.5 + 0.4 * *p).to_array()).collect(),
+            positions: unit.iter().map(|&p| p * scale).collect(),
+            ..Default::default()
+        };
+        let model = Model::Cloud(cloud);
+        let opts = ViewOptions::default();
+        let sizing = opts.point_sizing(&model);
+        assert!(
+            matches!(sizing, views::PointSizing::OffGrid(s) if s > 0.005 * scale && s < 0.05 * scale),
+            "scale {scale}: {sizing:?}"
+        );
+        let (c, r) = views::bounding_sphere(&model).unwrap();
+        let cams = views::fibonacci_rig(
+            c,
+            r,
+            &RigConfig {
+                cameras: 3,
+                width: 48,
+                height: 48,
+                ..RigConfig::default()
+            },
+        )
+        .unwrap();
+        views::render_views(&model, &cams, &opts.sized(sizing))
+            .unwrap()
+            .iter()
+            .flat_map(|v| (0..48 * 48).map(|i| v.alpha_at(i % 48, i / 48)))
+            .collect()
+    };
+    let unit_views = coverage(1.0);
+    // Each view is the sphere's disc, which the rig frames 0.95 × 24 = 22.8 px in radius:
+    // covered inside (no hole) and its area that of the disc, grown by the cubes reaching
+    // past the sphere (under 0.8 px).
+    for view in unit_views.chunks(48 * 48) {
+        for (i, &a) in view.iter().enumerate() {
+            let d = ((i % 48) as f32 + 0.5 - 24.0).hypot((i / 48) as f32 + 0.5 - 24.0);
+            if d < 22.0 {
+                assert!(
+                    a > 0.99,
+                    "hole at pixel {i}, {d} px from the centre: alpha {a}"
+                );
+            }
+        }
+        let area: f32 = view.iter().sum();
+        let disc = |r: f32| std::f32::consts::PI * r * r;
+        assert!(
+            area > disc(22.8) && area < disc(23.6),
+            "covered area {area} px² for a disc of {} px²",
+            disc(22.8)
+        );
+    }
+    for scale in [0.01, 1000.0] {
+        let scaled = coverage(scale);
+        let differ = unit_views
+            .iter()
+            .zip(&scaled)
+            .filter(|(a, b)| (*a - *b).abs() > 0.02)
+            .count();
+        assert!(
+            differ <= 8,
+            "scale {scale}: {differ} pixels differ from scale 1"
+        );
+    }
+}

@@ -78,13 +78,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let model = plenoptic_io::load(&args.input)
         .with_context(|| format!("cannot read {}", args.input.display()))?;
     plenoptic_render::degenerate::check_model(&args.input, &model)?;
-    let chosen = view.for_model(&model);
-    if chosen.point_size != view.point_size {
+    let sizing = view.point_sizing(&model);
+    let chosen = view.sized(sizing);
+    if sizing != views::PointSizing::AsConfigured {
         println!(
-            "the cloud samples its surface more sparsely than one point per voxel: its points \
-             are drawn {:.2} voxels wide so the surface is closed (renderer.close_surface = \
-             false draws them at {})",
-            chosen.point_size, view.point_size
+            "{sizing} (--point-size {} draws them at {0})",
+            view.point_size
         );
     }
     // The images are written, not kept: depth only where `depth/` is (the writer asks for it).

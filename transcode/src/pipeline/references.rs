@@ -136,15 +136,15 @@ fn stage_description(rig: &Rig, cfg: &Config) -> String {
 /// size the cloud's sampling needs, which the observer is told of when it is not the
 /// configured one.
 fn reference_options(model: &Model, cfg: &Config, observer: Observer<'_>) -> views::ViewOptions {
-    let mut opts = cfg.renderer.for_model(model);
+    let sizing = cfg.renderer.point_sizing(model);
+    let mut opts = cfg.renderer.sized(sizing);
     opts.background = [0.0; 3];
     opts.depth = false;
-    if opts.point_size != cfg.renderer.point_size {
+    if sizing != views::PointSizing::AsConfigured {
         observer(Event::Note(format!(
-            "the cloud samples its surface more sparsely than one point per voxel: its points \
-             are drawn {:.2} voxels wide (not {}) so the surface is closed \
-             (renderer.close_surface)",
-            opts.point_size, cfg.renderer.point_size
+            "{sizing} (renderer.point_size = {} and renderer.close_surface = false draw them \
+             at {0})",
+            cfg.renderer.point_size
         )));
     }
     opts
