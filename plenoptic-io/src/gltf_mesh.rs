@@ -108,7 +108,7 @@ fn asset_version(path: &Path) -> Option<String> {
 /// importer's I/O error does not say which one it was).
 fn missing_resource(path: &Path) -> Option<String> {
     let document = gltf::Gltf::open(path).ok()?;
-    let dir = path.parent().unwrap_or_else(|| Path::new(""));
+    let dir = resource_folder(path);
     let buffers = document.buffers().filter_map(|b| match b.source() {
         gltf::buffer::Source::Uri(uri) => {
             Some(format!("buffer {} refers to '{uri}'", b.index())).zip(Some(uri))
@@ -125,6 +125,14 @@ fn missing_resource(path: &Path) -> Option<String> {
         .chain(images)
         .find(|(_, uri)| !uri.starts_with("data:") && !dir.join(uri).exists())
         .map(|(what, _)| format!("{what}, which does not exist in {}", dir.display()))
+}
+
+/// The folder a glTF file's relative URIs start from, as it is named to a person: a bare file
+/// name's parent is the empty path, which names the current folder.
+fn resource_folder(path: &Path) -> &Path {
+    path.parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or_else(|| Path::new("."))
 }
 
 /// An accessor's component type and dimensions.
@@ -225,6 +233,59 @@ impl Builder<'_> {
                     accessor.count()
                 )));
             }
+            let indices = sparse.indices();
+            let (index_size, count) = (indices.index_type().size(), sparse.count());
+            self.check_span(&indices.view(), indices.offset(), count, index_size)
+                .map_err(|p| bad(format!("its sparse indices: {p}")))?;
+            let values = sparse.values();
+            self.check_span(&values.view(), values.offset(), count, accessor.size())
+                .map_err(|p| bad(format!("its sparse values: {p}")))?;
+        }
+        if let Some(view) = accessor.view() {
+            self.check_span(&view, accessor.offset(), accessor.count(), accessor.size())
+                .map_err(bad)?;
+        }
+        Ok(())
+    }
+
+    /// Refuses `count` items of `size` bytes from `offset` into `view` (`count` ≥ 1) that reach
+    /// past the view, and a view that reaches past its buffer's data. gltf's readers return
+    /// nothing for either (an attribute then looked absent, indices were read from beyond their
+    /// view) and compute the ends with sums that can wrap.
+    fn check_span(
+        &self,
+        view: &gltf::buffer::View<'_>,
+        offset: usize,
+        count: usize,
+        size: usize,
+    ) -> Result<(), String> {
+        let buffer = view.buffer().index();
+        let data = self.buffers.get(buffer).map_or(0, |d| d.0.len());
+        if view
+            .offset()
+            .checked_add(view.length())
+            .is_none_or(|end| end > data)
+        {
+            return Err(format!(
+                "buffer view {} ({} bytes from byte {}) reaches past the {data} bytes of buffer \
+                 {buffer}",
+                view.index(),
+                view.length(),
+                view.offset()
+            ));
+        }
+        let stride = view.stride().unwrap_or(size);
+        let end = stride
+            .checked_mul(count - 1)
+            .and_then(|b| b.checked_add(size))
+            .and_then(|b| b.checked_add(offset));
+        if end.is_none_or(|end| end > view.length()) {
+            return Err(format!(
+                "{count} items of {size} bytes, {stride} apart from byte {offset}, reach past the \
+                 {} bytes of buffer view {}",
+                view.length(),
+                view.index()
+            ));
         }
         Ok(())
     }
@@ -254,10 +315,20 @@ impl Builder<'_> {
             self.check_accessor(&what, &role, layouts, &accessor)?;
         }
         let reader = primitive.reader(|b| self.buffers.get(b.index()).map(|d| &d.0[..]));
-        let positions: Vec<[f32; 3]> = reader
-            .read_positions()
-            .ok_or_else(|| self.err(format!("{what} has no POSITION attribute")))?
-            .collect();
+        let positions: Vec<[f32; 3]> = match reader.read_positions() {
+            Some(positions) => positions.collect(),
+            None => {
+                return Err(self.err(match primitive.get(&gltf::Semantic::Positions) {
+                    None => format!("{what} has no POSITION attribute"),
+                    // Spans are checked above and the importer refuses an accessor with
+                    // neither a view nor sparse values, so this is a reader's own limit.
+                    Some(a) => format!(
+                        "{what} POSITION (accessor {}) could not be read from its buffer",
+                        a.index()
+                    ),
+                }));
+            }
+        };
         let vertex = format!("glTF {what} vertex");
         let position = ["POSITION.x", "POSITION.y", "POSITION.z"];
         crate::error::check_finite(self.path, &vertex, position, &positions)?;
@@ -425,5 +496,17 @@ fn texture_from_gltf(data: &gltf::image::Data) -> Texture {
         width: data.width,
         height: data.height,
         pixels,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_bare_file_name_resolves_in_the_current_folder() {
+        assert_eq!(resource_folder(Path::new("m.gltf")), Path::new("."));
+        assert_eq!(resource_folder(Path::new("a/b/m.gltf")), Path::new("a/b"));
+        assert_eq!(resource_folder(Path::new("/m.gltf")), Path::new("/"));
     }
 }

@@ -192,10 +192,40 @@ fn accessor_counts_the_file_cannot_back_are_errors() {
             r#"{"componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0], "sparse": {"count": 0, "indices": {"bufferView": 2, "componentType": 5125}, "values": {"bufferView": 0}}}"#,
             "sparse count is 0",
         ),
+        // Found by an adversarial sweep: each of these was reported as "no POSITION
+        // attribute" (gltf's reader returns nothing when the items do not fit).
+        (
+            r#"{"bufferView": 0, "componentType": 5126, "count": 1000000000, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]}"#,
+            "1000000000 items of 12 bytes, 12 apart from byte 0, reach past the 36 bytes of buffer view 0",
+        ),
+        (
+            r#"{"bufferView": 0, "byteOffset": 4000000000, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]}"#,
+            "3 items of 12 bytes, 12 apart from byte 4000000000, reach past the 36 bytes of buffer view 0",
+        ),
+        (
+            r#"{"bufferView": 4, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]}"#,
+            "3 items of 12 bytes, 252 apart from byte 0, reach past the 36 bytes of buffer view 4",
+        ),
+        (
+            r#"{"bufferView": 5, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]}"#,
+            "buffer view 5 (36 bytes from byte 60) reaches past the 72 bytes of buffer 0",
+        ),
+        (
+            r#"{"bufferView": 6, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]}"#,
+            "buffer view 6 (18446744073709551615 bytes from byte 0) reaches past the 72 bytes of buffer 0",
+        ),
+        (
+            r#"{"componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0], "sparse": {"count": 2, "indices": {"bufferView": 2, "componentType": 5125}, "values": {"bufferView": 0}}}"#,
+            "its sparse indices: 2 items of 4 bytes, 4 apart from byte 0, reach past the 4 bytes of buffer view 2",
+        ),
+        (
+            r#"{"componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0], "sparse": {"count": 1, "indices": {"bufferView": 2, "componentType": 5125}, "values": {"bufferView": 0, "byteOffset": 30}}}"#,
+            "its sparse values: 1 items of 12 bytes, 12 apart from byte 30, reach past the 36 bytes of buffer view 0",
+        ),
     ] {
         let text = document(4, "2.0").replace(positions, accessor).replace(
             views,
-            r#"{"buffer": 0, "byteOffset": 36, "byteLength": 36}, {"buffer": 0, "byteOffset": 0, "byteLength": 4}, {"buffer": 0, "byteOffset": 0, "byteLength": 36, "byteStride": 8}]"#,
+            r#"{"buffer": 0, "byteOffset": 36, "byteLength": 36}, {"buffer": 0, "byteOffset": 0, "byteLength": 4}, {"buffer": 0, "byteOffset": 0, "byteLength": 36, "byteStride": 8}, {"buffer": 0, "byteOffset": 0, "byteLength": 36, "byteStride": 252}, {"buffer": 0, "byteOffset": 60, "byteLength": 36}, {"buffer": 0, "byteOffset": 0, "byteLength": 18446744073709551615}]"#,
         );
         assert!(text.contains(accessor), "the test document changed");
         let e = read_with_deadline(text).unwrap_err();
@@ -207,4 +237,42 @@ fn accessor_counts_the_file_cannot_back_are_errors() {
             "{message}"
         );
     }
+}
+
+/// Indices that reach past their buffer view were read from the bytes beyond it; a POSITION
+/// accessor with no buffer view (nor sparse values) is named by the importer.
+#[test]
+fn indices_past_their_view_and_viewless_positions_are_named() {
+    let with_indices = document(4, "2.0")
+        .replace(
+            r#""COLOR_0": 1}, "mode""#,
+            r#""COLOR_0": 1}, "indices": 2, "mode""#,
+        )
+        .replace(
+            r#"{"buffer": 0, "byteOffset": 36, "byteLength": 36}]"#,
+            r#"{"buffer": 0, "byteOffset": 36, "byteLength": 36}, {"buffer": 0, "byteOffset": 0, "byteLength": 8}]"#,
+        )
+        .replace(
+            r#"{"bufferView": 1, "componentType": 5126, "count": 3, "type": "VEC3"}"#,
+            r#"{"bufferView": 1, "componentType": 5126, "count": 3, "type": "VEC3"}, {"bufferView": 2, "componentType": 5125, "count": 3, "type": "SCALAR"}"#,
+        );
+    assert!(with_indices.contains(r#""indices": 2"#) && with_indices.contains("5125"));
+    let message = read_with_deadline(with_indices).unwrap_err().to_string();
+    assert!(
+        message.contains("mesh 0 primitive 0 indices (accessor 2)")
+            && message.contains(
+                "3 items of 4 bytes, 4 apart from byte 0, reach past the 8 bytes of buffer view 2"
+            ),
+        "{message}"
+    );
+    let viewless = document(4, "2.0").replace(
+        r#"{"bufferView": 0, "componentType""#,
+        r#"{"componentType""#,
+    );
+    assert!(viewless.contains(r#"{"componentType": 5126, "count": 3, "type": "VEC3", "min""#));
+    let message = read_with_deadline(viewless).unwrap_err().to_string();
+    assert!(
+        message.contains("accessors[0].bufferView: Missing data"),
+        "{message}"
+    );
 }
