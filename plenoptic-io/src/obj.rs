@@ -16,7 +16,9 @@ pub(crate) fn read_obj(path: &Path) -> Result<Mesh, Error> {
     };
     Error::require_file(path)?;
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    check_finite_lines(path, &String::from_utf8_lossy(&bytes))?;
+    let text = String::from_utf8_lossy(&bytes);
+    let scan = scan_lines(path, &text)?;
+    check_faces(path, &text, &scan)?;
     // tobj's index arithmetic overflows on some malformed faces (`f 1//2 7//2 5/-2` multiplies
     // a wrapped relative index), a panic where overflow checks are on; turn any into an error.
     let (models, materials) =
@@ -25,13 +27,16 @@ pub(crate) fn read_obj(path: &Path) -> Result<Mesh, Error> {
             .map_err(|e| err(e.to_string()))?;
     let obj_materials = match materials {
         Ok(m) => m,
-        Err(e) => {
-            // tobj reports a missing `mtllib` as an error too; only a referenced material makes it fatal.
-            if models.iter().any(|m| m.mesh.material_id.is_some()) {
-                return Err(err(format!("material library: {e}")));
+        // tobj reports a missing `mtllib` as an error too; only a face that names a material
+        // makes it fatal (tobj then leaves the faces without one, and they would be drawn white).
+        Err(e) => match &scan.first_usemtl {
+            Some((line, name)) => {
+                return Err(err(format!(
+                    "line {line}: usemtl '{name}', but the material library cannot be read: {e}"
+                )));
             }
-            Vec::new()
-        }
+            None => Vec::new(),
+        },
     };
     let (materials, textures) = materials_of(path, &obj_materials)?;
     let mut mesh = Mesh {
@@ -90,10 +95,17 @@ fn merge_objects(
     obj_materials: usize,
     mesh: &mut Mesh,
 ) -> Result<(), Error> {
-    let all = |f: fn(&tobj::Mesh) -> bool| models.iter().all(|m| f(&m.mesh));
-    let has_normals = all(|m| !m.normals.is_empty());
-    let has_uvs = all(|m| !m.texcoords.is_empty());
-    let has_colors = all(|m| !m.vertex_color.is_empty());
+    // An attribute is kept only where every vertex has it: tobj leaves out the UV (normal) of
+    // a face vertex written without one, so a file that mixes `v/vt` and `v` faces has fewer
+    // UVs than vertices, and they would pair with the wrong vertices.
+    let all = |f: fn(&tobj::Mesh) -> usize| {
+        models
+            .iter()
+            .all(|m| m.mesh.positions.len() / 3 == f(&m.mesh))
+    };
+    let has_normals = all(|m| m.normals.len() / 3);
+    let has_uvs = all(|m| m.texcoords.len() / 2);
+    let has_colors = all(|m| m.vertex_color.len() / 3);
     let mut default_material = None;
     let (mut normals, mut uvs, mut colors) = (Vec::new(), Vec::new(), Vec::new());
     for (object, model) in models.iter().enumerate() {
@@ -158,21 +170,42 @@ fn merge_objects(
     Ok(())
 }
 
-/// Refuses the first `v`, `vn` or `vt` line holding a NaN or an infinity (or a number beyond the
-/// f32 range), naming the line, the 0-based index among lines of its kind and the component.
-/// tobj parses `nan` and `inf` as numbers, and its re-indexed vertices could not say which line
-/// they came from, so the text is scanned before tobj sees it.
-fn check_finite_lines(path: &Path, text: &str) -> Result<(), Error> {
+/// What the scan of an OBJ's lines learns that tobj's result cannot say.
+struct LineScan {
+    /// Lines of each kind: `v`, `vn`, `vt`.
+    counts: [u64; 3],
+    /// The first `usemtl` line (1-based) and the material it names.
+    first_usemtl: Option<(usize, String)>,
+}
+
+/// The kinds of line a face refers to, in the order of a face vertex's `v/vt/vn` and with the
+/// index of each in [`LineScan::counts`].
+const FACE_KINDS: [(&str, usize); 3] = [("v", 0), ("vt", 2), ("vn", 1)];
+
+/// Counts the `v`, `vn` and `vt` lines and refuses the first holding a NaN or an infinity (or
+/// a number beyond the f32 range), naming the line, the 0-based index among lines of its kind
+/// and the component. tobj parses `nan` and `inf` as numbers, and its re-indexed vertices could
+/// not say which line they came from, so the text is scanned before tobj sees it.
+fn scan_lines(path: &Path, text: &str) -> Result<LineScan, Error> {
     const V: [&str; 6] = ["x", "y", "z", "red", "green", "blue"];
     const VN: [&str; 3] = ["x", "y", "z"];
     const VT: [&str; 3] = ["u", "v", "w"];
-    let mut counts = [0u64; 3];
+    let mut scan = LineScan {
+        counts: [0; 3],
+        first_usemtl: None,
+    };
     for (n, line) in text.lines().enumerate() {
         let mut words = line.split_whitespace();
         let (key, kind, names): (&str, usize, &[&str]) = match words.next() {
             Some("v") => ("v", 0, &V),
             Some("vn") => ("vn", 1, &VN),
             Some("vt") => ("vt", 2, &VT),
+            Some("usemtl") => {
+                if scan.first_usemtl.is_none() {
+                    scan.first_usemtl = Some((n + 1, words.collect::<Vec<_>>().join(" ")));
+                }
+                continue;
+            }
             _ => continue,
         };
         for (c, word) in words.enumerate() {
@@ -182,7 +215,7 @@ fn check_finite_lines(path: &Path, text: &str) -> Result<(), Error> {
                 return Err(Error::NonFinite {
                     path: path.to_path_buf(),
                     what: format!("line {}: {key}", n + 1),
-                    index: counts[kind],
+                    index: scan.counts[kind],
                     property: names
                         .get(c)
                         .map_or_else(|| format!("value {}", c + 1), |s| (*s).to_string()),
@@ -194,7 +227,74 @@ fn check_finite_lines(path: &Path, text: &str) -> Result<(), Error> {
                 });
             }
         }
-        counts[kind] += 1;
+        scan.counts[kind] += 1;
+    }
+    Ok(scan)
+}
+
+/// Refuses the first `f` line that tobj would refuse without saying where, or read wrongly:
+/// fewer than three vertices, a vertex with more than `v/vt/vn`, a word that is not an index,
+/// index 0 (tobj took it for "absent"), a relative index before the first line of its kind, or
+/// an index past the file's lines of its kind (tobj ignored `vt` and `vn` references when the
+/// file had none). Positive indices may refer forward (tobj resolves them after reading), so
+/// they are checked against the whole file's counts and negative ones against the lines so far.
+fn check_faces(path: &Path, text: &str, scan: &LineScan) -> Result<(), Error> {
+    let mut so_far = [0u64; 3];
+    for (n, line) in text.lines().enumerate() {
+        let mut words = line.split_whitespace();
+        match words.next() {
+            Some("v") => so_far[0] += 1,
+            Some("vn") => so_far[1] += 1,
+            Some("vt") => so_far[2] += 1,
+            Some("f") => {
+                let bad = |problem: String| Error::Obj {
+                    path: path.to_path_buf(),
+                    message: format!("line {}: f: {problem}", n + 1),
+                };
+                let vertices: Vec<&str> = words.collect();
+                if vertices.len() < 3 {
+                    return Err(bad(format!(
+                        "{} vertices; a face needs at least 3",
+                        vertices.len()
+                    )));
+                }
+                for vertex in vertices {
+                    let parts: Vec<&str> = vertex.split('/').collect();
+                    if parts.len() > 3 || parts[0].is_empty() {
+                        return Err(bad(format!(
+                            "'{vertex}' is not a vertex (v, v/vt, v//vn or v/vt/vn)"
+                        )));
+                    }
+                    for (part, &(kind, k)) in parts.iter().zip(&FACE_KINDS) {
+                        if part.is_empty() {
+                            continue;
+                        }
+                        let index: i64 = part.parse().map_err(|_| {
+                            bad(format!("'{part}' in '{vertex}' is not a {kind} index"))
+                        })?;
+                        let problem = if index == 0 {
+                            Some("0 (OBJ indices count from 1)".to_string())
+                        } else if index < 0 && index.unsigned_abs() > so_far[k] {
+                            Some(format!(
+                                "{index}, before the first (only {} {kind} lines precede it)",
+                                so_far[k]
+                            ))
+                        } else if index > 0 && index.unsigned_abs() > scan.counts[k] {
+                            Some(format!(
+                                "{index}, but the file has {} {kind} lines",
+                                scan.counts[k]
+                            ))
+                        } else {
+                            None
+                        };
+                        if let Some(problem) = problem {
+                            return Err(bad(format!("'{vertex}': {kind} index {problem}")));
+                        }
+                    }
+                }
+            }
+            _ => {}
+        }
     }
     Ok(())
 }
