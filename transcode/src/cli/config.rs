@@ -29,12 +29,55 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The configuration file and the flags that override it, shared by run, demo, views and eval.
+/// The configuration file and every flag that overrides it, for the commands that run the
+/// pipeline (run, demo, sequence). `views` takes the file and the rig's flags only, `eval` the
+/// file only: a flag a command would ignore is not offered (clap refuses it).
 #[derive(Debug, Clone, Default, clap::Args)]
 pub struct Overrides {
+    #[command(flatten)]
+    pub file: ConfigFile,
+    #[command(flatten)]
+    pub rig: RigFlags,
+    #[command(flatten)]
+    pub pipeline: PipelineFlags,
+}
+
+impl Overrides {
+    /// The configuration: `base` (or the `--config` file) with the flags applied, validated.
+    pub fn resolve(&self, base: Config) -> anyhow::Result<Config> {
+        let mut c = self.file.load(base)?;
+        self.rig.apply(&mut c);
+        self.pipeline.apply(&mut c);
+        validated(c)
+    }
+}
+
+/// The `--config` file, over a command's defaults.
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct ConfigFile {
     /// TOML configuration file (see `transcode config --defaults`); flags override it.
     #[arg(long, value_name = "FILE")]
     pub config: Option<PathBuf>,
+}
+
+impl ConfigFile {
+    /// `base`, or the `--config` file read over it (not yet validated).
+    pub fn load(&self, base: Config) -> anyhow::Result<Config> {
+        match &self.config {
+            Some(path) => Config::load_over(path, &base).map_err(flat),
+            None => Ok(base),
+        }
+    }
+
+    /// [`ConfigFile::load`] validated: for a command no flag overrides.
+    pub fn resolve(&self, base: Config) -> anyhow::Result<Config> {
+        self.load(base).and_then(validated)
+    }
+}
+
+/// The flags that place the training cameras and size their views (`rig.*`).
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct RigFlags {
     /// Training cameras on the Fibonacci sphere.
     #[arg(long)]
     pub cameras: Option<usize>,
@@ -44,6 +87,34 @@ pub struct Overrides {
     /// Vertical field of view in degrees.
     #[arg(long, value_name = "DEG")]
     pub fov: Option<f64>,
+}
+
+impl RigFlags {
+    /// Applies the flags given to `c`.
+    pub fn apply(&self, c: &mut Config) {
+        if let Some(v) = self.cameras {
+            c.rig.cameras = v;
+        }
+        if let Some((w, h)) = self.resolution {
+            c.rig.width = w;
+            c.rig.height = h;
+        }
+        if let Some(v) = self.fov {
+            c.rig.fov_y_deg = v;
+        }
+    }
+}
+
+/// A configuration the flags were applied to, checked, with the check's error saying so.
+pub fn validated(c: Config) -> anyhow::Result<Config> {
+    c.validate()
+        .map_err(|e| anyhow::anyhow!("{e} (after applying the command-line flags)"))?;
+    Ok(c)
+}
+
+/// The flags of the held-out views, the splats, their training and the files written.
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct PipelineFlags {
     /// Held-out cameras for evaluation.
     #[arg(long)]
     pub heldout: Option<usize>,
@@ -108,26 +179,20 @@ pub struct Overrides {
     /// Also train from the other init mode and compare both in the report.
     #[arg(long)]
     pub compare_init: bool,
+    /// Train with the antialiased (Mip-Splatting) opacity compensation
+    /// (`training.antialiased`): sharper silhouettes (the README demo gains about 2.5 dB of
+    /// held-out PSNR on black and 3 dB on white), at the price of more splats from the
+    /// automatic budget; the PLY says so in a header comment
+    /// (`SplatRenderMode: mip`) and the SPZ in its flag, which Brush, PlayCanvas / SuperSplat,
+    /// splat-transform and our viewer read, but a viewer that ignores them draws it too opaque.
+    #[arg(long)]
+    pub antialiased: bool,
 }
 
-impl Overrides {
-    /// The configuration: `base` (or the `--config` file) with the flags applied, validated.
-    pub fn resolve(&self, base: Config) -> anyhow::Result<Config> {
-        let mut c = match &self.config {
-            Some(path) => Config::load_over(path, &base).map_err(flat)?,
-            None => base,
-        };
+impl PipelineFlags {
+    /// Applies the flags given to `c`.
+    pub fn apply(&self, c: &mut Config) {
         let o = self;
-        if let Some(v) = o.cameras {
-            c.rig.cameras = v;
-        }
-        if let Some((w, h)) = o.resolution {
-            c.rig.width = w;
-            c.rig.height = h;
-        }
-        if let Some(v) = o.fov {
-            c.rig.fov_y_deg = v;
-        }
         if let Some(v) = o.heldout {
             c.rig.heldout_cameras = v;
         }
@@ -180,32 +245,8 @@ impl Overrides {
         c.output.dataset &= !o.no_dataset;
         c.output.glb |= o.glb;
         c.output.compare_init |= o.compare_init;
-        c.validate()
-            .map_err(|e| anyhow::anyhow!("{e} (after applying the command-line flags)"))?;
-        Ok(c)
-    }
-}
-
-/// The flags of the commands that train (`run`, `demo`, `sequence`) beyond the shared
-/// overrides. Kept apart from [`Overrides`] because `eval` shares those and has its own
-/// `--antialiased` for how a model is drawn.
-#[derive(Debug, Clone, Copy, Default, clap::Args)]
-pub struct TrainingFlags {
-    /// Train with the antialiased (Mip-Splatting) opacity compensation
-    /// (`training.antialiased`): sharper silhouettes (the README demo gains about 2.5 dB of
-    /// held-out PSNR on black and 3 dB on white), at the price of more splats from the
-    /// automatic budget; the PLY says so in a header comment
-    /// (`SplatRenderMode: mip`) and the SPZ in its flag, which Brush, PlayCanvas / SuperSplat,
-    /// splat-transform and our viewer read, but a viewer that ignores them draws it too opaque.
-    #[arg(long)]
-    pub antialiased: bool,
-}
-
-impl TrainingFlags {
-    /// Applies the flags to a configuration the overrides resolved (a flag only turns a
-    /// setting on, so the file's `true` stays).
-    pub fn apply(self, config: &mut Config) {
-        config.training.antialiased |= self.antialiased;
+        // A flag only turns a setting on, so the file's `true` stays.
+        c.training.antialiased |= o.antialiased;
     }
 }
 

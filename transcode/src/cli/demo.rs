@@ -6,7 +6,7 @@ use anyhow::Context as _;
 use plenoptic_scenes::{DemoConfig, DemoLayout, demo_scene};
 use transcode::config::Config;
 
-use super::config::{Overrides, TrainingFlags, flat};
+use super::config::{Overrides, flat};
 use super::progress::Reporter;
 
 /// Arguments of `transcode demo`.
@@ -25,8 +25,6 @@ pub struct Args {
     layout: DemoLayout,
     #[command(flatten)]
     overrides: Overrides,
-    #[command(flatten)]
-    training: TrainingFlags,
     /// Print nothing but errors and the result.
     #[arg(long)]
     quiet: bool,
@@ -48,8 +46,7 @@ pub fn demo_config() -> Config {
 
 /// Runs `transcode demo`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let mut config = args.overrides.resolve(demo_config())?;
-    args.training.apply(&mut config);
+    let config = args.overrides.resolve(demo_config())?;
     let scene = DemoConfig {
         grid: args.grid,
         layout: args.layout,

@@ -10,7 +10,7 @@ use splat_train::eval::evaluate_views;
 use splat_train::init::SurfaceIndex;
 use transcode::config::Config;
 
-use super::config::{Overrides, flat, require_file};
+use super::config::{ConfigFile, flat, require_file};
 
 /// Arguments of `transcode eval`.
 #[derive(Debug, clap::Args)]
@@ -29,13 +29,13 @@ pub struct Args {
     #[command(flatten)]
     drawing: super::render::Drawing,
     #[command(flatten)]
-    overrides: Overrides,
+    file: ConfigFile,
 }
 
 /// Runs `transcode eval`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     require_file(&args.model, "model")?;
-    let config = args.overrides.resolve(Config::default())?;
+    let config = args.file.resolve(Config::default())?;
     let file = splat_core::model_file::read_model(&args.model).map_err(flat)?;
     let splats = file.splats;
     let antialiased = args

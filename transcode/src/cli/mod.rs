@@ -89,3 +89,69 @@ pub fn dispatch(cli: Cli) -> anyhow::Result<()> {
         Command::Convert(a) => convert::run(a),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Whether `transcode ARGS` parses; the error's text when it does not.
+    fn parses(args: &[&str]) -> Result<(), String> {
+        let argv = std::iter::once("transcode").chain(args.iter().copied());
+        Cli::try_parse_from(argv)
+            .map(drop)
+            .map_err(|e| e.to_string())
+    }
+
+    /// A command offers only the flags it acts on: `eval` took (and ignored) every pipeline
+    /// flag, `views` every training one.
+    #[test]
+    fn commands_refuse_the_flags_they_would_ignore() {
+        let eval = ["eval", "m.ply", "--reference", "d"];
+        assert!(parses(&[&eval[..], &["--config", "c.toml", "--plain"]].concat()).is_ok());
+        for flag in [
+            ["--resolution", "64"],
+            ["--cameras", "8"],
+            ["--splats", "10"],
+        ] {
+            let e = parses(&[&eval[..], &flag[..]].concat()).unwrap_err();
+            assert!(
+                e.contains(&format!("unexpected argument '{}'", flag[0])),
+                "{e}"
+            );
+        }
+        let views = ["views", "in.ply", "--out", "d"];
+        let rig = [
+            "--config",
+            "c.toml",
+            "--resolution",
+            "64",
+            "--cameras",
+            "8",
+            "--fov",
+            "40",
+        ];
+        assert!(parses(&[&views[..], &rig[..]].concat()).is_ok());
+        for flag in [
+            ["--heldout", "2"],
+            ["--iterations", "9"],
+            ["--splats", "10"],
+        ] {
+            let e = parses(&[&views[..], &flag[..]].concat()).unwrap_err();
+            assert!(
+                e.contains(&format!("unexpected argument '{}'", flag[0])),
+                "{e}"
+            );
+        }
+        let run = [
+            "run",
+            "in.ply",
+            "--out",
+            "o",
+            "--heldout",
+            "2",
+            "--splats",
+            "10",
+        ];
+        assert!(parses(&[&run[..], &rig[..], &["--antialiased"]].concat()).is_ok());
+    }
+}

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use transcode::config::Config;
 use transcode::pipeline::{Finish, RunOptions};
 
-use super::config::{Overrides, TrainingFlags, flat, require_file};
+use super::config::{Overrides, flat, require_file};
 use super::progress::Reporter;
 
 /// Arguments of `transcode run`.
@@ -18,8 +18,6 @@ pub struct Args {
     out: PathBuf,
     #[command(flatten)]
     overrides: Overrides,
-    #[command(flatten)]
-    training: TrainingFlags,
     /// Continue the run saved in DIR (after a crash or kill) from its last checkpoint, with the
     /// same input and settings; a finished run is left as it is.
     #[arg(long)]
@@ -37,7 +35,6 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     require_file(&args.input, "input")?;
     let mut config = args.overrides.resolve(Config::default())?;
-    args.training.apply(&mut config);
     if let Some(s) = args.checkpoint_interval {
         config.output.checkpoint_interval_s = s;
         config

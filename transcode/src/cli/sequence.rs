@@ -7,7 +7,7 @@ use anyhow::bail;
 use transcode::config::Config;
 use transcode::sequence::{self, FrameState, Shard};
 
-use super::config::{Overrides, TrainingFlags};
+use super::config::Overrides;
 use super::progress::Reporter;
 
 /// Arguments of `transcode sequence`.
@@ -21,8 +21,6 @@ pub struct Args {
     out: PathBuf,
     #[command(flatten)]
     overrides: Overrides,
-    #[command(flatten)]
-    training: TrainingFlags,
     /// Take the I-th of N contiguous blocks of frames (0-based), e.g. 2/10. Without it: the
     /// block a Slurm job array (SLURM_ARRAY_TASK_ID, SLURM_ARRAY_TASK_COUNT) or a Kubernetes
     /// Indexed Job (JOB_COMPLETION_INDEX, TRANSCODE_SHARD_COUNT) gives this task, else all.
@@ -53,7 +51,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return whole(&merged);
     }
     let mut config = args.overrides.resolve(Config::default())?;
-    args.training.apply(&mut config);
     if args.cold {
         config.sequence.warm_start = false;
     }

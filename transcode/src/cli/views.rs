@@ -8,7 +8,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use plenoptic_render::{self as views, BitDepth, DatasetOptions, PointShape, ViewOptions};
 use transcode::config::Config;
 
-use super::config::{Overrides, require_file};
+use super::config::{ConfigFile, RigFlags, require_file, validated};
 
 /// Arguments of `transcode views`.
 #[derive(Debug, clap::Args)]
@@ -19,9 +19,12 @@ pub struct Args {
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
     #[command(flatten)]
-    overrides: Overrides,
+    file: ConfigFile,
+    #[command(flatten)]
+    rig: RigFlags,
     /// Point size in voxels (cube side, or the disc's half-size), used as given (without it a
-    /// sparse cloud's points grow until its surface is closed).
+    /// sparse cloud's points grow until its surface is closed, and a cloud on no voxel grid is
+    /// drawn at its own spacing).
     #[arg(long)]
     point_size: Option<f32>,
     /// Draw points as view-aligned discs instead of voxel cubes.
@@ -44,7 +47,9 @@ pub struct Args {
 /// Runs `transcode views`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     require_file(&args.input, "input")?;
-    let config = args.overrides.resolve(Config::default())?;
+    let mut config = args.file.load(Config::default())?;
+    args.rig.apply(&mut config);
+    let config = validated(config)?;
     let mut view = config.renderer.clone();
     if let Some(s) = args.point_size {
         view.point_size = s;
