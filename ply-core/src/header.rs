@@ -124,17 +124,21 @@ impl Header {
             .find(|(_, e)| e.name == name)
     }
 
-    /// Whether the vertices carry 3D Gaussian Splatting's properties (`f_dc_0`, `opacity`,
-    /// `scale_0`, `rot_0`): a splat model rather than a point cloud or a mesh.
+    /// Whether the vertices carry 3D Gaussian Splatting's properties
+    /// ([`GAUSSIAN_SPLAT_PROPERTIES`]): a splat model rather than a point cloud or a mesh.
     #[must_use]
     pub fn holds_gaussian_splats(&self) -> bool {
         self.element("vertex").is_some_and(|(_, v)| {
-            ["f_dc_0", "opacity", "scale_0", "rot_0"]
+            GAUSSIAN_SPLAT_PROPERTIES
                 .iter()
                 .all(|n| v.properties.iter().any(|p| p.name == *n))
         })
     }
 }
+
+/// The vertex properties that mark a PLY as a 3D Gaussian Splatting model, one of each kind
+/// (colour, opacity, scale, rotation): a point cloud or a mesh has none of them.
+pub const GAUSSIAN_SPLAT_PROPERTIES: [&str; 4] = ["f_dc_0", "opacity", "scale_0", "rot_0"];
 
 /// Parses the header at the start of `bytes` (the whole file, or at least its header).
 ///

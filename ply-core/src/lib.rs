@@ -48,6 +48,7 @@ mod scalar;
 pub use codec::{parse_ascii, read_binary, write_ascii, write_binary};
 pub use error::{HeaderError, HeaderProblem};
 pub use header::{
-    Element, Header, MAX_HEADER_BYTES, PlyFormat, Property, PropertyKind, parse_header,
+    Element, GAUSSIAN_SPLAT_PROPERTIES, Header, MAX_HEADER_BYTES, PlyFormat, Property,
+    PropertyKind, parse_header,
 };
 pub use scalar::ScalarType;

@@ -14,7 +14,7 @@ pub enum Error {
         source: std::io::Error,
     },
     /// The PLY header is malformed or lacks what a 3DGS model needs.
-    #[error("{path}: PLY header line {line}: {message}")]
+    #[error("{}: PLY header{}: {message}", path.display(), at_line(*line))]
     Header {
         /// The file.
         path: PathBuf,
@@ -131,5 +131,14 @@ impl Error {
             path: path.to_path_buf(),
             source,
         }
+    }
+}
+
+/// " line N" for a header line, nothing for the header as a whole (line 0).
+fn at_line(line: usize) -> String {
+    if line == 0 {
+        String::new()
+    } else {
+        format!(" line {line}")
     }
 }

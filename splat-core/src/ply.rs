@@ -100,6 +100,22 @@ fn find_columns(path: &Path, el: &Element) -> Result<Columns, Error> {
             }
         }
     }
+    // A cloud or a mesh given where a model is expected: say what it is rather than name the
+    // first missing property.
+    if ply_core::GAUSSIAN_SPLAT_PROPERTIES
+        .iter()
+        .all(|n| !names.contains(n))
+    {
+        return Err(header_err(
+            path,
+            0,
+            format!(
+                "not a 3D Gaussian Splatting model: its vertices have none of {} (a point cloud \
+                 or a mesh, which is input for training, not a model)",
+                ply_core::GAUSSIAN_SPLAT_PROPERTIES.join(", ")
+            ),
+        ));
+    }
     let col = |n: &str| -> Result<usize, Error> {
         names
             .iter()

@@ -209,7 +209,11 @@ fn bad_files_give_clear_errors() {
     let good = std::fs::read(gt_path()).unwrap();
     expect_err(&good[..good.len() - 10], "vertices of 248 bytes need");
     expect_err(b"hello\n", "not a PLY");
-    expect_err(b"ply\nformat binary_little_endian 1.0\nelement vertex 1000000000000\nproperty float x\nend_header\n", "missing");
+    // A point cloud's header (no splat property at all) is named as one, without a line.
+    expect_err(
+        b"ply\nformat binary_little_endian 1.0\nelement vertex 1000000000000\nproperty float x\nend_header\n",
+        "bad.ply: PLY header: not a 3D Gaussian Splatting model: its vertices have none of f_dc_0, opacity, scale_0, rot_0",
+    );
     let header = String::from_utf8_lossy(
         &good[..good.windows(11).position(|w| w == b"end_header\n").unwrap()],
     )

@@ -105,6 +105,9 @@ fn file_site(model: &Path, colmap: Option<&Path>) -> anyhow::Result<Site> {
             model.display()
         );
     }
+    // Read as a model first: a point cloud, a mesh or a broken file is refused here with what
+    // it is, rather than served to a viewer that then shows nothing.
+    splat_core::model_file::read_model(model).map_err(super::config::flat)?;
     let mut bytes = std::fs::read(model).with_context(|| format!("reading {}", model.display()))?;
     if ext == "spz" && bytes.starts_with(b"NGSP") {
         bytes = spz_v4_as_v3(model, &bytes)?;
@@ -229,5 +232,38 @@ mod tests {
             let angle = 2.0 * a.rotation(i).dot(b.rotation(i)).abs().min(1.0).acos();
             assert!(angle < 4e-3, "splat {i}: {angle} rad");
         }
+    }
+
+    /// A point cloud (or a broken model) named as a model is refused with what it is: it was
+    /// served, and the viewer showed nothing.
+    #[test]
+    fn a_point_cloud_is_not_served_as_a_model() {
+        let dir = tempfile::tempdir().unwrap();
+        let cloud = dir.path().join("cloud.ply");
+        let positions = (0..10)
+            .map(|i| glam::Vec3::new(i as f32, 0.0, 1.0))
+            .collect();
+        plenoptic_io::write_cloud(
+            &cloud,
+            &plenoptic_io::PlenopticCloud {
+                colors: vec![[0.5; 3]; 10],
+                positions,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let e = format!("{:#}", file_site(&cloud, None).err().unwrap());
+        assert!(
+            e.contains("cloud.ply: PLY header: not a 3D Gaussian Splatting model"),
+            "{e}"
+        );
+        let broken = dir.path().join("broken.spz");
+        std::fs::write(&broken, b"not gzip").unwrap();
+        assert!(file_site(&broken, None).is_err());
+        let gt = Path::new(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../testdata/splat-scene/gt.ply"
+        ));
+        assert!(file_site(gt, None).is_ok());
     }
 }
