@@ -163,13 +163,21 @@ impl Error {
 
     /// Refuses a path that is not an existing regular file, before a reader library sees it.
     pub(crate) fn require_file(path: &std::path::Path) -> Result<(), Self> {
-        if path.is_file() {
-            return Ok(());
-        }
-        Err(Self::io(
-            path,
-            std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"),
-        ))
+        use std::io::{Error as IoError, ErrorKind};
+        let problem = match std::fs::metadata(path) {
+            Ok(m) if m.is_file() => return Ok(()),
+            Ok(m) if m.is_dir() => IoError::new(ErrorKind::InvalidInput, "a folder, not a file"),
+            // A pipe or a device cannot be mapped ("No such device").
+            Ok(_) => IoError::new(
+                ErrorKind::InvalidInput,
+                "not a regular file (a pipe or a device): give the file itself",
+            ),
+            Err(e) if e.kind() == ErrorKind::NotFound => {
+                IoError::new(ErrorKind::NotFound, "no such file")
+            }
+            Err(e) => e,
+        };
+        Err(Self::io(path, problem))
     }
 }
 
@@ -199,4 +207,33 @@ pub(crate) fn check_finite<const N: usize>(
         property: components[c].to_string(),
         value: values[index][c].to_string(),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    /// A folder named like a model said "No such device" (the PLY reader mapped it), and a pipe
+    /// likewise; each is now named for what it is, through every reader.
+    #[test]
+    fn what_is_not_a_file_is_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let folder = dir.path().join("model.ply");
+        std::fs::create_dir(&folder).unwrap();
+        for read in [crate::load, |p: &std::path::Path| {
+            crate::read_cloud(p).map(crate::Model::Cloud)
+        }] {
+            let e = read(&folder).unwrap_err().to_string();
+            assert!(e.ends_with("model.ply: a folder, not a file"), "{e}");
+        }
+        let missing = dir.path().join("none.obj");
+        let e = crate::load(&missing).unwrap_err().to_string();
+        assert!(e.ends_with("none.obj: no such file"), "{e}");
+        let fifo = dir.path().join("pipe.ply");
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+        assert!(made.unwrap().success(), "mkfifo (coreutils) failed");
+        let e = crate::load(&fifo).unwrap_err().to_string();
+        assert!(
+            e.contains("pipe.ply: not a regular file (a pipe or a device)"),
+            "{e}"
+        );
+    }
 }

@@ -18,6 +18,7 @@ use crate::{Error, Model, PlenopticCloud, PlyLayout};
 
 /// Maps the file and hands its bytes to `f` (empty files get an empty slice: mapping 0 bytes fails).
 fn with_bytes<R>(path: &Path, f: impl FnOnce(&[u8]) -> Result<R, Error>) -> Result<R, Error> {
+    Error::require_file(path)?;
     let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
     let len = file.metadata().map_err(|e| Error::io(path, e))?.len();
     if len == 0 {
