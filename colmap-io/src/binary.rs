@@ -12,6 +12,7 @@ use glam::{DVec2, DVec3};
 
 use crate::error::{Location, Problem};
 use crate::located::{ImagesRead, PointsRead};
+use crate::reconstruction::CameraField;
 use crate::{CameraModel, CameraRecord, Error, ImageRecord, Point2D, Point3D, TrackElement};
 
 /// Bytes of one camera record before its parameters: id u32, model i32, width u64, height u64.
@@ -173,8 +174,14 @@ pub(crate) fn read_cameras(path: &Path) -> Result<BTreeMap<u32, CameraRecord>, E
             height,
             params,
         };
-        if let Some((i, problem)) = camera.non_finite() {
-            return Err(r.error_at(at + CAMERA_HEADER + 8 * i as u64, problem));
+        if let Some((field, problem)) = camera.bad_intrinsics() {
+            // The record: CAMERA_ID (4 bytes), MODEL_ID (4), WIDTH (8), HEIGHT (8), PARAMS.
+            let offset = match field {
+                CameraField::Width => 8,
+                CameraField::Height => 16,
+                CameraField::Param(i) => CAMERA_HEADER + 8 * i as u64,
+            };
+            return Err(r.error_at(at + offset, problem));
         }
         if cameras.insert(id, camera).is_some() {
             return Err(r.error_at(

@@ -80,6 +80,26 @@ pub enum Problem {
         /// The value read.
         value: f64,
     },
+    /// A camera with no pixels.
+    #[error("camera {id}, WIDTH × HEIGHT: {width} × {height} is not an image size")]
+    ZeroSize {
+        /// The camera's id.
+        id: u64,
+        /// The width read.
+        width: u64,
+        /// The height read.
+        height: u64,
+    },
+    /// A camera whose focal length is zero or negative.
+    #[error("camera {id}, {field}: {value} is not a focal length; it must be positive")]
+    NotPositive {
+        /// The camera's id.
+        id: u64,
+        /// The parameter (`PARAMS[0] (fx)`…).
+        field: String,
+        /// The value read.
+        value: f64,
+    },
     /// An image whose rotation quaternion is zero (or too close to it to normalise).
     #[error("image {id}, QW QX QY QZ: {qvec:?} is not a rotation; a pose needs a unit quaternion")]
     ZeroRotation {

@@ -42,14 +42,49 @@ fn first_non_finite(
     ))
 }
 
+/// Where in a camera record a problem lies, for the readers to point at its line or bytes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum CameraField {
+    /// WIDTH or HEIGHT (the first of them that is 0).
+    Width,
+    Height,
+    /// The parameter of this index.
+    Param(usize),
+}
+
 impl CameraRecord {
-    /// The first parameter that is NaN or infinite (its index among the parameters): such a
-    /// camera projects every point to NaN.
-    pub(crate) fn non_finite(&self) -> Option<(usize, Problem)> {
+    /// The first field that makes the camera unusable: a width or height of 0 (no pixels), a
+    /// parameter that is NaN or infinite (every projection NaN), or a focal length (`f`, `fx`,
+    /// `fy`) that is not positive (every point projected onto the principal point, or
+    /// mirrored).
+    pub(crate) fn bad_intrinsics(&self) -> Option<(CameraField, Problem)> {
+        let id = u64::from(self.id);
+        if self.width == 0 || self.height == 0 {
+            let field = if self.width == 0 {
+                CameraField::Width
+            } else {
+                CameraField::Height
+            };
+            let (width, height) = (self.width, self.height);
+            return Some((field, Problem::ZeroSize { id, width, height }));
+        }
         let names = self.model.param_names();
-        first_non_finite("camera", self.id.into(), &self.params, |i| {
-            format!("PARAMS[{i}] ({})", names.get(i).copied().unwrap_or("?"))
-        })
+        let name = |i: usize| format!("PARAMS[{i}] ({})", names.get(i).copied().unwrap_or("?"));
+        if let Some((i, problem)) = first_non_finite("camera", id, &self.params, name) {
+            return Some((CameraField::Param(i), problem));
+        }
+        let focal = |i: &usize| matches!(names.get(*i), Some(&("f" | "fx" | "fy")));
+        let i = (0..self.params.len())
+            .filter(focal)
+            .find(|&i| self.params[i] <= 0.0)?;
+        Some((
+            CameraField::Param(i),
+            Problem::NotPositive {
+                id,
+                field: name(i),
+                value: self.params[i],
+            },
+        ))
     }
 }
 

@@ -130,7 +130,7 @@ fn parse_camera(line: &str) -> Result<CameraRecord, Problem> {
         height,
         params,
     };
-    match camera.non_finite() {
+    match camera.bad_intrinsics() {
         Some((_, problem)) => Err(problem),
         None => Ok(camera),
     }

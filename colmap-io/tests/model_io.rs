@@ -25,8 +25,18 @@ fn sample() -> Reconstruction {
     ];
     for (i, model) in CameraModel::ALL.iter().enumerate() {
         let id = 10 + i as u32;
+        // The awkward values as they are, except in a focal length, which must be positive
+        // (a reader refuses the camera otherwise): there shifted past 1.
+        let names = model.param_names();
         let params = (0..model.num_params())
-            .map(|k| awkward[(i + k) % awkward.len()] + k as f64)
+            .map(|k| {
+                let v: f64 = awkward[(i + k) % awkward.len()];
+                if matches!(names[k], "f" | "fx" | "fy") {
+                    v.abs() + 1.0 + k as f64
+                } else {
+                    v
+                }
+            })
             .collect();
         rec.cameras.insert(
             id,

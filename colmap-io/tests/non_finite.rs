@@ -184,3 +184,68 @@ fn a_zero_quaternion_is_refused_in_both_formats() {
     assert!(m.contains("images.bin: byte offset 12"), "{m}");
     assert!(m.contains("is not a rotation"), "{m}");
 }
+
+/// A camera with no pixels or a focal length that is not positive was read (`colmap info`
+/// listed it; only training refused it): each is refused at its line or its bytes.
+#[test]
+fn cameras_without_pixels_or_focal_length_are_refused_where_they_are() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    // cameras.txt line 4: `1 SIMPLE_PINHOLE 1919 1079 1847.53 959.5 539.5`.
+    for (k, value, expected) in [
+        (
+            2,
+            "0",
+            "line 4: camera 1, WIDTH × HEIGHT: 0 × 1079 is not an image size",
+        ),
+        (
+            3,
+            "0",
+            "line 4: camera 1, WIDTH × HEIGHT: 1919 × 0 is not an image size",
+        ),
+        (
+            4,
+            "0",
+            "line 4: camera 1, PARAMS[0] (f): 0 is not a focal length; it must be positive",
+        ),
+        (
+            4,
+            "-1847.53",
+            "line 4: camera 1, PARAMS[0] (f): -1847.53 is not a focal length; it must be positive",
+        ),
+    ] {
+        text_with(dir, "cameras.txt", 4, k, value);
+        let m = read_model_as(dir, Format::Text).unwrap_err().to_string();
+        assert!(m.ends_with(expected), "{m}");
+    }
+    // A negative principal point is a camera (an off-centre crop): read.
+    text_with(dir, "cameras.txt", 4, 5, "-20");
+    assert!(read_model_as(dir, Format::Text).is_ok());
+
+    let bin = tempfile::tempdir().unwrap();
+    let rec = read_model(&maupertuis()).unwrap();
+    write_model(bin.path(), &rec, Format::Binary).unwrap();
+    let good = std::fs::read(bin.path().join("cameras.bin")).unwrap();
+    // cameras.bin: count (8), then camera 1: id 4, model 4, width 8, height 8, params (f cx cy).
+    for (at, bytes, offset, expected) in [
+        (16, 0u64.to_le_bytes(), 16, "WIDTH × HEIGHT: 0 × 1079"),
+        (24, 0u64.to_le_bytes(), 24, "WIDTH × HEIGHT: 1919 × 0"),
+        (
+            32,
+            0f64.to_le_bytes(),
+            32,
+            "PARAMS[0] (f): 0 is not a focal length",
+        ),
+    ] {
+        let mut bad = good.clone();
+        bad[at..at + 8].copy_from_slice(&bytes);
+        std::fs::write(bin.path().join("cameras.bin"), bad).unwrap();
+        let err = read_model_as(bin.path(), Format::Binary).unwrap_err();
+        let m = err.to_string();
+        assert!(
+            matches!(err, Error::Format { location: Location::Offset(o), .. } if o == offset)
+                && m.contains(expected),
+            "{m}"
+        );
+    }
+}
