@@ -595,13 +595,26 @@ fn plenoptic_ply_mesh_has_per_vertex_camera_colours_and_load_chooses_by_faces() 
     assert!(matches!(load(&p).unwrap(), Model::Cloud(c) if c.len() == 4 && c.num_cameras == 2));
     let bad = text.replace("4 0 1 2 3", "4 0 1 2 9");
     let p = write(dir.path(), "badface.ply", bad.as_bytes());
+    // Named at its line (the 17 header lines, 4 vertex rows, then the face's).
+    let e = read_mesh(&p).unwrap_err().to_string();
+    assert!(
+        e.contains("badface.ply")
+            && e.contains("line 22")
+            && e.contains("vertex index 9, but there are only 4 vertices"),
+        "{e}"
+    );
+    // Faces written before their vertices are checked once both are read.
+    let face_first = "ply\nformat ascii 1.0\nelement face 1\nproperty list uchar int vertex_index\n\
+         element vertex 3\nproperty float x\nproperty float y\nproperty float z\nend_header\n\
+         3 0 1 7\n0 0 0\n1 0 0\n0 1 0\n";
+    let p = write(dir.path(), "facefirst.ply", face_first.as_bytes());
     let e = read_mesh(&p).unwrap_err();
     assert!(
         matches!(
             e,
             Error::IndexOutOfRange {
-                vertex: 9,
-                count: 4,
+                vertex: 7,
+                count: 3,
                 ..
             }
         ),

@@ -503,7 +503,8 @@ pub(crate) fn read_body(
             }
             vertices = Some(data);
         } else if want == Want::Triangles && element.name == "face" {
-            read_faces(path, element, &mut cursor, &mut triangles)?;
+            let vertex_count = vertices.as_ref().map(|v| v.positions.len() as u64);
+            read_faces(path, element, vertex_count, &mut cursor, &mut triangles)?;
         } else if let Some(stride) = stride {
             cursor.pos += records(path, bytes, cursor.pos, element, stride)?.len();
         } else {
@@ -673,6 +674,7 @@ fn decode_rows(
 fn read_faces(
     path: &Path,
     element: &Element,
+    vertex_count: Option<u64>,
     cursor: &mut Cursor<'_>,
     triangles: &mut Vec<[u32; 3]>,
 ) -> Result<(), Error> {
@@ -700,6 +702,17 @@ fn read_faces(
         }
         if let Some(bad) = list.iter().find(|&&v| v < 0.0 || v > f64::from(u32::MAX)) {
             return Err(cursor.error(element, f, format!("vertex index {bad} is out of range")));
+        }
+        // With the vertices read first (as files write them), a face past them is named at its
+        // line or bytes; otherwise the check after the body names the triangle.
+        if let Some(count) = vertex_count
+            && let Some(bad) = list.iter().find(|&&v| v >= count as f64)
+        {
+            return Err(cursor.error(
+                element,
+                f,
+                format!("vertex index {bad}, but there are only {count} vertices"),
+            ));
         }
         let v = |i: usize| list[i] as u32;
         for i in 1..list.len() - 1 {
