@@ -299,6 +299,19 @@ mod tests {
             .collect()
     }
 
+    /// `n` points of the Fibonacci lattice on a sphere of radius `radius` round the origin.
+    fn fibonacci_sphere(n: usize, radius: f32) -> Vec<Vec3> {
+        let golden = std::f32::consts::PI * (3.0 - 5.0_f32.sqrt());
+        (0..n)
+            .map(|i| {
+                let y = 1.0 - 2.0 * (i as f32 + 0.5) / n as f32;
+                let r = (1.0 - y * y).sqrt();
+                let t = golden * i as f32;
+                radius * Vec3::new(r * t.cos(), y, r * t.sin())
+            })
+            .collect()
+    }
+
     #[test]
     fn median_count_counts_what_a_brute_force_counts() {
         // A bumpy shell with heaped duplicates, some points near the box's low corner (cells
@@ -369,15 +382,7 @@ mod tests {
     fn a_sphere_shell_has_the_spacing_of_its_area() {
         // Fibonacci points on a sphere of radius 50: area 4π·50² over n points.
         let n = 40_000;
-        let golden = std::f32::consts::PI * (3.0 - 5.0_f32.sqrt());
-        let pts: Vec<Vec3> = (0..n)
-            .map(|i| {
-                let y = 1.0 - 2.0 * (i as f32 + 0.5) / n as f32;
-                let r = (1.0 - y * y).sqrt();
-                let t = golden * i as f32;
-                50.0 * Vec3::new(r * t.cos(), y, r * t.sin())
-            })
-            .collect();
+        let pts = fibonacci_sphere(n, 50.0);
         let truth = (4.0 * std::f32::consts::PI * 2500.0 / n as f32).sqrt();
         let s = surface_spacing(&pts).unwrap();
         assert!((s / truth - 1.0).abs() < 0.1, "spacing {s}, truth {truth}");
@@ -406,15 +411,7 @@ mod tests {
         assert!(lies_on_grid(&fine, 0.1));
         assert!(!lies_on_grid(&fine, 1.0));
         // Arbitrary floats: a Fibonacci sphere.
-        let sphere: Vec<Vec3> = (0..20_000)
-            .map(|i| {
-                let t = i as f32 * 2.399_963;
-                let y = 1.0 - 2.0 * (i as f32 + 0.5) / 20_000.0;
-                let r = (1.0 - y * y).sqrt();
-                37.3 * Vec3::new(r * t.cos(), y, r * t.sin())
-            })
-            .collect();
-        assert!(!lies_on_grid(&sphere, 1.0));
+        assert!(!lies_on_grid(&fibonacci_sphere(20_000, 37.3), 1.0));
         // A few strays, the first point among them, do not take a grid away.
         let mut strays = plane.clone();
         for p in strays.iter_mut().step_by(25) {
