@@ -132,13 +132,9 @@ pub fn closing_point_size(positions: &[Vec3], base: f32) -> f32 {
 /// extent over √n as the spacing when off the grid, else keep `base`.
 #[must_use]
 pub fn point_sizing(positions: &[Vec3], base: f32) -> PointSizing {
-    let finite: Vec<Vec3> = positions
-        .iter()
-        .copied()
-        .filter(|p| p.is_finite())
-        .collect();
+    let finite = finite_points(positions);
     let on_grid = lies_on_grid(&finite, base);
-    match surface_spacing(&finite) {
+    match finite_spacing(&finite) {
         Some(s) if !on_grid => PointSizing::OffGrid(CLOSING_WIDTH * s),
         Some(s) if s > DENSE_TOLERANCE * base => PointSizing::Grown((CLOSING_WIDTH * s).max(base)),
         Some(_) => PointSizing::AsConfigured,
@@ -198,15 +194,24 @@ fn bounds(finite: &[Vec3]) -> Option<(Vec3, f32)> {
 /// cloud with no extent.
 #[must_use]
 pub fn surface_spacing(positions: &[Vec3]) -> Option<f32> {
-    let finite: Vec<Vec3> = positions
+    finite_spacing(&finite_points(positions))
+}
+
+/// The points of `positions` whose coordinates are all finite.
+fn finite_points(positions: &[Vec3]) -> Vec<Vec3> {
+    positions
         .iter()
         .copied()
         .filter(|p| p.is_finite())
-        .collect();
+        .collect()
+}
+
+/// [`surface_spacing`] of points known to be finite.
+fn finite_spacing(finite: &[Vec3]) -> Option<f32> {
     if finite.len() < *COUNT_RANGE.start() {
         return None;
     }
-    let (lo, extent) = bounds(&finite)?;
+    let (lo, extent) = bounds(finite)?;
     if extent <= 0.0 {
         return None;
     }
@@ -215,7 +220,7 @@ pub fn surface_spacing(positions: &[Vec3]) -> Option<f32> {
     let mut radius = 5.0 * extent / (finite.len() as f32).sqrt();
     let mut median = 0;
     for _ in 0..MAX_ROUNDS {
-        median = median_count(&finite, lo, extent, radius);
+        median = median_count(finite, lo, extent, radius);
         if median < *COUNT_RANGE.start() {
             radius *= 2.0;
         } else if median > *COUNT_RANGE.end() {
