@@ -238,18 +238,8 @@ pub(crate) fn read_images(path: &Path) -> Result<ImagesRead, Error> {
             // The pose follows the 4-byte image id: QW QX QY QZ TX TY TZ, 8 bytes each.
             return Err(r.error_at(at + 4 + 8 * i as u64, problem));
         }
-        if out.images.insert(id, image).is_some() {
-            return Err(r.error_at(
-                at,
-                Problem::DuplicateId {
-                    what: "image",
-                    id: id.into(),
-                },
-            ));
-        }
-        out.record_location.insert(id, Location::Offset(at));
-        out.points2d_location
-            .insert(id, Location::Offset(points_at));
+        out.add(image, Location::Offset(at), Location::Offset(points_at))
+            .map_err(|p| r.error_at(at, p))?;
     }
     r.finish()?;
     Ok(out)

@@ -122,6 +122,16 @@ pub enum Problem {
         /// The repeated id.
         id: u64,
     },
+    /// Two images with the same file name.
+    #[error("image {id} has the name `{name}` of image {first}; each image is its own file")]
+    DuplicateName {
+        /// The later image's id.
+        id: u32,
+        /// The earlier image's id.
+        first: u32,
+        /// The shared name.
+        name: String,
+    },
     /// An image observation referring to a 3D point that the model does not have.
     #[error(
         "image {image_id} observation {point2d_idx} refers to point3D {point3d_id}, which no point has"

@@ -150,19 +150,8 @@ pub(crate) fn read_images(path: &Path) -> Result<ImagesRead, Error> {
         let mut image = parse_image(line).map_err(|p| format_error(path, n, p))?;
         let (pn, points_line) = lines.next().unwrap_or((n + 1, ""));
         image.points2d = parse_points2d(points_line).map_err(|p| format_error(path, pn, p))?;
-        let id = image.id;
-        if out.images.insert(id, image).is_some() {
-            return Err(format_error(
-                path,
-                n,
-                Problem::DuplicateId {
-                    what: "image",
-                    id: id.into(),
-                },
-            ));
-        }
-        out.record_location.insert(id, Location::Line(n));
-        out.points2d_location.insert(id, Location::Line(pn));
+        out.add(image, Location::Line(n), Location::Line(pn))
+            .map_err(|p| format_error(path, n, p))?;
     }
     Ok(out)
 }

@@ -549,3 +549,57 @@ fn pinhole_conversions_and_refusals() {
     assert!(CameraRecord::from_intrinsics(4, &skewed).is_err());
     let _: BTreeMap<u32, CameraRecord> = rec.cameras;
 }
+
+/// Two images with one file name were read, and training took one picture from two poses:
+/// refused at the second, in text and in binary.
+#[test]
+fn two_images_of_one_file_are_refused_at_the_second() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let images =
+        "1 1 0 0 0 0 0 0 1 a.png\n\n2 1 0 0 0 0 0 1 1 b.png\n\n3 1 0 0 0 0 0 2 1 a.png\n\n";
+    write_text_model(dir, "1 PINHOLE 10 10 1 2 3 4\n", images, "");
+    let err = read_model(dir).unwrap_err();
+    let message = err.to_string();
+    let (file, loc, problem) = located(err);
+    assert_eq!((file.as_str(), loc), ("images.txt", Location::Line(5)));
+    assert_eq!(
+        problem,
+        Problem::DuplicateName {
+            id: 3,
+            first: 1,
+            name: "a.png".into()
+        }
+    );
+    assert!(
+        message.ends_with(
+            "line 5: image 3 has the name `a.png` of image 1; each image is its own file"
+        ),
+        "{message}"
+    );
+
+    // The same model in binary: the second image's record starts after the count (8 bytes)
+    // and two records of 4 + 56 + 4 + 6 ("x.png\0") + 8 bytes each.
+    let images = "1 1 0 0 0 0 0 0 1 a.png\n\n2 1 0 0 0 0 0 1 1 b.png\n\n";
+    write_text_model(dir, "1 PINHOLE 10 10 1 2 3 4\n", images, "");
+    let mut rec = read_model(dir).unwrap();
+    let mut third = rec.images[&2].clone();
+    third.id = 3;
+    third.name = "a.png".into();
+    rec.images.insert(3, third);
+    let bin = tempfile::tempdir().unwrap();
+    write_model(bin.path(), &rec, Format::Binary).unwrap();
+    let (file, loc, problem) = located(read_model_as(bin.path(), Format::Binary).unwrap_err());
+    assert_eq!(
+        (file.as_str(), loc),
+        ("images.bin", Location::Offset(8 + 2 * 78))
+    );
+    assert!(matches!(
+        problem,
+        Problem::DuplicateName {
+            id: 3,
+            first: 1,
+            ..
+        }
+    ));
+}
