@@ -555,3 +555,72 @@ fn without_the_dataset_a_frame_trains_the_same_model() {
     run(&without, &["--no-dataset", "--resume"]);
     assert!(!without.join("dataset").exists());
 }
+
+/// A sequence re-run after a frame's file or the settings changed trains again what they
+/// changed: the changed frame and the frame warm-started from it, to the models a first run on
+/// the changed frames makes; the others are left as they are. (The saved run refused the
+/// change, with advice to use a `--resume` that `sequence` does not have, and every re-run
+/// failed the same way.)
+#[test]
+fn a_rerun_trains_again_what_changed_and_only_that() {
+    let tmp = tempfile::tempdir().unwrap();
+    let frames = tmp.path().join("frames");
+    let files = synth(&frames, 3, 13, 7);
+    let names = stems(&files);
+    let config = tmp.path().join("small.toml");
+    std::fs::write(&config, CONFIG).unwrap();
+    let run = |out: &Path, extra: &[&str]| {
+        let mut args = vec!["sequence", frames.to_str().unwrap(), "--out"];
+        args.extend([out.to_str().unwrap(), "--config", config.to_str().unwrap()]);
+        args.extend(extra);
+        check(&transcode(&args).output().unwrap(), "sequence")
+    };
+    let models = |out: &Path| -> Vec<Vec<u8>> {
+        names
+            .iter()
+            .map(|n| std::fs::read(out.join("frames").join(n).join("model/splats.ply")).unwrap())
+            .collect()
+    };
+    let seq = tmp.path().join("seq");
+    run(&seq, &["--quiet"]);
+    let before = models(&seq);
+
+    // Frame 2 (of 3) changes colour (its points, and so the sequence's framing sphere, stay):
+    // frames 2 and 3 are trained again, frame 1 is left.
+    let mut cloud = plenoptic_io::read_cloud(&files[1]).unwrap();
+    for c in cloud.colors.iter_mut().chain(&mut cloud.camera_colors) {
+        *c = c.map(|v| 1.0 - v);
+    }
+    plenoptic_io::write_cloud(&files[1], &cloud).unwrap();
+    let said = run(&seq, &[]);
+    assert!(
+        said.contains(&format!(
+            "{}: its earlier run began with a different version",
+            names[1]
+        )) && said.contains(&format!("{} was finished already", names[0]))
+            && !said.contains(&format!("{} was finished already", names[2])),
+        "{said}"
+    );
+    let after = models(&seq);
+    assert_eq!(after[0], before[0]);
+    assert_ne!(after[1], before[1]);
+    let fresh = tmp.path().join("fresh");
+    run(&fresh, &["--quiet"]);
+    assert_eq!(after, models(&fresh), "the re-run differs from a first run");
+    let manifest = json(&seq.join("sequence.json"));
+    let warm: Vec<&str> = manifest["frames"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f["warm_start"].as_str().unwrap_or("-"))
+        .collect();
+    assert_eq!(warm, ["-", names[0].as_str(), names[1].as_str()]);
+    assert!(states(&manifest).iter().all(|(_, s)| s == "finished"));
+
+    // Another setting: every frame is trained again, and the run succeeds.
+    let said = run(&seq, &["--iterations", "60"]);
+    assert!(said.contains("it is trained again"), "{said}");
+    assert_ne!(models(&seq)[0], before[0]);
+    let manifest = json(&seq.join("sequence.json"));
+    assert!(states(&manifest).iter().all(|(_, s)| s == "finished"));
+}

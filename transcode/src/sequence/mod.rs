@@ -27,7 +27,7 @@ use plenoptic_render::FramingSphere;
 use crate::config::Config;
 use crate::pipeline::{self, Finish, PipelineError, RunOptions, WarmStart};
 use crate::progress::{Event, Observer};
-use crate::resume::{RunState, config_differences};
+use crate::resume::{ResumeError, RunState, config_differences};
 pub use frames::{Frame, list_frames};
 pub use manifest::{
     FrameRecord, FrameResult, FrameState, SequenceManifest, ShardManifest, read_shard_manifests,
@@ -297,6 +297,9 @@ pub fn run_shard(
     };
     manifest.save(out)?;
     let of = frames.len();
+    // Whether the previous frame of the block was trained (or finished training) in this
+    // call: a frame warm-started from it must then be trained anew, whatever it saved.
+    let mut previous_trained = false;
     for (k, i) in block.enumerate() {
         let frame = &frames[i];
         let dir = out.join("frames").join(&frame.name);
@@ -325,19 +328,20 @@ pub fn run_shard(
                 None => "cold start".into(),
             },
         });
+        let fresh = warm.is_some() && previous_trained;
         let outcome = check_rig(frame, &frames[reference.index], &reference.rig).and_then(|()| {
-            let opts = RunOptions {
-                resume: true,
-                warm_start: warm.map(|(_, start)| start),
-            };
-            pipeline::run_with(&frame.path, &dir, &frame_cfg, opts, observer)
-                .map_err(|e| e.to_string())
+            let start = warm.map(|(_, start)| start);
+            run_frame(frame, &dir, &frame_cfg, start, fresh, observer).map_err(|e| e.to_string())
         });
+        previous_trained = matches!(outcome, Ok(Finish::Completed(_)));
         let record = &mut manifest.frames[k];
         match outcome {
             Ok(finish) => {
                 if matches!(finish, Finish::AlreadyFinished { .. }) {
                     observer(Event::Note(format!("{} was finished already", frame.name)));
+                    // What the model was made from, which the plan of this call may not be
+                    // (a frame warm-started by an earlier call whose previous frame failed now).
+                    record.warm_start = saved_warm_start(&dir);
                 }
                 record.result = Some(FrameResult::from_report(
                     &dir.join("report").join("report.json"),
@@ -353,6 +357,49 @@ pub fn run_shard(
         manifest.save(out)?;
     }
     Ok(manifest)
+}
+
+/// Runs one frame into `dir`: continues its saved run (or leaves it when it finished), and
+/// trains it anew when `fresh` (the frame it warms from was trained anew) or when the saved
+/// run began with another input or configuration, which a note says: a sequence re-run after
+/// a frame's file or the settings changed redoes what they changed.
+fn run_frame(
+    frame: &Frame,
+    dir: &Path,
+    cfg: &Config,
+    warm_start: Option<WarmStart>,
+    fresh: bool,
+    observer: Observer<'_>,
+) -> Result<Finish, PipelineError> {
+    let run = |resume: bool| {
+        let opts = RunOptions {
+            resume,
+            warm_start: warm_start.clone(),
+        };
+        pipeline::run_with(&frame.path, dir, cfg, opts, observer)
+    };
+    if fresh {
+        return run(false);
+    }
+    match run(true) {
+        Err(PipelineError::Resume(ResumeError::Mismatch { what, .. })) => {
+            observer(Event::Note(format!(
+                "{}: its earlier run began with {what}; it is trained again",
+                frame.name
+            )));
+            run(false)
+        }
+        other => other,
+    }
+}
+
+/// The frame a finished run in `dir` was warm-started from, by the folder name of the model
+/// its state records (`frames/NAME/model/splats.ply`); `None` for a cold start or no state.
+fn saved_warm_start(dir: &Path) -> Option<String> {
+    let state = RunState::load(dir).ok().flatten()?;
+    let model = state.modes.iter().find_map(|m| m.init.warm_start.clone())?;
+    let frame_dir = model.parent()?.parent()?;
+    Some(frame_dir.file_name()?.to_string_lossy().into_owned())
 }
 
 /// The frame's configuration and warm start. A frame with a saved run keeps the start that
