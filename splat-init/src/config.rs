@@ -177,6 +177,11 @@ impl InitConfig {
         if self.splats == Some(0) {
             return bad("splats", "must be at least 1".into());
         }
+        // A mesh's splats start from this many samples of its faces: none leaves nothing to
+        // initialise from, found only after the reference views were rendered.
+        if self.mesh_samples == 0 {
+            return bad("mesh_samples", "must be at least 1".into());
+        }
         if self.fit_directions < 16 {
             return bad(
                 "fit_directions",

@@ -466,6 +466,15 @@ impl TrainingConfig {
         let training = |(key, problem): (String, String)| (format!("training.{key}"), problem);
         self.lr.validate().map_err(training)?;
         self.densify.validate().map_err(training)?;
+        // A window that ends before it starts is a contradiction in what the user wrote (the
+        // trainer's own derived windows, as `transcode train`'s in short runs, may be empty).
+        let (start, stop) = (self.densify.start, self.densify.stop);
+        if stop <= start {
+            return bad(
+                "training.densify.stop",
+                format!("must be after training.densify.start ({start}), got {stop}"),
+            );
+        }
         if self.history_every == 0 {
             return bad("training.history_every", "must be at least 1");
         }
@@ -689,6 +698,12 @@ mod tests {
                 "[training.densify]\ngrad_threshold = nan\n",
                 "`training.densify.grad_threshold`",
             ),
+            // A second sweep: settings that passed and then failed late or did nothing.
+            (
+                "[training.densify]\nstart = 100\nstop = 10\n",
+                "`training.densify.stop`",
+            ),
+            ("[init]\nmesh_samples = 0\n", "`init.mesh_samples`"),
             (
                 "[training.densify]\npercent_dense = -1.0\n",
                 "`training.densify.percent_dense`",
