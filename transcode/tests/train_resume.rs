@@ -165,4 +165,19 @@ fn a_training_run_killed_at_random_moments_resumes_to_the_same_model() {
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("seed: 0 → 7"), "{err}");
+
+    // Fewer steps than the checkpoint holds are refused (the model of 240 steps was written as
+    // "trained 240 iterations" for --iterations 100).
+    let fewer: Vec<&str> = train_args(&train, &heldout, &killed_s)
+        .into_iter()
+        .map(|a| if a == "240" { "100" } else { a })
+        .collect();
+    let out = transcode(&fewer).output().unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("is at step 240, past --iterations 100"),
+        "{err}"
+    );
+    assert!(!killed.join("splats.ply").exists());
 }

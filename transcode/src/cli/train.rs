@@ -219,6 +219,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
         return Ok(());
     }
+    // A checkpoint past the steps asked for cannot be taken back to them: say so rather than
+    // write the model of more steps than asked.
+    if resume && trainer.iteration() > args.iterations {
+        bail!(
+            "the checkpoint in {} is at step {}, past --iterations {}: resume with --iterations \
+             {} or more to finish it there, or run without --resume to start over",
+            args.out.display(),
+            trainer.iteration(),
+            args.iterations,
+            trainer.iteration()
+        );
+    }
     files.clear(resume)?;
     let evaluations = if resume {
         files.saved_evaluations(trainer.iteration())?
