@@ -137,11 +137,18 @@ fn encode_streams(packed: &Packed) -> Result<Vec<u8>, Error> {
         .map(|r| &packed.body[r])
         .filter(|b| !b.is_empty())
         .collect();
+    // Each frame carries zstd's content checksum, so a damaged file is refused by its reader
+    // (without it a flipped bit in a stream decoded to other values as often as not).
+    let zstd_err = |e: std::io::Error| Error::Inconsistent(format!("zstd: {e}"));
+    let mut compressor = zstd::bulk::Compressor::new(ZSTD_LEVEL).map_err(zstd_err)?;
+    compressor
+        .set_parameter(zstd::zstd_safe::CParameter::ChecksumFlag(true))
+        .map_err(zstd_err)?;
     let frames = blocks
         .iter()
-        .map(|b| zstd::bulk::compress(b, ZSTD_LEVEL))
+        .map(|b| compressor.compress(b))
         .collect::<Result<Vec<_>, _>>()
-        .map_err(|e| Error::Inconsistent(format!("zstd: {e}")))?;
+        .map_err(zstd_err)?;
     let mut out = packed.header(ZSTD_VERSION);
     out[15] = blocks.len() as u8;
     out[16..20].copy_from_slice(&(NGSP_HEADER_BYTES as u32).to_le_bytes());
@@ -179,7 +186,8 @@ pub fn decode_spz(path: &Path, data: &[u8]) -> Result<SpzModel, Error> {
     if data.len() >= 4 && u32::from_le_bytes([data[0], data[1], data[2], data[3]]) == MAGIC {
         return decode_streams(path, data);
     }
-    let mut gz = flate2::read::GzDecoder::new(data);
+    // The buffered decoder consumes exactly the gzip member, so what follows it can be seen.
+    let mut gz = flate2::bufread::GzDecoder::new(data);
     let mut head = [0u8; HEADER_BYTES];
     gz.read_exact(&mut head)
         .map_err(|e| err(format!("not a gzip stream holding an SPZ header: {e}")))?;
@@ -218,6 +226,15 @@ pub fn decode_spz(path: &Path, data: &[u8]) -> Result<SpzModel, Error> {
                 body.len().to_string()
             },
             layout.total
+        )));
+    }
+    // An SPZ file is one gzip member: bytes after it (a second file appended, junk) are not
+    // part of the model and were ignored.
+    let after = gz.into_inner().len();
+    if after > 0 {
+        return Err(err(format!(
+            "{after} bytes after the gzip stream, which ends at byte {} (an SPZ file holds one)",
+            data.len() - after
         )));
     }
     let splats = unpack(&body, &layout, n, sh_degree, fractional_bits);

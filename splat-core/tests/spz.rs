@@ -223,6 +223,20 @@ fn broken_files_give_errors_that_say_what_is_wrong() {
     // A truncated gzip stream.
     let z = gzip(&good);
     check(&z[..z.len() / 2], "corrupt gzip stream");
+    // Bytes after the gzip stream (a file appended to itself, junk) were ignored.
+    let twice = [z.as_slice(), z.as_slice()].concat();
+    check(
+        &twice,
+        &format!(
+            "{} bytes after the gzip stream, which ends at byte {}",
+            z.len(),
+            z.len()
+        ),
+    );
+    check(
+        &[z.as_slice(), b"junk"].concat(),
+        "4 bytes after the gzip stream",
+    );
 }
 
 #[test]
@@ -415,6 +429,23 @@ fn broken_version_4_files_give_errors_that_say_what_is_wrong() {
         *b ^= 0x5a;
     }
     check(&v, "stream 0");
+    // One bit flipped anywhere in a frame's compressed bytes: refused (each frame carries
+    // zstd's checksum; without it a third of such files were read as other values).
+    let parts = v4_parts(&good);
+    let mut at = 32 + 16 * parts.entries.len();
+    for (i, frame) in parts.frames.iter().enumerate() {
+        for k in (0..frame.len()).step_by(frame.len().div_ceil(40).max(1)) {
+            let mut v = good.clone();
+            v[at + k] ^= 1 << (k % 8);
+            let e = decode_spz(path, &v);
+            assert!(
+                e.is_err(),
+                "stream {i}: bit {} of byte {k} flipped was read",
+                k % 8
+            );
+        }
+        at += frame.len();
+    }
     // A header claiming 200 million splats: refused by the table, nothing huge allocated.
     let mut v = good.clone();
     v[8..12].copy_from_slice(&200_000_000_u32.to_le_bytes());
