@@ -118,6 +118,12 @@ pub fn read_dataset(dir: &Path, downscale: f64) -> Result<Dataset, DatasetError>
     for (&id, image) in &reconstruction.images {
         let camera = reconstruction.camera_of(id).map_err(colmap)?;
         let path = dir.join("images").join(&image.name);
+        if path.is_dir() {
+            return Err(DatasetError::Unreadable {
+                path,
+                problem: "it is a folder, not an image file".into(),
+            });
+        }
         if !path.is_file() {
             return Err(DatasetError::MissingImage {
                 path,
@@ -514,6 +520,14 @@ mod tests {
             "{e}"
         );
         assert!(e.to_string().contains("missing"), "{e}");
+        // A folder where the image should be is named as one (it was "missing").
+        std::fs::create_dir(images.join("a.png")).unwrap();
+        let e = read_dataset(root, 1.0).unwrap_err().to_string();
+        assert!(
+            e.ends_with("a.png: cannot read the image: it is a folder, not an image file"),
+            "{e}"
+        );
+        std::fs::remove_dir(images.join("a.png")).unwrap();
 
         // No model at all.
         let e = read_dataset(&root.join("nowhere"), 1.0).unwrap_err();

@@ -336,7 +336,7 @@ impl Config {
     /// `base`'s values (so `transcode demo --config` keeps the demo's own settings for every key
     /// the file leaves out).
     pub fn load_over(path: &Path, base: &Self) -> Result<Self, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+        let bytes = std::fs::read(path).map_err(|source| ConfigError::Read {
             path: path.to_path_buf(),
             source,
         })?;
@@ -344,6 +344,14 @@ impl Config {
             path: path.to_path_buf(),
             message,
         };
+        // TOML is UTF-8: name where it stops being so (the reader's own error named no place).
+        let text = String::from_utf8(bytes).map_err(|e| {
+            let at = e.utf8_error().valid_up_to();
+            let line = 1 + e.as_bytes()[..at].iter().filter(|&&b| b == b'\n').count();
+            parse(format!(
+                "not UTF-8 text: byte {at} (line {line}) starts no UTF-8 character"
+            ))
+        })?;
         // Parsed alone first, so that a bad key or value is reported with its line.
         Self::from_toml(&text).map_err(parse)?;
         let file: toml::Table = toml::from_str(&text).map_err(|e| parse(e.to_string()))?;
@@ -770,6 +778,14 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("missing.toml"), "{e}");
+        // Bytes that are not UTF-8 are named by place (the reader said only "stream did not
+        // contain valid UTF-8").
+        std::fs::write(&p, b"[rig]\ncameras = 8\n# caf\xe9\n").unwrap();
+        let e = Config::load(&p).unwrap_err().to_string();
+        assert!(
+            e.ends_with("c.toml: not UTF-8 text: byte 23 (line 3) starts no UTF-8 character"),
+            "{e}"
+        );
     }
 
     /// A file read over another configuration (the demo's) replaces only the keys it sets,
