@@ -94,7 +94,10 @@ impl std::fmt::Display for PointSizing {
     /// What the choice was and why, for the person running the tool.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            Self::AsConfigured => write!(f, "its points are drawn at the configured size"),
+            Self::AsConfigured => write!(
+                f,
+                "its points are drawn at the configured voxel size (renderer.point_size)"
+            ),
             Self::Grown(size) => write!(
                 f,
                 "the cloud samples its surface more sparsely than one point per voxel: its \

@@ -40,20 +40,44 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let model = model?;
     let summary = Summary::of(&model);
     let format = format_of(&args.file);
+    let drawn = drawn_as(&model);
     if args.json {
         let mut value = serde_json::to_value(&summary).context("serialising the summary")?;
         if let Some(object) = value.as_object_mut() {
             object.insert("file".into(), args.file.display().to_string().into());
             object.insert("format".into(), format.into());
+            if let Some((kind, size, _)) = &drawn {
+                let sizing = serde_json::json!({ "kind": kind, "size": size });
+                object.insert("point_sizing".into(), sizing);
+            }
         }
         println!("{value}");
     } else {
-        print!(
-            "{}",
-            human(&args.file.display().to_string(), &format, &summary)
-        );
+        let mut text = human(&args.file.display().to_string(), &format, &summary);
+        if let Some((_, _, sentence)) = drawn {
+            text.push_str(&format!("{:<18}{sentence}\n", "reference views"));
+        }
+        print!("{text}");
     }
     Ok(())
+}
+
+/// How the reference views draw a cloud's points with the default renderer settings
+/// ([`plenoptic_render::point_sizing`]): its kind (`as_configured`, `grown`, `off_grid`), the
+/// cube side in the cloud's units and the sentence a run prints; `None` for a mesh.
+fn drawn_as(model: &plenoptic_io::Model) -> Option<(&'static str, f32, String)> {
+    use plenoptic_render::PointSizing;
+    let plenoptic_io::Model::Cloud(_) = model else {
+        return None;
+    };
+    let options = plenoptic_render::ViewOptions::default();
+    let sizing = options.point_sizing(model);
+    let kind = match sizing {
+        PointSizing::AsConfigured => "as_configured",
+        PointSizing::Grown(_) => "grown",
+        PointSizing::OffGrid(_) => "off_grid",
+    };
+    Some((kind, sizing.size(options.point_size), sizing.to_string()))
 }
 
 /// The container format: the PLY encoding from its header, else the extension.
@@ -332,5 +356,30 @@ mod tests {
                 "{other}"
             );
         }
+    }
+
+    /// `info` says how the reference views will draw a cloud: at the voxel for a voxelised
+    /// cloud, at its own spacing for one on no grid; nothing for a mesh.
+    #[test]
+    fn clouds_say_how_their_points_are_drawn() {
+        // A plane of 60 × 60 points one voxel apart, and the same scaled by 0.00137.
+        let plane = |scale: f32| {
+            let positions = (0..3600)
+                .map(|i| scale * glam::Vec3::new((i % 60) as f32, (i / 60) as f32, 7.0))
+                .collect();
+            plenoptic_io::Model::Cloud(plenoptic_io::PlenopticCloud {
+                colors: vec![[0.5; 3]; 3600],
+                positions,
+                ..Default::default()
+            })
+        };
+        let (kind, size, sentence) = drawn_as(&plane(0.00137)).unwrap();
+        assert_eq!(kind, "off_grid");
+        assert!((size / 0.00137 - 1.5).abs() < 0.2, "{size}");
+        assert!(sentence.contains("on no grid"), "{sentence}");
+        let (kind, size, _) = drawn_as(&plane(1.0)).unwrap();
+        assert_eq!((kind, size), ("as_configured", 1.0));
+        let mesh = plenoptic_io::load(&testdata("meshes/spider/spider.obj")).unwrap();
+        assert!(drawn_as(&mesh).is_none());
     }
 }
