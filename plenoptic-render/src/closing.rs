@@ -151,10 +151,9 @@ pub fn point_sizing(positions: &[Vec3], base: f32) -> PointSizing {
     }
 }
 
-/// Whether at least [`ON_GRID_SHARE`] of up to [`SPACING_SAMPLES`] evenly strided points have
-/// every coordinate within [`GRID_TOLERANCE`] voxels of a grid of pitch `base` (its origin
-/// anywhere: one of the first samples is taken as a grid point), over a box at least
-/// [`MIN_GRID_SPAN`] voxels across.
+/// Whether at least 90 % of up to 20,000 evenly strided points have every coordinate within
+/// 0.02 voxels of a grid of pitch `base` (its origin anywhere: one of the first eight samples
+/// is taken as a grid point), over a box at least 8 voxels across.
 #[must_use]
 pub fn lies_on_grid(finite: &[Vec3], base: f32) -> bool {
     match bounds(finite) {
@@ -309,14 +308,9 @@ mod tests {
 
     /// `n` points of the Fibonacci lattice on a sphere of radius `radius` round the origin.
     fn fibonacci_sphere(n: usize, radius: f32) -> Vec<Vec3> {
-        let golden = std::f32::consts::PI * (3.0 - 5.0_f32.sqrt());
-        (0..n)
-            .map(|i| {
-                let y = 1.0 - 2.0 * (i as f32 + 0.5) / n as f32;
-                let r = (1.0 - y * y).sqrt();
-                let t = golden * i as f32;
-                radius * Vec3::new(r * t.cos(), y, r * t.sin())
-            })
+        camera_model::rig::fibonacci_sphere(n)
+            .into_iter()
+            .map(|d| radius * d.as_vec3())
             .collect()
     }
 

@@ -378,15 +378,9 @@ fn views_kept_one_at_a_time_are_the_views_rendered_alone() {
 /// inside the cubes) and spilled the unit one past its frame.
 #[test]
 fn an_off_grid_cloud_looks_the_same_at_every_scale() {
-    let n = 20_000;
-    let golden = std::f32::consts::PI * (3.0 - 5.0_f32.sqrt());
-    let unit: Vec<Vec3> = (0..n)
-        .map(|i| {
-            let y = 1.0 - 2.0 * (i as f32 + 0.5) / n as f32;
-            let r = (1.0 - y * y).sqrt();
-            let t = golden * i as f32;
-            Vec3::new(r * t.cos(), y, r * t.sin())
-        })
+    let unit: Vec<Vec3> = camera_model::rig::fibonacci_sphere(20_000)
+        .into_iter()
+        .map(|d| d.as_vec3())
         .collect();
     let coverage = |scale: f32| -> Vec<f32> {
         let cloud = PlenopticCloud {
