@@ -12,6 +12,10 @@
 //! untouched. Errors are plain [`std::io::Error`]s; callers wrap them with the path in their own
 //! error types.
 //!
+//! A target that is a symbolic link is written through it, as `cp` writes: the file the link
+//! names is replaced (or created, where the link dangles) and the link stays. A file that is
+//! replaced keeps its permissions (a private `0600` model stays private).
+//!
 //! ```
 //! use std::io::Write;
 //!
@@ -57,14 +61,18 @@ pub fn write_atomic_with<F>(path: &Path, fill: F) -> std::io::Result<()>
 where
     F: FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
 {
+    let path = &through_links(path);
     let temp = temporary_sibling(path);
     let result = (|| {
-        let file = File::create(&temp)?;
+        let file = File::create(&temp).map_err(|e| explain_create(e, path))?;
         let mut writer = BufWriter::with_capacity(BUFFER_BYTES, file);
         fill(&mut writer)?;
         writer.flush()?;
         writer.get_ref().sync_all()?;
         drop(writer);
+        if let Ok(old) = std::fs::metadata(path) {
+            std::fs::set_permissions(&temp, old.permissions())?;
+        }
         std::fs::rename(&temp, path)
     })();
     if let Err(e) = result {
@@ -74,6 +82,44 @@ where
     }
     sync_parent(path);
     Ok(())
+}
+
+/// The file `path` names once its symbolic links are followed (a relative link from the
+/// link's own folder), whether or not that file exists yet; `path` itself when it is no link.
+/// Gives up after 40 links (a loop), as the kernel does, leaving the rename to replace the
+/// last one.
+fn through_links(path: &Path) -> PathBuf {
+    let mut path = path.to_path_buf();
+    for _ in 0..40 {
+        match std::fs::read_link(&path) {
+            Ok(target) => {
+                path = match path.parent() {
+                    Some(folder) if target.is_relative() => folder.join(target),
+                    _ => target,
+                };
+            }
+            Err(_) => break,
+        }
+    }
+    path
+}
+
+/// The temporary's creation failed: where the folder is missing or is not a folder, says so
+/// (the bare `No such file or directory` reads as if the file itself were expected to exist).
+fn explain_create(e: std::io::Error, path: &Path) -> std::io::Error {
+    let folder = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => return e,
+    };
+    let problem = match std::fs::metadata(folder) {
+        Err(_) => "does not exist",
+        Ok(m) if !m.is_dir() => "is not a folder",
+        Ok(_) => return e,
+    };
+    std::io::Error::new(
+        e.kind(),
+        format!("the folder {} {problem}", folder.display()),
+    )
 }
 
 /// The temporary used while `path` is written: `.NAME.PID.N.tmp` in the same folder.
@@ -216,6 +262,68 @@ mod tests {
         let err = write_atomic(&p, b"x").unwrap_err();
         assert_eq!(err.kind(), std::io::ErrorKind::NotFound);
         assert!(entries(dir.path()).is_empty());
+    }
+
+    #[test]
+    fn a_missing_folder_or_a_file_as_folder_is_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let err = write_atomic(&dir.path().join("nodir").join("x.bin"), b"x").unwrap_err();
+        assert!(err.to_string().ends_with("nodir does not exist"), "{err}");
+        let file = dir.path().join("file");
+        std::fs::write(&file, b"").unwrap();
+        let err = write_atomic(&file.join("x.bin"), b"x").unwrap_err();
+        assert!(err.to_string().ends_with("file is not a folder"), "{err}");
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_replaced_file_keeps_its_permissions() {
+        use std::os::unix::fs::PermissionsExt as _;
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("private.bin");
+        for mode in [0o600, 0o444, 0o640] {
+            std::fs::write(&p, b"old").unwrap_or_else(|_| {
+                // A read-only file from the last round: make it writable to reset it.
+                std::fs::set_permissions(&p, std::fs::Permissions::from_mode(0o600)).unwrap();
+                std::fs::write(&p, b"old").unwrap();
+            });
+            std::fs::set_permissions(&p, std::fs::Permissions::from_mode(mode)).unwrap();
+            write_atomic(&p, b"new").unwrap();
+            assert_eq!(std::fs::read(&p).unwrap(), b"new");
+            let now = std::fs::metadata(&p).unwrap().permissions().mode() & 0o777;
+            assert_eq!(now, mode, "{now:o} against {mode:o}");
+        }
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn links_are_written_through_even_when_they_dangle() {
+        let dir = tempfile::tempdir().unwrap();
+        let sub = dir.path().join("sub");
+        std::fs::create_dir(&sub).unwrap();
+        // A relative link into a folder, a link to that link, and a dangling link.
+        std::os::unix::fs::symlink("sub/target.bin", dir.path().join("link.bin")).unwrap();
+        std::os::unix::fs::symlink("link.bin", dir.path().join("link2.bin")).unwrap();
+        std::fs::write(sub.join("target.bin"), b"old").unwrap();
+        write_atomic(&dir.path().join("link2.bin"), b"new").unwrap();
+        assert_eq!(std::fs::read(sub.join("target.bin")).unwrap(), b"new");
+        for link in ["link.bin", "link2.bin"] {
+            let meta = std::fs::symlink_metadata(dir.path().join(link)).unwrap();
+            assert!(meta.file_type().is_symlink(), "{link} was replaced");
+        }
+        std::os::unix::fs::symlink("nowhere.bin", dir.path().join("dangling.bin")).unwrap();
+        write_atomic(&dir.path().join("dangling.bin"), b"made").unwrap();
+        assert_eq!(
+            std::fs::read(dir.path().join("nowhere.bin")).unwrap(),
+            b"made"
+        );
+        let meta = std::fs::symlink_metadata(dir.path().join("dangling.bin")).unwrap();
+        assert!(meta.file_type().is_symlink());
+        // A loop of links is an error of the write, not a hang.
+        std::os::unix::fs::symlink("loop_b", dir.path().join("loop_a")).unwrap();
+        std::os::unix::fs::symlink("loop_a", dir.path().join("loop_b")).unwrap();
+        write_atomic(&dir.path().join("loop_a"), b"x").unwrap();
+        assert_eq!(std::fs::read(dir.path().join("loop_a")).unwrap(), b"x");
     }
 
     #[test]

@@ -431,6 +431,31 @@ fn an_input_in_a_folder_the_run_clears_is_refused_and_kept() {
 }
 
 #[test]
+fn a_sparse_model_in_a_folder_the_run_clears_is_refused_and_kept() {
+    // `--points3d out/dataset/sparse/0` was deleted with the dataset's own model, then read
+    // back as the run's freshly written one: sparse init from the wrong points, silently.
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    let sparse = out.join("dataset/sparse/0");
+    std::fs::create_dir_all(&sparse).unwrap();
+    let points = "1 0.1 0.2 0.3 255 0 10 0.5\n2 1 2 3 1 2 3 -1\n";
+    std::fs::write(sparse.join("points3D.txt"), points).unwrap();
+    let mut cfg = small_config();
+    cfg.init.points3d = Some(sparse.clone());
+    cfg.init.mode = InitMode::Sparse;
+    let input = data().join("meshes/misc/cube_binary.ply");
+    let msg = transcode::pipeline::run(&input, &out, &cfg, &transcode::progress::ignore)
+        .unwrap_err()
+        .to_string();
+    assert!(msg.contains("sparse"), "{msg}");
+    assert!(msg.contains("choose another --out"), "{msg}");
+    assert_eq!(
+        std::fs::read_to_string(sparse.join("points3D.txt")).unwrap(),
+        points
+    );
+}
+
+#[test]
 fn a_run_without_held_out_views_is_refused_before_it_renders() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("out");

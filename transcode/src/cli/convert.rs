@@ -37,20 +37,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     {
         bail!("--sh1-bits, --sh-rest-bits and --spz-version apply to .spz output only");
     }
-    // The file the output names: through a symbolic link to its target (as `cp` writes), so
-    // the atomic rename replaces the target rather than the link.
-    let output = args
-        .output
-        .canonicalize()
-        .unwrap_or_else(|_| args.output.clone());
-    if args.input.canonicalize().is_ok_and(|input| input == output) {
-        bail!(
-            "{} and {} are the same file: convert writes a new file and reads the old one \
-             first; give another output",
-            args.input.display(),
-            args.output.display()
-        );
-    }
+    // Convert reads the whole input before it writes, but the atomic write would still replace
+    // the input with its own conversion (a lossy SPZ over its PLY, say).
+    super::outputs::refuse_overwriting_inputs(&args.output, "output", &[&args.input], &[])?;
     let model = model_file::read_model(&args.input)?;
     let splats = &model.splats;
     if splats.is_empty() {
@@ -91,7 +80,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         version: args.spz_version.unwrap_or(defaults.version),
         ..defaults
     };
-    model_file::write_model(&output, splats, model.antialiased, &spz_options)?;
+    model_file::write_model(&args.output, splats, model.antialiased, &spz_options)?;
     let size = |p: &Path| {
         std::fs::metadata(p)
             .map(|m| m.len())

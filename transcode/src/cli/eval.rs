@@ -35,6 +35,20 @@ pub struct Args {
 /// Runs `transcode eval`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     require_file(&args.model, "model")?;
+    if let Some(json) = &args.json {
+        let dataset = args.reference.as_path();
+        let surface: Vec<&Path> = args.surface.iter().map(PathBuf::as_path).collect();
+        super::outputs::refuse_overwriting_inputs(
+            json,
+            "--json",
+            &[&[args.model.as_path()], surface.as_slice()].concat(),
+            &[
+                &dataset.join("images"),
+                &dataset.join("masks"),
+                &super::render::model_dir(dataset),
+            ],
+        )?;
+    }
     let config = args.file.resolve(Config::default())?;
     let file = splat_core::model_file::read_model(&args.model).map_err(flat)?;
     let splats = file.splats;

@@ -11,6 +11,7 @@ mod convert;
 mod demo;
 mod eval;
 mod info;
+mod outputs;
 mod progress;
 mod render;
 mod run;

@@ -21,8 +21,14 @@ pub struct Args {
     /// Output folder for the PNG files.
     #[arg(long)]
     pub out: PathBuf,
-    /// Background colour in [0, 1], as R,G,B.
-    #[arg(long, value_delimiter = ',', num_args = 3, default_values_t = [0.0, 0.0, 0.0])]
+    /// Background colour in [0, 1], as R,G,B (or three values: R G B).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        num_args = 1..=3,
+        allow_hyphen_values = true,
+        default_values_t = [0.0, 0.0, 0.0]
+    )]
     pub background: Vec<f32>,
     /// Render only these images (names as in the model), comma-separated.
     #[arg(long, value_delimiter = ',')]
@@ -83,10 +89,26 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         selected.retain(|id| names.contains(&rec.images[id].name));
     }
-    let bg = glam::Vec3::from_slice(&args.background);
+    let [r, g, b] = args.background[..] else {
+        bail!(
+            "--background takes three components, R,G,B in [0, 1]; got {}",
+            args.background.len()
+        );
+    };
+    let bg = glam::Vec3::new(r, g, b);
     // (Not through min/max_element, which pass over a NaN.)
     if !args.background.iter().all(|c| (0.0..=1.0).contains(c)) {
         bail!("--background components must lie in [0, 1], got {bg}");
+    }
+    let outputs = output_files(&args.out, &rec, &selected)?;
+    let root = dataset_root(&model);
+    for path in outputs.values() {
+        super::outputs::refuse_overwriting_inputs(
+            path,
+            "the render",
+            &[&args.splats],
+            &[&model, &root.join("images"), &root.join("masks")],
+        )?;
     }
     let opts = RenderOptions {
         background: bg,
@@ -109,13 +131,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .with_context(|| format!("camera of image {}", image.name))?;
         let cam = RenderCamera::try_from(&camera)
             .with_context(|| format!("camera of image {}", image.name))?;
-        let out = r.forward(&splats, &cam, &opts);
+        let out = r
+            .try_forward(&splats, &cam, &opts)
+            .with_context(|| format!("camera of image {}", image.name))?;
         let pixels: Vec<u8> = out
             .rgb
             .iter()
             .map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
             .collect();
-        let path = args.out.join(&image.name).with_extension("png");
+        let path = &outputs[&id];
         if let Some(parent) = path.parent() {
             std::fs::create_dir_all(parent)
                 .with_context(|| format!("creating {}", parent.display()))?;
@@ -129,10 +153,60 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             image::ExtendedColorType::Rgb8,
         )
         .with_context(|| format!("encoding {}", path.display()))?;
-        atomic_output::write_atomic(&path, &png)
+        atomic_output::write_atomic(path, &png)
             .with_context(|| format!("cannot write {}", path.display()))?;
         bar.inc(1);
     }
     bar.finish_with_message(format!("wrote {}", args.out.display()));
     Ok(())
+}
+
+/// The dataset folder a COLMAP model belongs to: the folder holding `sparse/N` when the model
+/// is such a folder, else the model's own folder.
+fn dataset_root(model: &Path) -> PathBuf {
+    match (model.parent(), model.parent().and_then(Path::file_name)) {
+        (Some(sparse), Some(name)) if name == "sparse" => {
+            sparse.parent().unwrap_or(Path::new(".")).to_path_buf()
+        }
+        _ => model.to_path_buf(),
+    }
+}
+
+/// The PNG each selected image is written to: its name in the model (subfolders kept) with the
+/// extension `.png`, under `out`. A name that would leave `out` (absolute, `..`, empty) is
+/// refused, as are two images that would share one file (`a.jpg` and `a.png`).
+fn output_files(
+    out: &Path,
+    rec: &colmap_io::Reconstruction,
+    selected: &[u32],
+) -> anyhow::Result<std::collections::BTreeMap<u32, PathBuf>> {
+    use std::path::Component;
+    let mut by_file: std::collections::HashMap<PathBuf, &str> = std::collections::HashMap::new();
+    let mut outputs = std::collections::BTreeMap::new();
+    for id in selected {
+        let name = &rec.images[id].name;
+        let relative = Path::new(name);
+        let inside = relative.file_name().is_some()
+            && relative
+                .components()
+                .all(|c| matches!(c, Component::Normal(_) | Component::CurDir));
+        if !inside {
+            bail!(
+                "image {id} is named {name:?}, which would be written outside --out {}: render \
+                 writes each image under its name in the model, so the name must be a relative \
+                 path without `..`",
+                out.display()
+            );
+        }
+        let file = relative.with_extension("png");
+        if let Some(other) = by_file.insert(file.clone(), name) {
+            bail!(
+                "images {other:?} and {name:?} would both be written to {}: render names each \
+                 PNG after its image; render them into separate folders with --images",
+                out.join(&file).display()
+            );
+        }
+        outputs.insert(*id, out.join(file));
+    }
+    Ok(outputs)
 }

@@ -171,6 +171,11 @@ fn execute(
     let started = Instant::now();
     let layout = Layout::new(out);
     layout.check_input_outside(input)?;
+    if let Some(sparse) = &cfg.init.points3d {
+        // Sparse init reads its COLMAP model after the dataset stage has rewritten the
+        // dataset's own model, which a `--points3d` inside `dataset/` would be.
+        layout.check_input_outside(sparse)?;
+    }
     layout.clear_results(saved.is_none())?;
     let mut clock = StageClock::default();
 
