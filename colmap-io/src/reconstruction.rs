@@ -115,6 +115,21 @@ pub struct ImageRecord {
 }
 
 impl ImageRecord {
+    /// The image's name as a path under the images folder (subfolders kept), or `None` where the
+    /// name would lead out of it: absolute, with a `..` segment, or empty. Readers of a dataset
+    /// and writers named after its images join only this to their folder, so a model's names
+    /// cannot make them read or write elsewhere.
+    #[must_use]
+    pub fn relative_file(&self) -> Option<&std::path::Path> {
+        use std::path::{Component, Path};
+        let path = Path::new(&self.name);
+        let inside = path.file_name().is_some()
+            && path
+                .components()
+                .all(|c| matches!(c, Component::Normal(_) | Component::CurDir));
+        inside.then_some(path)
+    }
+
     /// The first pose number that is NaN or infinite (its index in QW QX QY QZ TX TY TZ), or a
     /// quaternion too close to zero to normalise (index 0): either makes every projection NaN.
     pub(crate) fn bad_pose(&self) -> Option<(usize, Problem)> {
@@ -365,5 +380,40 @@ impl Reconstruction {
             }
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn image_names_that_leave_the_images_folder_have_no_relative_file() {
+        let image = |name: &str| ImageRecord {
+            id: 1,
+            qvec: [1.0, 0.0, 0.0, 0.0],
+            tvec: [0.0; 3],
+            camera_id: 1,
+            name: name.into(),
+            points2d: Vec::new(),
+        };
+        for inside in ["a.png", "cam1/a.png", "./a.png", "a..b.png", "..a.png"] {
+            assert_eq!(
+                image(inside).relative_file(),
+                Some(std::path::Path::new(inside)),
+                "{inside}"
+            );
+        }
+        for outside in [
+            "",
+            "../a.png",
+            "cam/../../a.png",
+            "/etc/passwd",
+            "a/..",
+            ".",
+            "cam/..",
+        ] {
+            assert_eq!(image(outside).relative_file(), None, "{outside:?}");
+        }
     }
 }

@@ -2,7 +2,9 @@
 //!
 //! The layout is `DIR/sparse/0/` (a COLMAP model, text or binary), `DIR/images/NAME` for every
 //! image the model registers, and optionally `DIR/masks/NAME` (a grey image of the same size,
-//! the coverage) for any of them. `transcode train`, `transcode eval` and the tests all read
+//! the coverage): where `masks/` exists it holds one for every image (a view without one would
+//! be read as fully covered beside masked ones, so its absence is an error). Image names are
+//! paths relative to `images/` and may not lead out of it. `transcode train`, `transcode eval` and the tests all read
 //! datasets through [`read_dataset`], so a dataset means the same thing to each of them.
 //!
 //! Colour conventions:
@@ -38,6 +40,31 @@ pub enum DatasetError {
         /// Where the image should be.
         path: PathBuf,
         /// Its name in the model.
+        name: String,
+    },
+    /// An image's name in the model leads out of `images/` (absolute, `..`, or empty).
+    #[error(
+        "{model}: image {id} is named {name:?}, which leads out of the images folder: a \
+         dataset's image names are paths relative to images/"
+    )]
+    OutsideImages {
+        /// The model folder (`DIR/sparse/0`).
+        model: PathBuf,
+        /// The image's id.
+        id: u32,
+        /// Its name in the model.
+        name: String,
+    },
+    /// `masks/` exists but holds no mask for an image: that view would be scored and trained as
+    /// fully covered while the others are masked.
+    #[error(
+        "{path}: missing: masks/ holds masks, so every image needs one under its own name (the \
+         COLMAP model registers image {name:?})"
+    )]
+    MissingMask {
+        /// Where the mask should be.
+        path: PathBuf,
+        /// The image's name in the model.
         name: String,
     },
     /// An image or mask file cannot be opened or decoded.
@@ -114,10 +141,18 @@ pub fn read_dataset(dir: &Path, downscale: f64) -> Result<Dataset, DatasetError>
     if reconstruction.images.is_empty() {
         return Err(DatasetError::Empty(sparse));
     }
+    let masks = Some(dir.join("masks")).filter(|m| m.is_dir());
     let mut views = Vec::with_capacity(reconstruction.images.len());
     for (&id, image) in &reconstruction.images {
         let camera = reconstruction.camera_of(id).map_err(colmap)?;
-        let path = dir.join("images").join(&image.name);
+        let relative = image
+            .relative_file()
+            .ok_or_else(|| DatasetError::OutsideImages {
+                model: sparse.clone(),
+                id,
+                name: image.name.clone(),
+            })?;
+        let path = dir.join("images").join(relative);
         if path.is_dir() {
             return Err(DatasetError::Unreadable {
                 path,
@@ -130,8 +165,13 @@ pub fn read_dataset(dir: &Path, downscale: f64) -> Result<Dataset, DatasetError>
                 name: image.name.clone(),
             });
         }
-        let mask = dir.join("masks").join(&image.name);
-        let mask = mask.is_file().then_some(mask);
+        let mask = masks.as_ref().map(|m| m.join(relative));
+        if let Some(mask) = mask.as_ref().filter(|m| !m.is_file()) {
+            return Err(DatasetError::MissingMask {
+                path: mask.clone(),
+                name: image.name.clone(),
+            });
+        }
         views.push(read_view(
             &path,
             mask.as_deref(),
@@ -528,6 +568,33 @@ mod tests {
             "{e}"
         );
         std::fs::remove_dir(images.join("a.png")).unwrap();
+
+        // masks/ without b's mask (b.png removed above): b was read as fully covered beside
+        // masked views, silently.
+        write(root, [0, 0, 0], true);
+        std::fs::remove_file(masks.join("b.png")).unwrap();
+        let e = read_dataset(root, 1.0).unwrap_err();
+        assert!(
+            matches!(&e, DatasetError::MissingMask { name, path } if name == "b.png" && path.ends_with("masks/b.png")),
+            "{e}"
+        );
+        // Without masks/ at all the images are read as they are.
+        std::fs::remove_dir_all(&masks).unwrap();
+        assert!(read_dataset(root, 1.0).is_ok());
+
+        // An image name that leads out of images/.
+        let sparse = root.join("sparse/0");
+        let mut rec = colmap_io::read_model(&sparse).unwrap();
+        rec.images.get_mut(&1).unwrap().name = "../secret.png".into();
+        image::RgbImage::new(W, H)
+            .save(root.join("secret.png"))
+            .unwrap();
+        colmap_io::write_model(&sparse, &rec, colmap_io::Format::Text).unwrap();
+        let e = read_dataset(root, 1.0).unwrap_err();
+        assert!(
+            matches!(&e, DatasetError::OutsideImages { id: 1, name, .. } if name == "../secret.png"),
+            "{e}"
+        );
 
         // No model at all.
         let e = read_dataset(&root.join("nowhere"), 1.0).unwrap_err();

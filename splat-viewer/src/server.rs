@@ -59,17 +59,7 @@ impl Server {
         let local = listener
             .local_addr()
             .map_err(|source| Error::Bind { addr, source })?;
-        // On a loopback address only local names are accepted in `Host`, so a page elsewhere
-        // cannot reach this server through a DNS name rebound to 127.0.0.1.
-        let hosts = local.ip().is_loopback().then(|| {
-            let port = local.port();
-            vec![
-                format!("127.0.0.1:{port}"),
-                format!("localhost:{port}"),
-                format!("[::1]:{port}"),
-                local.to_string(),
-            ]
-        });
+        let hosts = allowed_hosts(local);
         Ok(Self {
             listener,
             site: Arc::new(site),
@@ -238,4 +228,46 @@ fn secure(mut r: Response<Full<Bytes>>) -> Response<Full<Bytes>> {
         HeaderValue::from_static("no-referrer"),
     );
     r
+}
+
+/// The `Host` values a server listening on `local` answers: on a loopback address only local
+/// names, so a page elsewhere cannot reach it through a DNS name rebound to 127.0.0.1; `None`
+/// (any) elsewhere. On port 80 also the names alone, as browsers leave HTTP's default port out.
+fn allowed_hosts(local: SocketAddr) -> Option<Vec<String>> {
+    local.ip().is_loopback().then(|| {
+        let port = local.port();
+        let names = [
+            "127.0.0.1".to_owned(),
+            "localhost".to_owned(),
+            "[::1]".to_owned(),
+            match local {
+                SocketAddr::V4(a) => a.ip().to_string(),
+                SocketAddr::V6(a) => format!("[{}]", a.ip()),
+            },
+        ];
+        let mut hosts: Vec<String> = names.iter().map(|n| format!("{n}:{port}")).collect();
+        if port == 80 {
+            hosts.extend(names);
+        }
+        hosts
+    })
+}
+
+#[cfg(test)]
+mod host_tests {
+    use super::*;
+
+    #[test]
+    fn loopback_servers_answer_local_names_and_port_80_the_names_alone() {
+        let on = |s: &str| allowed_hosts(s.parse().unwrap());
+        let hosts = on("127.0.0.1:8080").unwrap();
+        assert!(hosts.contains(&"localhost:8080".to_owned()));
+        assert!(!hosts.contains(&"localhost".to_owned()));
+        let hosts = on("127.0.0.1:80").unwrap();
+        for h in ["localhost", "127.0.0.1", "[::1]", "localhost:80"] {
+            assert!(hosts.contains(&h.to_owned()), "{h}");
+        }
+        assert!(on("[::1]:80").unwrap().contains(&"[::1]".to_owned()));
+        assert_eq!(on("0.0.0.0:80"), None);
+    }
 }

@@ -119,10 +119,18 @@ impl Site {
         if !real.starts_with(root) {
             return Err(Refusal::Forbidden("a link that leads out of the folder"));
         }
-        let real = if real.is_dir() {
-            real.join("index.html")
+        let (real, key) = if real.is_dir() {
+            // The folder's page is a path of its own: a link there must stay inside too.
+            let page = real
+                .join("index.html")
+                .canonicalize()
+                .map_err(|_| Refusal::NotFound)?;
+            if !page.starts_with(root) {
+                return Err(Refusal::Forbidden("a link that leads out of the folder"));
+            }
+            (page, format!("{key}/index.html"))
         } else {
-            real
+            (real, key)
         };
         if !real.is_file() {
             return Err(Refusal::NotFound);
@@ -301,5 +309,25 @@ mod tests {
         }
         // A link that stays inside is followed.
         assert_eq!(&s.resolve("/link.txt").unwrap().bytes[..], b"in");
+        // A folder's index.html that is a link out (it was served, as application/octet-stream).
+        let sub = dir.path().join("sub");
+        std::fs::create_dir(&sub).unwrap();
+        std::os::unix::fs::symlink(outside.path().join("secret.txt"), sub.join("index.html"))
+            .unwrap();
+        for bad in ["/sub", "/sub/"] {
+            assert!(
+                matches!(s.resolve(bad), Err(Refusal::Forbidden(_))),
+                "{bad}"
+            );
+        }
+        // A folder's own index.html is served as HTML.
+        let page = dir.path().join("page");
+        std::fs::create_dir(&page).unwrap();
+        std::fs::write(page.join("index.html"), b"<p>").unwrap();
+        let found = s.resolve("/page/").unwrap();
+        assert_eq!(
+            (&found.bytes[..], found.content_type),
+            (&b"<p>"[..], "text/html; charset=utf-8")
+        );
     }
 }

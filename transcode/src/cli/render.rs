@@ -180,24 +180,19 @@ fn output_files(
     rec: &colmap_io::Reconstruction,
     selected: &[u32],
 ) -> anyhow::Result<std::collections::BTreeMap<u32, PathBuf>> {
-    use std::path::Component;
     let mut by_file: std::collections::HashMap<PathBuf, &str> = std::collections::HashMap::new();
     let mut outputs = std::collections::BTreeMap::new();
     for id in selected {
-        let name = &rec.images[id].name;
-        let relative = Path::new(name);
-        let inside = relative.file_name().is_some()
-            && relative
-                .components()
-                .all(|c| matches!(c, Component::Normal(_) | Component::CurDir));
-        if !inside {
+        let image = &rec.images[id];
+        let name = &image.name;
+        let Some(relative) = image.relative_file() else {
             bail!(
                 "image {id} is named {name:?}, which would be written outside --out {}: render \
                  writes each image under its name in the model, so the name must be a relative \
                  path without `..`",
                 out.display()
             );
-        }
+        };
         let file = relative.with_extension("png");
         if let Some(other) = by_file.insert(file.clone(), name) {
             bail!(

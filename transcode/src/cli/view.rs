@@ -149,7 +149,17 @@ fn colmap_views(dir: &Path) -> anyhow::Result<(Vec<SceneView>, Pictures)> {
     let model = super::render::model_dir(dir);
     let rec = colmap_io::read_model(&model)
         .with_context(|| format!("reading the COLMAP model in {}", model.display()))?;
-    let images_dir = dir.join("images");
+    // Served to whoever reaches the port: only files inside images/, whatever the names say
+    // and wherever links in the folder lead.
+    let images_dir = dir.join("images").canonicalize().ok();
+    let inside = |image: &colmap_io::ImageRecord| {
+        let images_dir = images_dir.as_ref()?;
+        let file = images_dir
+            .join(image.relative_file()?)
+            .canonicalize()
+            .ok()?;
+        file.starts_with(images_dir).then_some(file)
+    };
     let mut views = Vec::new();
     let mut pictures = Vec::new();
     for (id, image) in &rec.images {
@@ -160,8 +170,8 @@ fn colmap_views(dir: &Path) -> anyhow::Result<(Vec<SceneView>, Pictures)> {
             || format!("image_{id}"),
             |s| s.to_string_lossy().into_owned(),
         );
-        let reference = std::fs::read(images_dir.join(&image.name))
-            .ok()
+        let reference = inside(image)
+            .and_then(|file| std::fs::read(file).ok())
             .map(|bytes| {
                 let name = format!("references/{id}-{}", sanitise(&image.name));
                 pictures.push((name.clone(), bytes));
@@ -265,5 +275,40 @@ mod tests {
             "/../testdata/splat-scene/gt.ply"
         ));
         assert!(file_site(gt, None).is_ok());
+    }
+
+    /// Only files inside the dataset's images/ are served: names with `..` or absolute paths,
+    /// and links in images/ that lead out, were read and served to whoever reached the port.
+    #[cfg(unix)]
+    #[test]
+    fn colmap_references_stay_inside_the_images_folder() {
+        let dir = tempfile::tempdir().unwrap();
+        let secret = dir.path().join("secret.png");
+        std::fs::write(&secret, b"secret").unwrap();
+        let dataset = dir.path().join("dataset");
+        let images = dataset.join("images");
+        std::fs::create_dir_all(&images).unwrap();
+        std::fs::write(images.join("ok.png"), b"reference").unwrap();
+        std::os::unix::fs::symlink(&secret, images.join("link.png")).unwrap();
+        let names = [
+            "ok.png",
+            "../secret.png",
+            "link.png",
+            secret.to_str().unwrap(),
+        ];
+        let sparse = dataset.join("sparse/0");
+        std::fs::create_dir_all(&sparse).unwrap();
+        std::fs::write(sparse.join("cameras.txt"), "1 PINHOLE 8 8 8 8 4 4\n").unwrap();
+        let lines: String = names
+            .iter()
+            .enumerate()
+            .map(|(i, n)| format!("{} 1 0 0 0 0 0 0 1 {n}\n\n", i + 1))
+            .collect();
+        std::fs::write(sparse.join("images.txt"), lines).unwrap();
+        std::fs::write(sparse.join("points3D.txt"), "").unwrap();
+        let (views, pictures) = colmap_views(&dataset).unwrap();
+        assert_eq!(views.len(), 4);
+        let served: Vec<&[u8]> = pictures.iter().map(|(_, b)| b.as_slice()).collect();
+        assert_eq!(served, [b"reference".as_slice()]);
     }
 }
