@@ -456,6 +456,31 @@ fn a_sparse_model_in_a_folder_the_run_clears_is_refused_and_kept() {
 }
 
 #[test]
+fn a_second_writer_of_one_output_folder_is_refused() {
+    // Two processes in one folder cleared each other's checkpoints and models (a requeued
+    // cluster task beside its first attempt). The lock is the OS's, so another handle in this
+    // process stands in for the other process.
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    let held = transcode::lock::WriterLock::acquire(&out.join(".transcode.lock")).unwrap();
+    std::fs::create_dir_all(out.join("model")).unwrap();
+    std::fs::write(out.join("model/splats.ply"), b"the other run's").unwrap();
+    let input = data().join("meshes/misc/cube_binary.ply");
+    let msg = transcode::pipeline::run(&input, &out, &small_config(), &transcode::progress::ignore)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        msg.contains("another transcode process is writing here"),
+        "{msg}"
+    );
+    assert_eq!(
+        std::fs::read(out.join("model/splats.ply")).unwrap(),
+        b"the other run's"
+    );
+    drop(held);
+}
+
+#[test]
 fn a_run_without_held_out_views_is_refused_before_it_renders() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("out");

@@ -7,6 +7,7 @@
 //!
 //! - [`mod@bench`]: the speed figures of a frame, measured in one run (`transcode bench`).
 //! - [`config`]: every setting ([`config::Config`]), with defaults, TOML files and validation.
+//! - [`lock`]: one writer at a time in an output folder.
 //! - [`pipeline`]: the stages, from an input file to a model, a dataset and a report.
 //! - [`plot`]: the reports' inline SVG line plots.
 //! - [`progress`]: the events a run reports to its caller (the library never prints).
@@ -29,6 +30,7 @@
 
 pub mod bench;
 pub mod config;
+pub mod lock;
 pub mod pipeline;
 pub mod plot;
 pub mod progress;

@@ -329,6 +329,27 @@ fn shards_take_contiguous_blocks_and_the_last_merges() {
     check(&collected, "--collect");
     assert_eq!(json(&out.join("sequence.json")), merged);
 
+    // A shard another process is running is refused (a requeued task beside its first
+    // attempt rewrote the same manifest and frames), and its manifest is left as it was; a
+    // stray file in shards/ is not read as a manifest.
+    let before = std::fs::read(out.join("shards/shard-0-of-2.json")).unwrap();
+    let held =
+        transcode::lock::WriterLock::acquire(&out.join("shards/.shard-0-of-2.lock")).unwrap();
+    let busy = shard("0", false);
+    assert!(!busy.status.success());
+    let err = String::from_utf8_lossy(&busy.stderr);
+    assert!(
+        err.contains("shard 0/2: another transcode process"),
+        "{err}"
+    );
+    assert_eq!(
+        std::fs::read(out.join("shards/shard-0-of-2.json")).unwrap(),
+        before
+    );
+    drop(held);
+    std::fs::write(out.join("shards/shard-notes.json"), "{}").unwrap();
+    check(&shard("0", false), "shard 0/2 beside a stray file");
+
     // A shard that does not exist is refused.
     let bad = shard("2", false);
     assert!(!bad.status.success());

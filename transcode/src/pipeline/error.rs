@@ -24,6 +24,9 @@ pub enum PipelineError {
         /// The folder the run clears (the output folder itself for its saved state).
         folder: PathBuf,
     },
+    /// Another process is writing the output folder.
+    #[error(transparent)]
+    Lock(#[from] crate::lock::LockError),
     /// The input is a 3DGS model, not a cloud or a mesh.
     #[error(
         "{0} is a 3DGS splat model (its vertices have f_dc_0, opacity, scale_0 and rot_0), not a \

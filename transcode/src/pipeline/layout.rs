@@ -113,6 +113,11 @@ impl Layout {
         Ok(())
     }
 
+    /// The file whose lock a run holds while it writes here ([`crate::lock`]).
+    pub(super) fn lock_file(&self) -> PathBuf {
+        self.out.join(".transcode.lock")
+    }
+
     /// Creates the run's folders (`dataset/` only when it is written).
     pub(super) fn create(&self, dataset: bool) -> Result<(), PipelineError> {
         for d in [&self.model_dir, &self.report_dir, &self.checkpoints] {

@@ -170,6 +170,9 @@ fn execute(
     }
     let started = Instant::now();
     let layout = Layout::new(out);
+    // Held until the run returns: a second run into this folder would clear what this one
+    // writes.
+    let _writer = crate::lock::WriterLock::acquire(&layout.lock_file())?;
     layout.check_input_outside(input)?;
     if let Some(sparse) = &cfg.init.points3d {
         // Sparse init reads its COLMAP model after the dataset stage has rewritten the

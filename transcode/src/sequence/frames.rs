@@ -35,7 +35,10 @@ pub fn list_frames(input: &str) -> Result<Vec<Frame>, SequenceError> {
                 source,
             })?;
             let path = entry.path();
-            if path.is_file() && has_frame_extension(&path) {
+            // Hidden files are no frames: macOS's `._f_1.ply` beside `f_1.ply`, editors'
+            // backups, and `..ply`, whose stem `.` would name the frames folder itself.
+            let hidden = entry.file_name().to_string_lossy().starts_with('.');
+            if !hidden && path.is_file() && has_frame_extension(&path) {
                 paths.push(path);
             }
         }
@@ -85,6 +88,19 @@ pub fn list_frames(input: &str) -> Result<Vec<Frame>, SequenceError> {
             path,
         })
         .collect();
+    if let Some(f) = frames
+        .iter()
+        .find(|f| f.name.is_empty() || f.name.starts_with('.'))
+    {
+        // Each frame's outputs go to `OUT/frames/NAME`: `.` and `..` are the frames folder and
+        // the output folder themselves, which a frame's run would clear.
+        return Err(SequenceError::NoFrames(format!(
+            "{}: a frame's output folder is named by its file stem, and {:?} is hidden or names \
+             a folder above it; rename the file",
+            f.path.display(),
+            f.name
+        )));
+    }
     frames.sort_by(|a, b| natural_cmp(&a.name, &b.name).then_with(|| a.path.cmp(&b.path)));
     for pair in frames.windows(2) {
         if pair[0].name == pair[1].name {
@@ -280,6 +296,20 @@ mod tests {
         );
         let pattern = format!("{folder}/s_*.ply");
         assert_eq!(names(list_frames(&pattern).unwrap()), ["s_9", "s_10"]);
+        // Hidden files in a folder are no frames (`._s_1.ply`, and `..ply` whose stem `.` named
+        // the frames folder itself); a glob that names them is refused.
+        let hidden = dir.path().join("hidden");
+        std::fs::create_dir(&hidden).unwrap();
+        for name in ["a.ply", "._a.ply", "..ply", "...ply"] {
+            std::fs::write(hidden.join(name), b"x").unwrap();
+        }
+        assert_eq!(names(list_frames(hidden.to_str().unwrap()).unwrap()), ["a"]);
+        let dots = list_frames(&format!("{}/.*ply", hidden.display())).unwrap_err();
+        assert!(
+            dots.to_string()
+                .contains("is hidden or names a folder above it"),
+            "{dots}"
+        );
 
         // Holes in a numbered sequence become frames whose files do not exist.
         let numbered = dir.path().join("numbered");

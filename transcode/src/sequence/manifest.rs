@@ -27,19 +27,6 @@ pub enum FrameState {
     Failed,
 }
 
-impl FrameState {
-    /// How far a frame got, for merging manifests that both name it: finished over failed over
-    /// running over pending.
-    fn rank(self) -> u8 {
-        match self {
-            Self::Pending => 0,
-            Self::Running => 1,
-            Self::Failed => 2,
-            Self::Finished => 3,
-        }
-    }
-}
-
 /// What a finished frame produced, from its `report/report.json`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FrameResult {
@@ -169,6 +156,13 @@ impl ShardManifest {
             .join(format!("shard-{}-of-{}.json", shard.index, shard.count))
     }
 
+    /// `DIR/shards/.shard-I-of-N.lock`, held by the process running the shard.
+    #[must_use]
+    pub fn lock_path(out: &Path, shard: Shard) -> PathBuf {
+        out.join("shards")
+            .join(format!(".shard-{}-of-{}.lock", shard.index, shard.count))
+    }
+
     /// Writes it atomically.
     pub fn save(&self, out: &Path) -> Result<(), SequenceError> {
         write_json(&Self::path(out, self.shard), self)
@@ -223,8 +217,11 @@ impl SequenceManifest {
     }
 
     /// Merges shard manifests (oldest first, as [`read_shard_manifests`] gives them) over
-    /// `frames` (the sequence's frames in order, as listed now): each frame takes the record
-    /// that got furthest, between equal ones the latest; a frame no shard reports is pending.
+    /// `frames` (the sequence's frames in order, as listed now): each frame takes its latest
+    /// report, where a `pending` one (a shard that has not reached the frame yet) leaves an
+    /// earlier report standing; a frame no shard reports is pending. So a frame that failed in
+    /// a re-run after an earlier run finished it shows the failure, and one running again shows
+    /// that, whatever shard counts the runs had.
     pub fn merge(
         input: &str,
         frames: &[super::Frame],
@@ -234,12 +231,11 @@ impl SequenceManifest {
             .iter()
             .map(|f| FrameRecord::pending(f, Shard::default()))
             .collect();
-        // The furthest state wins; between equal states the later manifest (they come oldest
-        // first), so a frame shows the shard that last reported it.
+        // The latest report wins (they come oldest first), but `pending` says nothing new.
         let mut reported = vec![false; records.len()];
         for record in shards.iter().flat_map(|s| &s.frames) {
             if let Some(k) = records.iter().position(|r| r.name == record.name)
-                && (!reported[k] || record.state.rank() >= records[k].state.rank())
+                && (!reported[k] || record.state != FrameState::Pending)
             {
                 records[k] = record.clone();
                 reported[k] = true;
@@ -314,7 +310,7 @@ pub fn read_shard_manifests(out: &Path) -> Result<Vec<ShardManifest>, SequenceEr
         .filter(|p| {
             p.file_name()
                 .and_then(|n| n.to_str())
-                .is_some_and(|n| n.starts_with("shard-") && n.ends_with(".json"))
+                .is_some_and(is_shard_manifest_name)
         })
         .collect();
     // Oldest first (by modification time, then name), for `SequenceManifest::merge`.
@@ -337,6 +333,16 @@ pub fn read_shard_manifests(out: &Path) -> Result<Vec<ShardManifest>, SequenceEr
             })
         })
         .collect()
+}
+
+/// Whether `name` is `shard-I-of-N.json`, as [`ShardManifest::path`] names them: other files
+/// in `shards/` (notes, a backup) are not read as manifests.
+fn is_shard_manifest_name(name: &str) -> bool {
+    let digits = |s: &str| !s.is_empty() && s.bytes().all(|b| b.is_ascii_digit());
+    name.strip_prefix("shard-")
+        .and_then(|n| n.strip_suffix(".json"))
+        .and_then(|n| n.split_once("-of-"))
+        .is_some_and(|(i, n)| digits(i) && digits(n))
 }
 
 fn write_json<T: Serialize>(path: &Path, value: &T) -> Result<(), SequenceError> {
@@ -384,7 +390,23 @@ mod tests {
     }
 
     #[test]
-    fn merge_takes_the_furthest_record_and_counts() {
+    fn only_shard_manifests_are_read_from_the_shards_folder() {
+        for name in ["shard-0-of-1.json", "shard-12-of-300.json"] {
+            assert!(is_shard_manifest_name(name), "{name}");
+        }
+        for name in [
+            "shard-notes.json",
+            "shard-0-of-1.json.bak",
+            "shard--of-2.json",
+            "shard-a-of-2.json",
+            ".shard-0-of-1.json.1.tmp",
+        ] {
+            assert!(!is_shard_manifest_name(name), "{name}");
+        }
+    }
+
+    #[test]
+    fn merge_takes_the_latest_report_and_counts() {
         let frames: Vec<super::super::Frame> = ["a", "b", "c", "d"]
             .iter()
             .map(|n| super::super::Frame {
@@ -433,5 +455,21 @@ mod tests {
         assert_eq!(m.summary.warm_seconds_median, Some(3.0));
         assert_eq!(m.summary.total_seconds, 13.0);
         assert_eq!(median_of_sorted(&[1.0, 2.0, 4.0, 8.0]), 3.0);
+
+        // A re-run with another shard count: what it reports beats the older run's records
+        // (an old `finished` hid a fresh failure, and an old `failed` a frame running again).
+        let rerun = [
+            shard(vec![
+                record("a", Finished, Some(1.0), false),
+                record("b", Failed, None, false),
+            ]),
+            shard(vec![
+                record("a", Failed, None, false),
+                record("b", Running, None, false),
+            ]),
+        ];
+        let m = SequenceManifest::merge("x", &frames[..2], &rerun);
+        let states: Vec<FrameState> = m.frames.iter().map(|r| r.state).collect();
+        assert_eq!(states, [Failed, Running]);
     }
 }

@@ -282,6 +282,10 @@ pub fn run_shard(
         ));
     }
     let cfg = &own;
+    // One process a shard: a requeued task whose first attempt still runs, or an array
+    // submitted twice, would rewrite this shard's manifest and frames under the other.
+    let _writer = crate::lock::WriterLock::acquire(&ShardManifest::lock_path(out, shard))
+        .map_err(|e| SequenceError::Shard(format!("shard {shard}: {e}")))?;
     let block = shard.block(frames.len());
     let (sphere, reference) = sequence_sphere(frames, cfg, observer)?;
     let mut manifest = ShardManifest {

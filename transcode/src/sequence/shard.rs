@@ -99,6 +99,14 @@ impl Shard {
             })?;
             return Self::new(index, count).map(Some);
         }
+        if let Some(count) = var("TRANSCODE_SHARD_COUNT") {
+            // A Job that is not Indexed gives no index: every pod would take every frame, all
+            // at once, into one folder.
+            return Err(SequenceError::Shard(format!(
+                "TRANSCODE_SHARD_COUNT={count} is set but JOB_COMPLETION_INDEX is not: run the \
+                 shards as an Indexed Job (completionMode: Indexed), or pass --shard I/N"
+            )));
+        }
         Ok(None)
     }
 
@@ -106,7 +114,10 @@ impl Shard {
     /// (empty when there are more shards than frames).
     #[must_use]
     pub fn block(&self, frames: usize) -> Range<usize> {
-        (self.index * frames / self.count)..((self.index + 1) * frames / self.count)
+        // In u128: `index · frames` wraps usize for counts near its range (a garbage array
+        // size), which gave a shard a wrong block or an inverted one.
+        let at = |i: usize| (i as u128 * frames as u128 / self.count as u128) as usize;
+        at(self.index)..at(self.index + 1)
     }
 }
 
@@ -129,6 +140,14 @@ mod tests {
             }
         }
         assert_eq!(Shard::new(1, 3).unwrap().block(6), 2..4);
+        // Counts near usize's range: `index · frames` wrapped (a panic on an inverted range, or
+        // a frame given to a shard whose block is empty).
+        let huge = usize::MAX / 3;
+        assert_eq!(Shard::new(huge - 1, huge).unwrap().block(3), 2..3);
+        assert_eq!(Shard::new(huge / 2, huge).unwrap().block(3), 1..1);
+        let last = Shard::new(usize::MAX - 1, usize::MAX).unwrap();
+        assert_eq!(last.block(3), 2..3);
+        assert_eq!(Shard::new(0, usize::MAX).unwrap().block(3), 0..0);
     }
 
     #[test]
@@ -188,6 +207,8 @@ mod tests {
                 ("JOB_COMPLETION_INDEX", "3"),
                 ("TRANSCODE_SHARD_COUNT", "3"),
             ],
+            // A Job that is not Indexed: it ran every pod as shard 0/1, all at once.
+            &[("TRANSCODE_SHARD_COUNT", "4")],
         ] {
             assert!(Shard::from_env(env(bad)).is_err(), "{bad:?}");
         }
