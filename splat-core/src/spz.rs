@@ -55,7 +55,10 @@ const COLOR_SCALE: f32 = 0.15;
 /// Header flag: the model was trained with the antialiased (Mip-Splatting-style) rasteriser.
 const FLAG_ANTIALIASED: u8 = 0x1;
 /// The largest magnitude of a 24-bit signed integer.
-const MAX_FIXED: f32 = 8_388_607.0;
+/// The largest coordinate magnitude SPZ's 24-bit fixed-point positions hold (with no
+/// fractional bits): 2²³ − 1 units from the origin.
+pub const MAX_COORDINATE: f32 = 8_388_607.0;
+const MAX_FIXED: f32 = MAX_COORDINATE;
 /// Bits of each smallest-three component's magnitude (a sign bit comes on top).
 const QUAT_BITS: u32 = 9;
 const QUAT_MASK: u32 = (1 << QUAT_BITS) - 1;

@@ -5,6 +5,10 @@ use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
 
+/// The fewest splats `init.splats` may ask for: each splat's initial size comes from its 3
+/// nearest neighbours.
+pub const MIN_SPLATS: usize = 4;
+
 /// Where initial splats come from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -174,8 +178,14 @@ impl InitConfig {
     /// with it.
     pub fn validate(&self) -> Result<(), (String, String)> {
         let bad = |key: &str, problem: String| Err((format!("init.{key}"), problem));
-        if self.splats == Some(0) {
-            return bad("splats", "must be at least 1".into());
+        if let Some(k) = self.splats.filter(|&k| k < MIN_SPLATS) {
+            return bad(
+                "splats",
+                format!(
+                    "must be at least {MIN_SPLATS}, got {k}: a splat's initial size is the \
+                     distance to its 3 nearest neighbours (fewer made one vanishing splat)"
+                ),
+            );
         }
         // A mesh's splats start from this many samples of its faces: none leaves nothing to
         // initialise from, found only after the reference views were rendered.

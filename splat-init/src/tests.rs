@@ -443,10 +443,10 @@ fn bad_init_settings_are_refused_naming_the_key() {
         ),
         (
             InitConfig {
-                splats: Some(0),
+                splats: Some(3),
                 ..base.clone()
             },
-            "`init.splats` must be at least 1",
+            "`init.splats` must be at least 4, got 3",
         ),
         (
             InitConfig {

@@ -601,4 +601,21 @@ fn degenerate_input_stops_before_training_with_a_clear_message() {
     assert!(msg.contains("dataset"), "{msg}");
     assert!(!out.join("dataset/sparse/0/cameras.txt").exists());
     assert!(!out.join("dataset/sparse/0/points3D.bin").exists());
+
+    // The four points scaled by 1e-3: the cameras framing them stand within the near plane,
+    // which culled every splat; such an input trained to an empty model reported as a success
+    // (alpha IoU 0).
+    let centre = points.positions.iter().copied().sum::<glam::Vec3>() / 4.0;
+    let tiny = with_positions("tiny.ply", &|_, p| (p - centre) * 1e-3);
+    let msg = refused(&tiny, &out, &cfg, "so the cameras that frame it stand");
+    assert!(msg.contains("Scale the input up"), "{msg}");
+    assert!(!out.join("dataset/sparse/0/cameras.txt").exists());
+
+    // Geo-referenced coordinates beyond SPZ's 24-bit positions: the run trained, then failed
+    // writing the report's viewer ("inconsistent splats"), with or without --no-spz.
+    let far_out = with_positions("utm.ply", &|_, p| {
+        (p - centre) * 100.0 + glam::Vec3::splat(9e6)
+    });
+    let msg = refused(&far_out, &out, &cfg, "units from the origin");
+    assert!(msg.contains("Move the input near the origin"), "{msg}");
 }

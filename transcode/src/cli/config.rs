@@ -328,9 +328,10 @@ impl std::str::FromStr for SplatCount {
             "auto" => Ok(Self::Auto),
             "all" => Ok(Self::All),
             _ => match s.parse::<usize>() {
-                Ok(k) if k > 0 => Ok(Self::Count(k)),
+                Ok(k) if k >= splat_init::config::MIN_SPLATS => Ok(Self::Count(k)),
                 _ => Err(format!(
-                    "expected auto, all or a positive number of splats, got {s:?}"
+                    "expected auto, all or a number of splats of at least {}, got {s:?}",
+                    splat_init::config::MIN_SPLATS
                 )),
             },
         }

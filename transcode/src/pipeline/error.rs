@@ -7,6 +7,9 @@ use splat_init as init;
 
 use crate::resume::ResumeError;
 
+/// How far the nearest camera must stand from the input's bounding sphere, in near planes.
+pub(super) const NEAR_PLANE_CLEARANCE: f64 = 1.25;
+
 /// Errors of the pipeline, each naming the stage and the file.
 #[derive(Debug, thiserror::Error)]
 pub enum PipelineError {
@@ -40,6 +43,41 @@ pub enum PipelineError {
     /// The input cannot make a model (no extent, too few points, no area, nothing visible).
     #[error("{0}")]
     Degenerate(#[from] plenoptic_render::degenerate::DegenerateError),
+    /// The input is so small that the cameras framing it stand within the near plane of it.
+    #[error(
+        "the input is {:.3e} units across, so the cameras that frame it stand {gap:.3e} units \
+         from it: splat renderers (this one and the viewers of 3DGS files) cull every splat \
+         nearer than {near} units to the camera, so its near side, or all of it, would not be \
+         drawn. Scale the input up (its units are the file's: a model in metres of an object a \
+         few millimetres wide is this small) to at least {:.3} units across",
+        2.0 * radius,
+        2.0 * radius * NEAR_PLANE_CLEARANCE * f64::from(*near) / gap
+    )]
+    TooSmall {
+        /// Radius of the input's bounding sphere.
+        radius: f64,
+        /// The nearest camera's distance from that sphere.
+        gap: f64,
+        /// The near plane.
+        near: f32,
+    },
+    /// The input lies beyond what the SPZ model and the report's viewer can place.
+    #[error(
+        "the input reaches {largest:.0} units from the origin: the SPZ model and the report's \
+         viewer store positions as 24-bit fixed point, at most {limit:.0} units out, and 32-bit \
+         floats there keep about {ulp} of a unit. Move the input near the origin (subtract its \
+         centre, {centre:?}) before converting it"
+    )]
+    TooFar {
+        /// The largest coordinate magnitude of the input's bounding sphere.
+        largest: f64,
+        /// SPZ's limit.
+        limit: f32,
+        /// The spacing of f32 values at `largest`.
+        ulp: f32,
+        /// The input's bounding-sphere centre.
+        centre: [f64; 3],
+    },
     /// The configuration is invalid.
     #[error(transparent)]
     Config(#[from] crate::config::ConfigError),

@@ -148,6 +148,43 @@ pub fn run_with(
 /// The stages of a run, in order (the numbers in [`Event::Stage`]).
 const STAGES: u32 = 6;
 
+/// Refuses an input whose model could not be drawn or stored, before anything is rendered:
+/// - cameras within [`error::NEAR_PLANE_CLEARANCE`] near planes of the object (the near plane
+///   is in absolute units, as in every 3DGS renderer, so an object under about 0.01 units
+///   across was culled whole and trained to an empty model reported as a success);
+/// - coordinates beyond SPZ's 24-bit positions (the run trained, then failed to write the
+///   report's viewer, which carries the model as SPZ).
+fn check_placeable(rig: &views::Rig) -> Result<(), PipelineError> {
+    let near = splat_core::constants::NEAR_PLANE;
+    let gap = rig
+        .train
+        .iter()
+        .chain(&rig.heldout)
+        .map(|c| c.pose.center().distance(rig.center) - rig.radius)
+        .fold(f64::INFINITY, f64::min);
+    if gap < error::NEAR_PLANE_CLEARANCE * f64::from(near) {
+        return Err(PipelineError::TooSmall {
+            radius: rig.radius,
+            gap,
+            near,
+        });
+    }
+    // The model's splats stay near the input (a percent past its bounds, with room to move):
+    // beyond SPZ's positions the run trained, then failed to write the viewer.
+    let largest = (rig.center.abs().max_element() + rig.radius) * 1.01;
+    let limit = splat_core::spz::MAX_COORDINATE;
+    if largest > f64::from(limit) {
+        let at = largest as f32;
+        return Err(PipelineError::TooFar {
+            largest,
+            limit,
+            ulp: at.next_up() - at,
+            centre: rig.center.to_array(),
+        });
+    }
+    Ok(())
+}
+
 /// The stages, from the beginning or continuing `saved`: load → reference views and dataset →
 /// for each init mode (init → train → evaluate) → export the models → report.
 fn execute(
@@ -187,6 +224,7 @@ fn execute(
     layout.create(cfg.output.dataset)?;
     let mut state = open_state(input, cfg, &layout, saved, observer)?;
     let rig = views::build_rig(&loaded.model, &cfg.rig)?;
+    check_placeable(&rig)?;
     clock.lap("rig");
     let refs = reference_views(
         input,
