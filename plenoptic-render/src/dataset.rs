@@ -49,7 +49,9 @@ pub fn dataset_image_name(i: usize) -> String {
 /// order (`|_, image| image` keeps the images; see [`crate::render_views_with`] for why a caller
 /// keeps less). When more than half of the views see nothing
 /// ([`crate::degenerate::check_coverage`]) the error comes before `sparse/0/` is written, and a
-/// model left there by an earlier run is removed first, so a failed dataset never looks complete.
+/// model left there by an earlier run is removed first, so a failed dataset never looks complete;
+/// so are an earlier dataset's views (`view_NNN.png` / `.exr` in `images/`, `masks/`, `depth/`),
+/// which would otherwise sit beside this one's. Other files in the folder are left alone.
 pub fn write_dataset<T, F>(
     dir: &Path,
     model: &Model,
@@ -71,8 +73,14 @@ where
     }
     let writer = DatasetWriter::create(dir)?;
     // A model left by an earlier run would make a failed one look complete: it goes first, and
-    // is written again only once every view is rendered and something is visible in them.
+    // is written again only once every view is rendered and something is visible in them. So
+    // do an earlier run's views: where it had more cameras, or masks or depth this one does not
+    // write, they would sit beside this run's as if they belonged to it (a reader pairs every
+    // image with the mask of its name).
     remove_stale_model(&writer)?;
+    for folder in ["images", "masks", "depth"] {
+        remove_view_files(&dir.join(folder))?;
+    }
     let masks_dir = opts.masks.then(|| create_dir(dir, "masks")).transpose()?;
     let depth_dir = opts.depth.then(|| create_dir(dir, "depth")).transpose()?;
 
@@ -181,6 +189,28 @@ fn remove_model_files(sparse_dir: &Path) -> Result<(), Error> {
             Ok(()) => {}
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
             Err(source) => return Err(Error::Io { path, source }),
+        }
+    }
+    Ok(())
+}
+
+/// Removes the files in `folder` named as a dataset names its views (`view_NNN.png`, and
+/// `view_NNN.exr` for depth); other files, and a missing folder, are left alone.
+fn remove_view_files(folder: &Path) -> Result<(), Error> {
+    let Ok(entries) = std::fs::read_dir(folder) else {
+        return Ok(());
+    };
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let is_view = name.to_str().is_some_and(|n| {
+            let digits = n
+                .strip_prefix("view_")
+                .and_then(|r| r.strip_suffix(".png").or_else(|| r.strip_suffix(".exr")));
+            digits.is_some_and(|d| !d.is_empty() && d.bytes().all(|b| b.is_ascii_digit()))
+        });
+        if is_view && entry.file_type().is_ok_and(|t| t.is_file()) {
+            let path = entry.path();
+            std::fs::remove_file(&path).map_err(|source| Error::Io { path, source })?;
         }
     }
     Ok(())

@@ -77,4 +77,36 @@ fn dataset_round_trips_through_colmap_io() {
     let ply = plenoptic_io::read_cloud(&dir.path().join("sparse/0/points3D.ply")).unwrap();
     assert_eq!(ply.positions, cloud.positions);
     assert!(ply.normals.is_some());
+
+    // Written again into the same folder with 2 cameras, no masks and no depth: the earlier
+    // run's views 2..4, its masks and its depth maps were left beside the new images (a reader
+    // paired them with the new views). The user's own files stay.
+    std::fs::write(dir.path().join("images/notes.txt"), b"mine").unwrap();
+    write_dataset(
+        dir.path(),
+        &model,
+        &cams[..2],
+        &ViewOptions::default(),
+        &DatasetOptions {
+            masks: false,
+            ..DatasetOptions::default()
+        },
+        &|| {},
+        |_, _| (),
+    )
+    .unwrap();
+    let listed = |folder: &str| -> Vec<String> {
+        let mut names: Vec<String> = std::fs::read_dir(dir.path().join(folder))
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        names
+    };
+    assert_eq!(
+        listed("images"),
+        ["notes.txt", "view_000.png", "view_001.png"]
+    );
+    assert!(listed("masks").is_empty(), "{:?}", listed("masks"));
+    assert!(listed("depth").is_empty(), "{:?}", listed("depth"));
 }
