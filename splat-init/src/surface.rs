@@ -22,8 +22,11 @@ pub fn surface_init(
     }
     let spacing = point_spacing(&points.positions);
     let (normals, normal_source) = match &points.normals {
-        Some(n) => (n.clone(), "file"),
-        None => (pca_normals(&points.positions, cfg.normal_neighbours), "pca"),
+        Some(n) => file_normals(n, &points.positions, cfg.normal_neighbours),
+        None => (
+            pca_normals(&points.positions, cfg.normal_neighbours),
+            "pca".to_string(),
+        ),
     };
     let (degree, errors) = decide_sh_degree(points, cfg, exponent);
     let sigma = splat_train::init::scales_from_knn(&points.positions);
@@ -55,11 +58,39 @@ pub fn surface_init(
         sh_degree: degree,
         sh_fit_rms: errors,
         point_spacing: spacing,
-        normals: normal_source.to_string(),
+        normals: normal_source,
         source: "surface".to_string(),
         warm_start: None,
     };
     Ok((splats, summary))
+}
+
+/// The file's normals, each scaled to unit length (through its largest component, so that
+/// (10³⁰, 10³⁰, 0) is a direction too), with those that name no direction (zero, not finite)
+/// replaced by fitted ones ([`pca_normals`] of `k` neighbours), and where they came from.
+/// Exporters write zero normals for "none": taken as they were, every such disc faced +z.
+fn file_normals(normals: &[Vec3], positions: &[Vec3], k: usize) -> (Vec<Vec3>, String) {
+    let unit = |n: Vec3| {
+        let largest = n.abs().max_element();
+        (largest.is_finite() && largest > 0.0).then(|| (n / largest).normalize())
+    };
+    let scaled: Vec<Option<Vec3>> = normals.par_iter().map(|&n| unit(n)).collect();
+    let missing = scaled.iter().filter(|n| n.is_none()).count();
+    if missing == 0 {
+        return (scaled.into_iter().flatten().collect(), "file".into());
+    }
+    let fitted = pca_normals(positions, k);
+    let merged = scaled
+        .iter()
+        .zip(&fitted)
+        .map(|(n, f)| n.unwrap_or(*f))
+        .collect();
+    let source = if missing == normals.len() {
+        "pca (the file's normals are all zero or not finite)".to_string()
+    } else {
+        format!("file ({missing} zero or not finite, fitted instead)")
+    };
+    (merged, source)
 }
 
 /// Neighbours (besides the point itself) whose colours decide whether a point is on a texture

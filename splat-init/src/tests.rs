@@ -282,6 +282,41 @@ fn surface_init_makes_flat_discs_on_the_points() {
     }
 }
 
+/// Exporters write zero normals for "none": taken as they were, every disc faced +z whatever
+/// the surface (a plane x = 0 here). Zero ones are fitted instead, and the summary says so;
+/// normals far beyond f32's squares, such as (0, 10³⁰, 0), are directions.
+#[test]
+fn zero_normals_in_the_file_are_fitted_instead() {
+    let pts: Vec<Vec3> = grid(10).iter().map(|p| Vec3::new(0.0, p.x, p.y)).collect();
+    let facing = |normals: Vec<Vec3>| {
+        let sp = SurfacePoints {
+            positions: pts.clone(),
+            normals: Some(normals),
+            colors: vec![[0.5; 3]; pts.len()],
+            ..SurfacePoints::default()
+        };
+        let (s, summary) = surface_init(&sp, &InitConfig::default(), 10).unwrap();
+        let along_x = (0..s.len())
+            .filter(|&i| ((s.rotation(i) * Vec3::Z).x.abs() - 1.0).abs() < 1e-4)
+            .count();
+        (along_x, summary.normals)
+    };
+    let (along_x, source) = facing(vec![Vec3::ZERO; 100]);
+    assert_eq!(along_x, 100);
+    assert!(
+        source.starts_with("pca (the file's normals are all zero"),
+        "{source}"
+    );
+    let half: Vec<Vec3> = (0..100)
+        .map(|i| if i % 2 == 0 { Vec3::X } else { Vec3::ZERO })
+        .collect();
+    let (along_x, source) = facing(half);
+    assert_eq!(along_x, 100);
+    assert_eq!(source, "file (50 zero or not finite, fitted instead)");
+    let (along_x, source) = facing(vec![Vec3::new(1e30, 0.0, 0.0); 100]);
+    assert_eq!((along_x, source.as_str()), (100, "file"));
+}
+
 /// A grid whose left half is dark and right half light: points whose 8 nearest neighbours
 /// reach across the boundary take the edge ratio, the rest the even ratio; a half-strength
 /// contrast takes the ratio half-way; the discs' σ follows.

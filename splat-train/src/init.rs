@@ -174,7 +174,8 @@ impl std::fmt::Debug for SurfaceIndex {
 
 impl SurfaceIndex {
     /// Indexes `points`, with their outward `normals` where the input has them; `None` for an
-    /// empty or unindexable set.
+    /// empty or unindexable set. Normals that are all zero (how exporters write "none") count as
+    /// none: they orient nothing.
     ///
     /// # Panics
     /// If `normals` is not one per point (a caller bug).
@@ -183,6 +184,7 @@ impl SurfaceIndex {
         if let Some(n) = normals {
             assert_eq!(n.len(), points.len(), "SurfaceIndex: one normal per point");
         }
+        let normals = normals.filter(|n| n.iter().any(|v| *v != glam::Vec3::ZERO));
         let index = PointIndex::new(points)?;
         let spacing = spacing_in(&index, points);
         Some(Self {
@@ -280,6 +282,9 @@ mod tests {
             assert_eq!(n.normal, Some(2.0 * n.position + 1.0));
         }
         assert!(SurfaceIndex::new(&[], None).is_none());
+        // All-zero normals (an exporter's "none") orient nothing: the report said "oriented".
+        let zeros = vec![glam::Vec3::ZERO; pts.len()];
+        assert!(!SurfaceIndex::new(&pts, Some(&zeros)).unwrap().is_oriented());
     }
 
     #[test]
