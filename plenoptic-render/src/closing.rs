@@ -257,10 +257,8 @@ fn median_count(points: &[Vec3], lo: Vec3, extent: f32, radius: f32) -> usize {
         .collect();
     let start_of = |cell: usize| cells.get(cell).map_or(sorted.len(), |c| c.1);
     let r2 = radius * radius;
-    let stride = points.len().div_ceil(SPACING_SAMPLES).max(1);
-    let mut counts: Vec<usize> = points
+    let mut counts: Vec<usize> = distinct_samples(points)
         .par_iter()
-        .step_by(stride)
         .map(|&p| {
             let c = coord(p).as_ivec3();
             let mut n = 0;
@@ -293,6 +291,19 @@ fn median_count(points: &[Vec3], lo: Vec3, extent: f32, radius: f32) -> usize {
         .collect();
     let mid = counts.len() / 2;
     *counts.select_nth_unstable(mid).1
+}
+
+/// Up to [`SPACING_SAMPLES`] evenly strided points, each position once: a heap of duplicates
+/// (depth sensors' invalid returns at the origin, a point written thousands of times) is one
+/// place on the surface, and as a majority of the samples it made the median count that of the
+/// heap, so the spacing shrank towards zero and the views came out empty.
+fn distinct_samples(points: &[Vec3]) -> Vec<Vec3> {
+    let stride = points.len().div_ceil(SPACING_SAMPLES).max(1);
+    let mut samples: Vec<Vec3> = points.iter().step_by(stride).copied().collect();
+    let bits = |p: &Vec3| p.to_array().map(f32::to_bits);
+    samples.sort_unstable_by_key(bits);
+    samples.dedup_by_key(|p| bits(p));
+    samples
 }
 
 #[cfg(test)]
@@ -337,10 +348,13 @@ mod tests {
         );
         let extent = (hi - lo).max_element();
         for radius in [0.3, 1.0, 2.5, 7.0, 40.0] {
+            // Around each distinct sample position once (the heap of duplicates is one).
             let stride = pts.len().div_ceil(SPACING_SAMPLES).max(1);
-            let mut counts: Vec<usize> = pts
+            let mut samples: Vec<Vec3> = pts.iter().step_by(stride).copied().collect();
+            samples.sort_by(|a, b| a.to_array().partial_cmp(&b.to_array()).unwrap());
+            samples.dedup();
+            let mut counts: Vec<usize> = samples
                 .iter()
-                .step_by(stride)
                 .map(|&p| {
                     let n = pts
                         .iter()
@@ -365,6 +379,20 @@ mod tests {
             let s = surface_spacing(&grid(400, h)).unwrap();
             assert!((s / h - 1.0).abs() < 0.1, "spacing {s} for grid {h}");
         }
+    }
+
+    #[test]
+    fn a_heap_of_duplicates_does_not_shrink_the_spacing() {
+        // A plane with half again as many copies of one point (a depth sensor's invalid returns
+        // at the origin): the spacing was that of the heap, and the cloud was drawn 6e-6 wide.
+        let mut pts = grid(200, 1.0);
+        let plane = surface_spacing(&pts).unwrap();
+        pts.extend(std::iter::repeat_n(Vec3::ZERO, pts.len() * 3 / 2));
+        let heaped = surface_spacing(&pts).unwrap();
+        assert!(
+            (heaped / plane - 1.0).abs() < 0.05,
+            "{heaped} against {plane}"
+        );
     }
 
     #[test]

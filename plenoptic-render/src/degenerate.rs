@@ -88,7 +88,9 @@ pub enum DegenerateError {
     /// Most views of the rig see nothing.
     #[error(
         "{}: nothing is visible in {empty} of the {total} {kind} views ({names}); more than half are empty, \
-         so the object is too small or too thin for the cameras (try a larger --point-size or resolution)",
+         so the object is too small or too thin for the cameras, or its points are drawn at a size \
+         that hides them (check the point size, `views --point-size` or `[renderer] point_size`, \
+         or raise the resolution)",
         path.display()
     )]
     NothingVisible {

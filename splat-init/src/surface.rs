@@ -65,12 +65,17 @@ pub fn surface_init(
     Ok((splats, summary))
 }
 
-/// The file's normals, each scaled to unit length (through its largest component, so that
-/// (10³⁰, 10³⁰, 0) is a direction too), with those that name no direction (zero, not finite)
-/// replaced by fitted ones ([`pca_normals`] of `k` neighbours), and where they came from.
-/// Exporters write zero normals for "none": taken as they were, every such disc faced +z.
+/// The file's normals as they are, those whose square overflows or vanishes in f32 scaled by
+/// their largest component (so that (10³⁰, 10³⁰, 0) is a direction too), and those that name no
+/// direction (zero, not finite) replaced by fitted ones ([`pca_normals`] of `k` neighbours);
+/// and where they came from. Exporters write zero normals for "none": taken as they were,
+/// every such disc faced +z.
 fn file_normals(normals: &[Vec3], positions: &[Vec3], k: usize) -> (Vec<Vec3>, String) {
     let unit = |n: Vec3| {
+        let square = n.length_squared();
+        if square.is_normal() && square.is_finite() {
+            return Some(n);
+        }
         let largest = n.abs().max_element();
         (largest.is_finite() && largest > 0.0).then(|| (n / largest).normalize())
     };
