@@ -16,6 +16,9 @@ pub(crate) fn read_gltf(path: &Path) -> Result<Mesh, Error> {
         message,
     };
     Error::require_file(path)?;
+    if let Some(problem) = container_problem(path) {
+        return Err(err(problem));
+    }
     if let Some(version) = asset_version(path).filter(|v| !v.starts_with("2.")) {
         return Err(err(format!(
             "glTF version {version} is not supported (glTF 2.0 only)"
@@ -80,6 +83,41 @@ pub(crate) fn read_gltf(path: &Path) -> Result<Mesh, Error> {
 
 /// The `asset.version` of a .gltf or .glb file, or `None` when it cannot be read (the importer
 /// then reports the problem). A GLB container of version 1 is glTF 1.0.
+/// What is wrong with the file as a container, said before the importer says it less clearly
+/// ("failed to fill whole buffer", "expected value at line 1 column 1"): a GLB shorter than its
+/// header's length, a `.glb` without the magic, a `.gltf` that is not JSON text.
+fn container_problem(path: &Path) -> Option<String> {
+    use std::io::Read as _;
+    let mut head = [0u8; 12];
+    let file = std::fs::File::open(path).ok()?;
+    let size = file.metadata().ok()?.len();
+    let read = file.take(12).read(&mut head).ok()?;
+    let glb_extension = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("glb"));
+    if head.starts_with(b"glTF") {
+        if read < 12 {
+            return Some(format!("a GLB header is 12 bytes; the file has {size}"));
+        }
+        let declared = u64::from(u32::from_le_bytes([head[8], head[9], head[10], head[11]]));
+        return (declared > size).then(|| {
+            format!(
+                "the GLB header declares {declared} bytes but the file has {size}: it is cut short"
+            )
+        });
+    }
+    if glb_extension {
+        return Some("not a GLB file: it does not start with the magic `glTF`".into());
+    }
+    // (A byte-order mark, which the spec forbids writing but readers meet, is not the problem.)
+    let text = head[..read]
+        .strip_prefix(b"\xEF\xBB\xBF")
+        .unwrap_or(&head[..read]);
+    let first = text.iter().find(|b| !b.is_ascii_whitespace());
+    (read > 0 && first.is_some_and(|&b| b != b'{'))
+        .then(|| "not a glTF JSON file (it does not start with `{`) nor a GLB (`glTF`)".into())
+}
+
 fn asset_version(path: &Path) -> Option<String> {
     let bytes = std::fs::read(path).ok()?;
     let json = if bytes.starts_with(b"glTF") {

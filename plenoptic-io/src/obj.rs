@@ -208,7 +208,25 @@ fn scan_lines(path: &Path, text: &str) -> Result<LineScan, Error> {
             }
             _ => continue,
         };
-        for (c, word) in words.enumerate() {
+        // (Up to a trailing comment.)
+        let words: Vec<&str> = words.take_while(|w| !w.starts_with('#')).collect();
+        // tobj refuses these as "position parse error" (or normal, texture) without a line.
+        let needed = [3, 3, 1][kind];
+        let malformed = |problem: String| Error::Obj {
+            path: path.to_path_buf(),
+            message: format!("line {}: {key}: {problem}", n + 1),
+        };
+        if let Some(word) = words.iter().find(|w| w.parse::<f32>().is_err()) {
+            return Err(malformed(format!("'{word}' is not a number")));
+        }
+        if words.len() < needed {
+            return Err(malformed(format!(
+                "{} number(s); it needs at least {needed} ({})",
+                words.len(),
+                names[..needed].join(", ")
+            )));
+        }
+        for (c, word) in words.iter().enumerate() {
             if let Ok(x) = word.parse::<f32>()
                 && !x.is_finite()
             {

@@ -276,3 +276,51 @@ fn indices_past_their_view_and_viewless_positions_are_named() {
         "{message}"
     );
 }
+
+/// A GLB cut short, a `.glb` that is not one, a GLB shorter than its header and a `.gltf` that
+/// is not JSON: the importer said "failed to fill whole buffer" or "expected value at line 1
+/// column 1".
+#[test]
+fn broken_containers_are_named_as_such() {
+    let glb = std::fs::read(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../testdata/meshes/box-textured/BoxTextured.glb"
+    ))
+    .unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let cases: [(&str, &[u8], &str); 4] = [
+        (
+            "cut.glb",
+            &glb[..1000],
+            "the GLB header declares 4696 bytes but the file has 1000",
+        ),
+        (
+            "noise.glb",
+            b"not a glb file at all",
+            "not a GLB file: it does not start with the magic",
+        ),
+        (
+            "short.glb",
+            &glb[..8],
+            "a GLB header is 12 bytes; the file has 8",
+        ),
+        ("noise.gltf", b"\x00\x01binary", "not a glTF JSON file"),
+    ];
+    for (name, bytes, expected) in cases {
+        let path = dir.path().join(name);
+        std::fs::write(&path, bytes).unwrap();
+        let e = read_mesh(&path).unwrap_err().to_string();
+        assert!(e.contains(expected), "{name}: {e}");
+    }
+    // A byte-order mark before the JSON is not the problem the importer is left to judge.
+    let path = dir.path().join("bom.gltf");
+    std::fs::write(
+        &path,
+        [b"\xEF\xBB\xBF".as_slice(), document(4, "2.0").as_bytes()].concat(),
+    )
+    .unwrap();
+    let e = read_mesh(&path)
+        .map(|_| String::new())
+        .unwrap_or_else(|e| e.to_string());
+    assert!(!e.contains("not a glTF JSON file"), "{e}");
+}

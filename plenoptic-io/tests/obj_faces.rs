@@ -51,6 +51,14 @@ fn bad_faces_are_refused_naming_their_line() {
             "mtllib missing.mtl\nusemtl red paint\nf 1 2 3\n",
             "line 8: usemtl 'red paint', but the material library cannot be read",
         ),
+        // tobj said "position parse error" (or normal, texture) without a line.
+        (
+            "v 0 0\nf 1 2 3\n",
+            "line 7: v: 2 number(s); it needs at least 3 (x, y, z)",
+        ),
+        ("v 0 zero 0\n", "line 7: v: 'zero' is not a number"),
+        ("vn 0 1\n", "line 7: vn: 2 number(s); it needs at least 3"),
+        ("vt\n", "line 7: vt: 0 number(s); it needs at least 1 (u)"),
     ] {
         let e = read(&obj(faces)).unwrap_err();
         let message = e.to_string();

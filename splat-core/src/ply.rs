@@ -403,8 +403,10 @@ impl Vertices<'_> {
             let mut it = line.split_whitespace();
             for (c, (slot, &ty)) in values.iter_mut().zip(&types).enumerate() {
                 *slot = it.next().and_then(|w| parse_ascii(w, ty)).ok_or_else(|| {
+                    // The line's own offset in the file (it is a slice of the file's bytes).
+                    let at = line.as_ptr() as usize - self.data.as_ptr() as usize;
                     self.body_err(
-                        0,
+                        at,
                         i,
                         format!(
                             "property {c} (`{}`) is missing or not a valid {}",
@@ -437,9 +439,11 @@ impl Vertices<'_> {
         }
         let need = n.checked_mul(stride).and_then(|b| b.checked_add(off));
         if need.is_none_or(|need| need > body.len()) {
+            // Named by the first vertex the file cuts, at the offset where it starts.
+            let whole = (body.len().saturating_sub(off)) / stride.max(1);
             return Err(self.body_err(
-                self.header.body_offset + off,
-                (body.len().saturating_sub(off)) / stride.max(1),
+                self.header.body_offset + off + whole * stride,
+                whole,
                 format!(
                     "{n} vertices of {stride} bytes need {} bytes but the body after this \
                      offset has {}",

@@ -208,6 +208,33 @@ fn expect_err(bytes: &[u8], needle: &str) {
 fn bad_files_give_clear_errors() {
     let good = std::fs::read(gt_path()).unwrap();
     expect_err(&good[..good.len() - 10], "vertices of 248 bytes need");
+    // Cut inside vertex 2055: named at the offset where that vertex starts (it said the body's
+    // start).
+    let body = good.windows(11).position(|w| w == b"end_header\n").unwrap() + 11;
+    let cut = &good[..body + 2055 * 248 + 100];
+    expect_err(
+        cut,
+        &format!("byte offset {} (vertex 2055)", body + 2055 * 248),
+    );
+    // An ASCII row with a word that is no number, at its line's offset (it said 0).
+    let names = [
+        "x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2",
+        "rot_0", "rot_1", "rot_2", "rot_3",
+    ];
+    let properties: String = names
+        .iter()
+        .map(|n| format!("property float {n}\n"))
+        .collect();
+    let ascii = format!(
+        "ply\nformat ascii 1.0\nelement vertex 2\n{properties}end_header\n{}\n0 zero {}\n",
+        ["0"; 14].join(" "),
+        ["0"; 12].join(" ")
+    );
+    let second_row = ascii.find("0 zero").unwrap();
+    expect_err(
+        ascii.as_bytes(),
+        &format!("byte offset {second_row} (vertex 1)"),
+    );
     expect_err(b"hello\n", "not a PLY");
     // A point cloud's header (no splat property at all) is named as one, without a line.
     expect_err(

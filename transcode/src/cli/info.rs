@@ -37,7 +37,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     spinner.enable_steady_tick(Duration::from_millis(120));
     let model = plenoptic_io::load(&args.file);
     spinner.finish_and_clear();
-    let model = model?;
+    let model = match model {
+        Err(plenoptic_io::Error::UnsupportedFormat { path, extension }) => anyhow::bail!(
+            "{}: unsupported file type '{extension}': info reads clouds and meshes (.ply, .obj, \
+             .gltf, .glb) and splat models (.ply, .spz, .splat, .glb)",
+            path.display()
+        ),
+        other => other?,
+    };
     let summary = Summary::of(&model);
     let format = format_of(&args.file);
     let drawn = drawn_as(&model);
