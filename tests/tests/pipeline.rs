@@ -478,6 +478,15 @@ fn a_second_writer_of_one_output_folder_is_refused() {
         b"the other run's"
     );
     drop(held);
+    // An output that is a file is named as one (it said "cannot write …/model/splats.ply: Not a
+    // directory").
+    let file = tmp.path().join("afile");
+    std::fs::write(&file, b"x").unwrap();
+    let msg =
+        transcode::pipeline::run(&input, &file, &small_config(), &transcode::progress::ignore)
+            .unwrap_err()
+            .to_string();
+    assert!(msg.contains("is a file, not a folder"), "{msg}");
 }
 
 #[test]

@@ -79,12 +79,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
     }
     if !args.quiet {
+        let which = if block.is_empty() {
+            "no frames (more shards than frames)".to_string()
+        } else {
+            format!(
+                "frames {}..{} ({} frames)",
+                block.start + 1,
+                block.end,
+                block.len()
+            )
+        };
         eprintln!(
-            "sequence of {} frames; shard {shard}: frames {}..{} ({} frames){}",
+            "sequence of {} frames; shard {shard}: {which}{}",
             frames.len(),
-            block.start + 1,
-            block.end,
-            block.len(),
             if config.sequence.warm_start {
                 format!(
                     "; warm starts train {:.0} % of the steps",

@@ -29,9 +29,10 @@ pub struct Args {
 }
 
 /// Pages an output folder may hold, in the order they are looked for.
-const ENTRY_PAGES: [&str; 4] = [
+const ENTRY_PAGES: [&str; 5] = [
     "report/report.html",
     "report.html",
+    "sequence.html",
     "viewer/index.html",
     "index.html",
 ];

@@ -27,6 +27,11 @@ pub enum PipelineError {
         /// The folder the run clears (the output folder itself for its saved state).
         folder: PathBuf,
     },
+    /// The output folder names something that is not a folder.
+    #[error(
+        "the output {0} is a file, not a folder: a run writes a folder (model/, report/, dataset/)"
+    )]
+    OutputNotFolder(PathBuf),
     /// Another process is writing the output folder.
     #[error(transparent)]
     Lock(#[from] crate::lock::LockError),

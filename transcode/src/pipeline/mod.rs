@@ -206,6 +206,9 @@ fn execute(
         .into());
     }
     let started = Instant::now();
+    if out.exists() && !out.is_dir() {
+        return Err(PipelineError::OutputNotFolder(out.to_path_buf()));
+    }
     let layout = Layout::new(out);
     // Held until the run returns: a second run into this folder would clear what this one
     // writes.

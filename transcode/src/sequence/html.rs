@@ -153,6 +153,27 @@ fn temporal_plot(h: &mut String, m: &SequenceManifest) {
     ));
 }
 
+/// A relative path as a URL path: each segment's bytes outside the unreserved characters
+/// percent-encoded (a frame named `take#2` linked to `take`, fragment `2`).
+fn url_path(path: &Path) -> String {
+    path.iter()
+        .map(|segment| {
+            segment
+                .to_string_lossy()
+                .bytes()
+                .map(|b| {
+                    if b.is_ascii_alphanumeric() || b"-._~".contains(&b) {
+                        char::from(b).to_string()
+                    } else {
+                        format!("%{b:02X}")
+                    }
+                })
+                .collect::<String>()
+        })
+        .collect::<Vec<_>>()
+        .join("/")
+}
+
 /// Every frame: its state, start, figures, and a link to its own report once finished.
 fn frames_table(h: &mut String, m: &SequenceManifest) {
     h.push_str(
@@ -163,11 +184,7 @@ fn frames_table(h: &mut String, m: &SequenceManifest) {
     for r in &m.frames {
         let link = r.dir.join("report").join("report.html");
         let name = if r.state == FrameState::Finished {
-            format!(
-                "<a href=\"{}\">{}</a>",
-                esc(&link.to_string_lossy()),
-                esc(&r.name)
-            )
+            format!("<a href=\"{}\">{}</a>", esc(&url_path(&link)), esc(&r.name))
         } else {
             esc(&r.name)
         };
@@ -225,5 +242,23 @@ fn consecutive_table(h: &mut String, m: &SequenceManifest) {
             );
         }
         h.push_str("</table>\n");
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn links_to_frames_are_url_paths() {
+        let link = Path::new("frames/take#2 ?50%/report/report.html");
+        assert_eq!(
+            url_path(link),
+            "frames/take%232%20%3F50%25/report/report.html"
+        );
+        assert_eq!(
+            url_path(Path::new("frames/été_1")),
+            "frames/%C3%A9t%C3%A9_1"
+        );
     }
 }
