@@ -102,13 +102,14 @@ impl RigConfig {
         if !(self.fov_y_deg > 0.0 && self.fov_y_deg < 170.0) {
             return bad(
                 "fov_y_deg",
-                format!("must be in (0, 170), got {}", self.fov_y_deg),
+                format!("must be in (0, 170), got {:?}", self.fov_y_deg),
             );
         }
         if !(0.0..0.9).contains(&self.margin) {
             return bad(
                 "margin",
-                format!("must be in [0, 0.9), got {}", self.margin),
+                // (Debug: 1e300 as `1e300`, not its 301 digits.)
+                format!("must be in [0, 0.9), got {:?}", self.margin),
             );
         }
         if self.heldout_cameras > 0
@@ -347,6 +348,13 @@ mod tests {
                     ..RigConfig::default()
                 },
                 "`rig.fov_y_deg` must be in (0, 170), got 175",
+            ),
+            (
+                RigConfig {
+                    margin: 1e300,
+                    ..RigConfig::default()
+                },
+                "`rig.margin` must be in [0, 0.9), got 1e300",
             ),
         ];
         for (cfg, expected) in cases {

@@ -504,6 +504,16 @@ fn a_run_without_held_out_views_is_refused_before_it_renders() {
         "{msg}"
     );
     assert!(!out.join("dataset").exists(), "rendered before refusing");
+    // Views the rasteriser cannot train on (over 8192²): refused before rendering, not after
+    // all of them were.
+    let mut cfg = small_config();
+    cfg.rig.width = 9000;
+    cfg.rig.height = 9000;
+    let msg = transcode::pipeline::run(&input, &out, &cfg, &transcode::progress::ignore)
+        .unwrap_err()
+        .to_string();
+    assert!(msg.contains("the training views are too large"), "{msg}");
+    assert!(!out.join("dataset").exists(), "rendered before refusing");
 }
 
 #[test]

@@ -205,6 +205,15 @@ fn execute(
         }
         .into());
     }
+    // The views are trained on: a size the rasteriser refuses failed only after all of them
+    // were rendered (the reference renderer and `transcode views` go to 16384²).
+    splat_core::Rasterizer::check_view_size(cfg.rig.width, cfg.rig.height).map_err(|e| {
+        crate::config::ConfigError::Invalid {
+            path: None,
+            key: "rig.width/rig.height".into(),
+            problem: format!("the training views are too large: {e}"),
+        }
+    })?;
     let started = Instant::now();
     if out.exists() && !out.is_dir() {
         return Err(PipelineError::OutputNotFolder(out.to_path_buf()));
