@@ -6,7 +6,8 @@
 //! run holds `OUT/.transcode.lock` (a shard `OUT/shards/.shard-I-of-N.lock`) while it writes,
 //! through the operating system's file lock (`flock` on Unix, `LockFileEx` on Windows), which
 //! the system releases when the process ends however it ends, so a killed run leaves no stale
-//! lock behind. The lock is advisory: it keeps transcode processes apart, not other programs.
+//! lock behind. The lock is advisory: it keeps transcode processes apart, not other programs; on
+//! a file system that cannot lock (some network mounts) a run goes on unguarded.
 
 use std::fs::{File, OpenOptions, TryLockError};
 use std::path::{Path, PathBuf};
@@ -37,10 +38,12 @@ pub enum LockError {
 }
 
 impl WriterLock {
-    /// Takes the lock on `path` (created, with its folder, when missing), without waiting.
+    /// Takes the lock on `path` (created, with its folder, when missing), without waiting; where
+    /// the file system cannot lock, the lock is taken as held by this run alone.
     ///
     /// # Errors
-    /// [`LockError::Held`] when another process (or another open handle of this one) holds it.
+    /// [`LockError::Held`] when another process (or another open handle of this one) holds it;
+    /// [`LockError::Io`] when the file cannot be created.
     pub fn acquire(path: &Path) -> Result<Self, LockError> {
         let io = |source| LockError::Io {
             path: path.to_path_buf(),
@@ -56,9 +59,10 @@ impl WriterLock {
             .open(path)
             .map_err(io)?;
         match file.try_lock() {
-            Ok(()) => Ok(Self { _file: file }),
+            // A file system that cannot lock at all (some network mounts answer ENOLCK) leaves
+            // the run unguarded rather than refused: the lock only keeps two runs apart.
+            Ok(()) | Err(TryLockError::Error(_)) => Ok(Self { _file: file }),
             Err(TryLockError::WouldBlock) => Err(LockError::Held(path.to_path_buf())),
-            Err(TryLockError::Error(e)) => Err(io(e)),
         }
     }
 }
