@@ -474,6 +474,52 @@ impl Packed {
     }
 }
 
+/// How many splats SPZ's byte ranges clamp (as Niantic's encoder does) when they are packed:
+/// log-scales outside about [−10, 5.94], DC colour coefficients outside about ±3.33, higher SH
+/// coefficients outside about [−1, 0.99]. Positions beyond the 24-bit range are refused instead.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SpzClamps {
+    /// Splats with a log-scale clamped.
+    pub log_scales: usize,
+    /// Splats with a DC coefficient clamped.
+    pub colours: usize,
+    /// Splats with a higher SH coefficient clamped.
+    pub sh: usize,
+}
+
+impl SpzClamps {
+    /// Whether nothing is clamped.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        *self == Self::default()
+    }
+}
+
+/// Counts what packing `splats` as SPZ would clamp (the same formulas as the packing).
+#[must_use]
+pub fn clamped_by_spz(splats: &Splats) -> SpzClamps {
+    let outside = |raw: f32| !(0.0..=255.0).contains(&raw.round());
+    let k = splats.coeffs_per_splat();
+    let mut c = SpzClamps::default();
+    for i in 0..splats.len() {
+        let ls = splats.log_scales[i].to_array();
+        c.log_scales += usize::from(ls.iter().any(|&v| outside((v + 10.0) * 16.0)));
+        let sh = &splats.sh[i * k..(i + 1) * k];
+        let dc = sh[0];
+        c.colours += usize::from(
+            dc.iter()
+                .any(|&v| outside(v * (COLOR_SCALE * 255.0) + 127.5)),
+        );
+        c.sh += usize::from(
+            sh[1..]
+                .iter()
+                .flatten()
+                .any(|&v| outside(v * 128.0 + 128.0)),
+        );
+    }
+    c
+}
+
 /// Rounds to the nearest integer and clamps into a byte (`load-spz.cc`'s `toUint8`).
 fn to_u8(x: f32) -> u8 {
     x.round().clamp(0.0, 255.0) as u8
@@ -710,6 +756,31 @@ mod tests {
     #[test]
     fn sh_quantisation_keeps_zero_and_bucket_centres() {
         assert_eq!(quantize_sh(0.0, 4), 128);
+        // What the packing clamps is what `clamped_by_spz` counts.
+        let mut s = Splats::new(1);
+        for (scale, dc, rest) in [
+            (-2.0, 0.5, 0.5),
+            (20.0, 0.5, 0.5),
+            (-11.0, 0.5, 0.5),
+            (-2.0, 10.0, 0.5),
+            (-2.0, 0.5, -1.5),
+        ] {
+            s.push(
+                glam::Vec3::ZERO,
+                glam::Vec3::new(-2.0, scale, -2.0),
+                [1.0, 0.0, 0.0, 0.0],
+                0.0,
+                &[[dc, 0.0, 0.0], [0.0, rest, 0.0], [0.0; 3], [0.0; 3]],
+            );
+        }
+        assert_eq!(
+            clamped_by_spz(&s),
+            SpzClamps {
+                log_scales: 2,
+                colours: 1,
+                sh: 1
+            }
+        );
         assert_eq!(quantize_sh(0.0, 5), 128);
         assert_eq!(quantize_sh(-2.0, 8), 0);
         assert_eq!(quantize_sh(2.0, 8), 255);

@@ -49,6 +49,29 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             args.output.display()
         );
     }
+    if to == Format::Spz {
+        let clamped = spz::clamped_by_spz(splats);
+        for (count, what) in [
+            (clamped.log_scales, "a log-scale outside SPZ's [-10, 5.94]"),
+            (
+                clamped.colours,
+                "a DC colour coefficient outside SPZ's ±3.33",
+            ),
+            (
+                clamped.sh,
+                "a higher SH coefficient outside SPZ's [-1, 0.99]",
+            ),
+        ] {
+            if count > 0 {
+                println!(
+                    "warning: {count} splat(s) of {} have {what}: clamped into the range in {}, \
+                     as Niantic's encoder does",
+                    args.input.display(),
+                    args.output.display()
+                );
+            }
+        }
+    }
     if model.skipped_extensions {
         println!(
             "warning: {} holds SPZ extension records, which are not read (a tool's extension can \
