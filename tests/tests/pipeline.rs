@@ -64,6 +64,17 @@ fn pipeline_on_a_small_plenoptic_cloud() {
     }
     assert!(out.join("dataset/sparse/0/points3D.ply").is_file());
 
+    // The stages account for the run's wall time: the models' export and the report's viewer
+    // were in the total but in no stage (a sixth of a small run). Not resumed.
+    let staged: f64 = outcome.report.timings.iter().map(|t| t.seconds).sum();
+    let total = outcome.report.total_seconds;
+    assert!(
+        staged <= total && staged >= total - 0.05,
+        "stages {staged:.3} s of {total:.3} s: {:?}",
+        outcome.report.timings
+    );
+    assert!(!outcome.report.resumed);
+
     // Model: the main (surface) run's PLY reads back with the reported splat count.
     let main = &outcome.report.runs[0];
     assert_eq!(main.init.mode, InitMode::Surface);

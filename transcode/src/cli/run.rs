@@ -82,5 +82,13 @@ pub fn print_outcome(outcome: &transcode::pipeline::Outcome) {
     }
     println!("model:  {}", outcome.model.display());
     println!("report: {}", outcome.html.display());
-    println!("total:  {:.1} s", outcome.report.total_seconds);
+    println!(
+        "total:  {:.1} s{}",
+        outcome.report.total_seconds,
+        if outcome.report.resumed {
+            " (this session; the run was resumed and its training time spans every session)"
+        } else {
+            ""
+        }
+    );
 }

@@ -218,6 +218,7 @@ fn execute(
     if out.exists() && !out.is_dir() {
         return Err(PipelineError::OutputNotFolder(out.to_path_buf()));
     }
+    let saved_run = saved.is_some();
     let layout = Layout::new(out);
     // Held until the run returns: a second run into this folder would clear what this one
     // writes.
@@ -285,8 +286,10 @@ fn execute(
     // The models only now that every run is trained and evaluated, the report after them and the
     // "finished" state last: whatever a kill leaves behind, a model file is the final one.
     export(&mut trained, cfg, observer)?;
+    clock.lap("write models");
+    let resumed = saved_run;
     let outcome = report(
-        &info, &refs, trained, cfg, &layout, clock, started, observer,
+        &info, &refs, trained, cfg, &layout, clock, started, resumed, observer,
     )?;
     state.status = Status::Finished;
     state.save(out)?;

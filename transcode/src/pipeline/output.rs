@@ -93,8 +93,9 @@ pub(super) fn report(
     trained: Vec<TrainedModel>,
     cfg: &Config,
     layout: &Layout,
-    clock: StageClock,
+    mut clock: StageClock,
     started: Instant,
+    resumed: bool,
     observer: Observer<'_>,
 ) -> Result<Outcome, PipelineError> {
     observer(Event::Stage {
@@ -115,6 +116,7 @@ pub(super) fn report(
             &main.renders,
         )?;
     }
+    clock.lap("report viewer");
     let mut report = Report {
         version: env!("CARGO_PKG_VERSION").to_string(),
         input: input.clone(),
@@ -124,6 +126,7 @@ pub(super) fn report(
         timings: clock.timings,
         runs: trained.into_iter().map(|t| t.report).collect(),
         total_seconds: 0.0,
+        resumed,
     };
     report.total_seconds = started.elapsed().as_secs_f64();
     let html =

@@ -245,6 +245,14 @@ fn train_to_end(
     let mut saved_at = Instant::now();
     let report = loop {
         while budget.search.due(trainer.iteration()) {
+            // A round trains two branches for many steps and cannot be checkpointed inside it:
+            // the state before it is saved, so a run killed during a round resumes at the
+            // round's start (it went back to the last timed checkpoint, at the demo's scale
+            // often none: the whole run again).
+            let t = Instant::now();
+            saving.save(trainer, &probe.curve, budget.search)?;
+            trainer.count_time_between_steps(t.elapsed().as_secs_f64());
+            saved_at = Instant::now();
             budget_round(
                 trainer,
                 &mut budget,

@@ -201,8 +201,12 @@ pub struct Report {
     pub timings: Vec<StageTiming>,
     /// Runs, the main one first.
     pub runs: Vec<RunReport>,
-    /// Total wall time in seconds.
+    /// Total wall time in seconds, of this session when the run was resumed.
     pub total_seconds: f64,
+    /// Whether this session continued a killed run: its stages and total are this session's,
+    /// while each model's training time spans every session.
+    #[serde(default)]
+    pub resumed: bool,
 }
 
 /// Pictures of one held-out view for the HTML page (images on black, clamped, 3·W·H).
@@ -558,7 +562,13 @@ fn timings_table(h: &mut String, report: &Report, names: &[String]) {
     }
     let _ = writeln!(
         h,
-        "<tr><th>total</th><th>{:.2}</th></tr></table>",
+        "<tr><th>total{}</th><th>{:.2}</th></tr></table>",
+        if report.resumed {
+            " (this session: the run was resumed, and a model's training time spans every \
+             session)"
+        } else {
+            ""
+        },
         report.total_seconds
     );
 }
