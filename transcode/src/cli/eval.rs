@@ -45,7 +45,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             &[
                 &dataset.join("images"),
                 &dataset.join("masks"),
-                &super::render::model_dir(dataset),
+                &dataset.join("sparse").join("0"),
             ],
         )?;
     }
