@@ -120,3 +120,17 @@ fn bench_measures_a_generated_frame_and_an_existing_one() {
     assert!(!missing.status.success());
     assert!(String::from_utf8_lossy(&missing.stderr).contains("nope.ply"));
 }
+
+/// `--steps 0` and `--repeats 0` timed nothing and printed training steps of 0.0 ms.
+#[test]
+fn nothing_timed_is_refused() {
+    for (flag, value) in [("--steps", "0"), ("--repeats", "0")] {
+        let run = Command::new(BIN)
+            .args(["bench", "--points", "3000", flag, value])
+            .output()
+            .unwrap();
+        assert!(!run.status.success(), "{flag} {value} was accepted");
+        let err = String::from_utf8_lossy(&run.stderr);
+        assert!(err.contains(flag), "{err}");
+    }
+}

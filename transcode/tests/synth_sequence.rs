@@ -124,4 +124,23 @@ fn a_single_frame_makes_its_folder_and_a_file_in_its_way_is_named() {
         "{err}"
     );
     assert_eq!(std::fs::read(&blocker).unwrap(), b"not a folder");
+    // Its own mesh as the output: refused, the mesh kept (the frame replaced it, exit 0).
+    let mesh = tmp.path().join("cube.ply");
+    let cube = std::fs::read(format!(
+        "{}/../testdata/meshes/misc/cube_binary.ply",
+        env!("CARGO_MANIFEST_DIR")
+    ))
+    .unwrap();
+    std::fs::write(&mesh, &cube).unwrap();
+    let own = Command::new(BIN)
+        .args(["synth", "--points", "3000", "--grid", "40", "--mesh"])
+        .arg(&mesh)
+        .arg("--out")
+        .arg(&mesh)
+        .output()
+        .unwrap();
+    assert!(!own.status.success());
+    let err = String::from_utf8_lossy(&own.stderr);
+    assert!(err.contains("which this command reads"), "{err}");
+    assert_eq!(std::fs::read(&mesh).unwrap(), cube);
 }

@@ -37,10 +37,14 @@ pub struct Args {
     splats: usize,
     /// Repeats of each rasteriser figure, and rounds of the training step by thread count
     /// (medians quoted).
-    #[arg(long, default_value_t = BenchOptions::default().repeats)]
+    #[arg(long, default_value_t = BenchOptions::default().repeats, value_parser = at_least_one)]
     repeats: usize,
     /// Training steps timed (and a quarter of them, at least 3, per round and thread count).
-    #[arg(long, default_value_t = BenchOptions::default().steps)]
+    #[arg(
+        long,
+        default_value_t = BenchOptions::default().steps,
+        value_parser = clap::value_parser!(u32).range(1..)
+    )]
     steps: u32,
     /// Thread counts to time the rasteriser and the training step at, comma-separated (default:
     /// 1 and all of the machine's, which gives the serial fraction); the step is timed at each
@@ -225,5 +229,13 @@ fn print_report(r: &BenchReport, opts: &BenchOptions) {
     }
     if let Some(b) = r.peak_rss_bytes {
         println!("peak resident memory: {:.2} GB", b as f64 / 1e9);
+    }
+}
+
+/// A count of at least 1 (`--repeats`: none timed nothing and printed 0.0 ms figures).
+fn at_least_one(s: &str) -> Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(n) if n >= 1 => Ok(n),
+        _ => Err(format!("expected a whole number of at least 1, got {s:?}")),
     }
 }

@@ -55,6 +55,8 @@ pub struct Args {
 
 /// Loads the mesh, synthesises the plenoptic cloud and writes it.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    // The frame replaced the mesh it was made from (a plenoptic cloud, no longer a mesh).
+    super::outputs::refuse_overwriting_inputs(&args.out, "--out", &[&args.mesh], &[])?;
     let spinner = ProgressBar::new_spinner().with_style(
         ProgressStyle::with_template("{spinner} {msg} [{elapsed}]")
             .unwrap_or_else(|_| ProgressStyle::default_spinner()),
