@@ -2,7 +2,7 @@
 //!
 //! The layout is `DIR/sparse/0/` (a COLMAP model, text or binary), `DIR/images/NAME` for every
 //! image the model registers, and optionally `DIR/masks/NAME` (a grey image of the same size,
-//! the coverage): where `masks/` exists it holds one for every image (a view without one would
+//! the coverage, or an image whose alpha channel is the coverage): where `masks/` exists it holds one for every image (a view without one would
 //! be read as fully covered beside masked ones, so its absence is an error). Image names are
 //! paths relative to `images/` and may not lead out of it. `transcode train`, `transcode eval` and the tests all read
 //! datasets through [`read_dataset`], so a dataset means the same thing to each of them.
@@ -186,6 +186,36 @@ pub fn read_dataset(dir: &Path, downscale: f64) -> Result<Dataset, DatasetError>
     })
 }
 
+/// A mask's coverage: its alpha channel where it has one (a white RGBA or grey-alpha image
+/// whose alpha is the coverage was read as fully covered), else its grey level. A mask whose
+/// largest value is one step of its range (0/1 written into an 8- or 16-bit image) is refused:
+/// read as coverage it is ≈ 0 everywhere, and the scores flattered a model of the background.
+fn mask_coverage(
+    path: &Path,
+    mask: &image::DynamicImage,
+) -> Result<image::ImageBuffer<image::Luma<f32>, Vec<f32>>, DatasetError> {
+    let coverage = if mask.color().has_alpha() {
+        let rgba = mask.to_rgba32f();
+        image::ImageBuffer::from_fn(rgba.width(), rgba.height(), |x, y| {
+            image::Luma([rgba.get_pixel(x, y)[3]])
+        })
+    } else {
+        mask.to_luma32f()
+    };
+    let largest = coverage.pixels().map(|p| p[0]).fold(0.0_f32, f32::max);
+    if largest > 0.0 && largest <= 1.5 / 255.0 {
+        return Err(DatasetError::Unreadable {
+            path: path.to_path_buf(),
+            problem: format!(
+                "its largest value is {:.6} of full scale: a mask of 0 and 1 rather than 0 and \
+                 255 (or 65535); masks hold coverage over the image's whole range",
+                largest
+            ),
+        });
+    }
+    Ok(coverage)
+}
+
 /// Reads one image (and its mask) as a view of `camera`, reduced by `downscale` ≥ 1.
 fn read_view(
     path: &Path,
@@ -201,7 +231,7 @@ fn read_view(
         Some(p) => {
             let m = decode(p)?;
             check_size(p, &m, "its image", img.width(), img.height())?;
-            Some(m.to_luma32f())
+            Some(mask_coverage(p, &m)?)
         }
         None => None,
     };
@@ -602,6 +632,47 @@ mod tests {
             matches!(&e, DatasetError::Colmap { path, .. } if path.ends_with("sparse/0")),
             "{e}"
         );
+    }
+
+    /// Masks that keep their coverage in an alpha channel (white RGBA, grey-alpha) read as the
+    /// grey ones (they were read as fully covered); masks of 0 and 1 instead of 0 and 255 are
+    /// refused (read as ≈ 0 coverage, they flattered a model of the background).
+    #[test]
+    fn masks_in_alpha_read_as_grey_ones_and_zero_one_masks_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let root = dir.path();
+        write(root, [0, 0, 0], true);
+        let masks_of = |root: &Path| -> Vec<Option<Vec<u16>>> {
+            read_dataset(root, 1.0)
+                .unwrap()
+                .views
+                .into_iter()
+                .map(|v| v.mask)
+                .collect()
+        };
+        let grey = masks_of(root);
+        assert!(grey.iter().all(Option::is_some));
+        for name in ["a.png", "b.png"] {
+            let path = root.join("masks").join(name);
+            let m = image::open(&path).unwrap().to_luma8();
+            image::RgbaImage::from_fn(W, H, |x, y| {
+                image::Rgba([255, 255, 255, m.get_pixel(x, y)[0]])
+            })
+            .save(&path)
+            .unwrap();
+        }
+        assert_eq!(masks_of(root), grey);
+        for name in ["a.png", "b.png"] {
+            let path = root.join("masks").join(name);
+            let m = image::open(&path).unwrap().to_rgba8();
+            image::GrayImage::from_fn(W, H, |x, y| {
+                image::Luma([u8::from(m.get_pixel(x, y)[3] > 127)])
+            })
+            .save(&path)
+            .unwrap();
+        }
+        let e = read_dataset(root, 1.0).unwrap_err().to_string();
+        assert!(e.contains("a mask of 0 and 1 rather than 0 and 255"), "{e}");
     }
 
     /// The real photos in `testdata/` read at an eighth of their size.

@@ -108,6 +108,34 @@ fn random_backgrounds_go_behind_masks_and_need_them() {
         "{compensated} vs {plain}"
     );
 
+    // A masked training set with held-out views without masks: white was scored against their
+    // black background (1.89 dB), so it is refused too, naming the held-out folder.
+    std::fs::remove_dir_all(heldout.join("masks")).unwrap();
+    let out = transcode(&[
+        "train",
+        &s(&train),
+        "--heldout",
+        &s(&heldout),
+        "--out",
+        &s(&root.join("refused-heldout")),
+        "--iterations",
+        "10",
+        "--background",
+        "white",
+        "--quiet",
+    ])
+    .output()
+    .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success(),
+        "an unmasked held-out set was accepted"
+    );
+    assert!(
+        err.contains("has no mask in") && err.contains(&s(&heldout.join("masks"))),
+        "{err}"
+    );
+
     // Without masks, only black is accepted.
     std::fs::remove_dir_all(train.join("masks")).unwrap();
     for background in ["random", "white"] {

@@ -184,9 +184,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         views,
         reconstruction: rec,
     } = read_dataset(&args.dataset, args.downscale)?;
-    refuse_background_without_masks(&args, &views)?;
+    refuse_background_without_masks(&args, &views, &args.dataset)?;
     let eval_views = match &args.heldout {
-        Some(dir) => read_dataset(dir, args.downscale)?.views,
+        Some(dir) => {
+            let heldout = read_dataset(dir, args.downscale)?.views;
+            // Scored on the training background: held-out views without coverage were scored
+            // as if their black background were the object (1.89 dB on white).
+            refuse_background_without_masks(&args, &heldout, dir)?;
+            heldout
+        }
         None => views.clone(),
     };
     std::fs::create_dir_all(&args.out)
@@ -359,7 +365,11 @@ fn read_saved<T: serde::de::DeserializeOwned>(path: &Path) -> anyhow::Result<T> 
 }
 
 /// Refuses a random or white background on views that hold their own (no mask, no alpha).
-fn refuse_background_without_masks(args: &Args, views: &[View]) -> anyhow::Result<()> {
+fn refuse_background_without_masks(
+    args: &Args,
+    views: &[View],
+    dataset: &Path,
+) -> anyhow::Result<()> {
     if args.background != BackgroundArg::Black
         && let Some(v) = views.iter().find(|v| v.mask.is_none())
     {
@@ -369,7 +379,7 @@ fn refuse_background_without_masks(args: &Args, views: &[View]) -> anyhow::Resul
              --background black, or add masks/ (coverage images named like the images)",
             format!("{:?}", args.background).to_lowercase(),
             v.name,
-            args.dataset.join("masks").display()
+            dataset.join("masks").display()
         );
     }
     Ok(())
