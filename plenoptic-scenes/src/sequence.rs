@@ -33,18 +33,31 @@ impl Default for Motion {
 }
 
 impl Motion {
+    /// Each value finite, the shift and bend at most [`Self::MAX_RADII`] radii (the frames share
+    /// one grid that holds them all: a bend of 10³⁰ radii left each frame a speck of 1–28
+    /// points).
     fn validate(&self) -> Result<(), Error> {
-        if [self.turn_deg, self.shift, self.bend]
-            .iter()
-            .all(|v| v.is_finite())
-        {
-            Ok(())
-        } else {
-            Err(Error::InvalidConfig(format!(
-                "motion values must be finite, got {self:?}"
-            )))
+        for (name, value, bound) in [
+            ("turn_deg", self.turn_deg, f64::INFINITY),
+            ("shift", self.shift, Self::MAX_RADII),
+            ("bend", self.bend, Self::MAX_RADII),
+        ] {
+            if !(value.is_finite() && value.abs() <= bound) {
+                return Err(Error::InvalidConfig(format!(
+                    "motion `{name}` must be finite{}, got {value:?}",
+                    if bound.is_finite() {
+                        format!(" and at most {bound} radii either way")
+                    } else {
+                        String::new()
+                    }
+                )));
+            }
         }
+        Ok(())
     }
+
+    /// The largest shift or bend, in radii of the rest mesh.
+    pub const MAX_RADII: f64 = 10.0;
 
     /// Where the rest-mesh point `p` is at time `t`, and the transformed normal `n` (unit), for
     /// a rest mesh of centre `c` and radius `r`.
@@ -344,6 +357,19 @@ mod tests {
             ..Motion::default()
         };
         let e = SequenceSynth::new(&mesh, &config, bad, 3).unwrap_err();
-        assert!(e.to_string().contains("finite"), "{e}");
+        assert!(
+            e.to_string().contains("motion `bend` must be finite"),
+            "{e}"
+        );
+        let far = Motion {
+            shift: 1e30,
+            ..Motion::default()
+        };
+        let e = SequenceSynth::new(&mesh, &config, far, 3).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("at most 10 radii either way, got 1e30"),
+            "{e}"
+        );
     }
 }
