@@ -38,7 +38,20 @@ impl Default for DatasetOptions {
 /// COLMAP's text format and Inria's loader need.
 #[must_use]
 pub fn dataset_image_name(i: usize) -> String {
-    format!("view_{i:03}.png")
+    format!("{VIEW_PREFIX}{i:03}.png")
+}
+
+/// What every view file of a dataset is named from: `view_NNN.png` (images, masks) and
+/// `view_NNN.exr` (depth).
+const VIEW_PREFIX: &str = "view_";
+
+/// Whether `name` is a view file as a dataset names them ([`dataset_image_name`], and the
+/// depth map's `.exr` of the same stem).
+fn is_view_file(name: &str) -> bool {
+    let digits = name
+        .strip_prefix(VIEW_PREFIX)
+        .and_then(|r| r.strip_suffix(".png").or_else(|| r.strip_suffix(".exr")));
+    digits.is_some_and(|d| !d.is_empty() && d.bytes().all(|b| b.is_ascii_digit()))
 }
 
 /// Renders `model` from every camera (in parallel over views) and writes the dataset folder:
@@ -201,13 +214,7 @@ fn remove_view_files(folder: &Path) -> Result<(), Error> {
         return Ok(());
     };
     for entry in entries.flatten() {
-        let name = entry.file_name();
-        let is_view = name.to_str().is_some_and(|n| {
-            let digits = n
-                .strip_prefix("view_")
-                .and_then(|r| r.strip_suffix(".png").or_else(|| r.strip_suffix(".exr")));
-            digits.is_some_and(|d| !d.is_empty() && d.bytes().all(|b| b.is_ascii_digit()))
-        });
+        let is_view = entry.file_name().to_str().is_some_and(is_view_file);
         if is_view && entry.file_type().is_ok_and(|t| t.is_file()) {
             let path = entry.path();
             std::fs::remove_file(&path).map_err(|source| Error::Io { path, source })?;

@@ -498,26 +498,37 @@ impl SpzClamps {
 /// Counts what packing `splats` as SPZ would clamp (the same formulas as the packing).
 #[must_use]
 pub fn clamped_by_spz(splats: &Splats) -> SpzClamps {
-    let outside = |raw: f32| !(0.0..=255.0).contains(&raw.round());
+    let outside = |code: f32| !(0.0..=255.0).contains(&code.round());
     let k = splats.coeffs_per_splat();
     let mut c = SpzClamps::default();
     for i in 0..splats.len() {
         let ls = splats.log_scales[i].to_array();
-        c.log_scales += usize::from(ls.iter().any(|&v| outside((v + 10.0) * 16.0)));
+        c.log_scales += usize::from(ls.iter().any(|&v| outside(log_scale_code(v))));
         let sh = &splats.sh[i * k..(i + 1) * k];
-        let dc = sh[0];
-        c.colours += usize::from(
-            dc.iter()
-                .any(|&v| outside(v * (COLOR_SCALE * 255.0) + 127.5)),
-        );
+        c.colours += usize::from(sh[0].iter().any(|&v| outside(colour_code(v))));
         c.sh += usize::from(
             sh[1..]
                 .iter()
                 .flatten()
-                .any(|&v| outside(v * 128.0 + 128.0)),
+                .any(|&v| !(0..=255).contains(&sh_code(v))),
         );
     }
     c
+}
+
+/// A log-scale's byte before rounding and clamping: [−10, 5.94] in steps of 1/16.
+fn log_scale_code(v: f32) -> f32 {
+    (v + 10.0) * 16.0
+}
+
+/// A DC colour coefficient's byte before rounding and clamping.
+fn colour_code(c: f32) -> f32 {
+    c * (COLOR_SCALE * 255.0) + 127.5
+}
+
+/// A higher SH coefficient's byte (±1 full scale) before its bucket and clamping.
+fn sh_code(x: f32) -> i32 {
+    (x * 128.0).round() as i32 + 128
 }
 
 /// Rounds to the nearest integer and clamps into a byte (`load-spz.cc`'s `toUint8`).
@@ -529,7 +540,7 @@ fn to_u8(x: f32) -> u8 {
 /// to the centre of its bucket so that zero stays exactly zero.
 fn quantize_sh(x: f32, bits: u8) -> u8 {
     let bucket = 1_i32 << (8 - bits);
-    let q = (x * 128.0).round() as i32 + 128;
+    let q = sh_code(x);
     let q = (q + bucket / 2) / bucket * bucket;
     q.clamp(0, 255) as u8
 }
@@ -657,10 +668,10 @@ fn pack(splats: &Splats, options: &SpzOptions) -> Result<Packed, Error> {
     let k = s.coeffs_per_splat();
     for i in 0..n {
         let dc = s.sh[i * k];
-        out.extend(dc.map(|c| to_u8(c * (COLOR_SCALE * 255.0) + 127.5)));
+        out.extend(dc.map(|c| to_u8(colour_code(c))));
     }
     for ls in &s.log_scales {
-        out.extend(ls.to_array().map(|v| to_u8((v + 10.0) * 16.0)));
+        out.extend(ls.to_array().map(|v| to_u8(log_scale_code(v))));
     }
     for i in 0..n {
         out.extend(pack_quaternion(s.rotation(i)));
