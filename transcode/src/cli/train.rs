@@ -682,12 +682,15 @@ fn initial_splats(
             splat_init::colmap_points(rec)
         }
         Init::Random => {
-            let corners: Vec<Vec3> = if rec.points3d.len() >= 2 {
-                rec.points3d.values().map(|p| p.xyz.as_vec3()).collect()
-            } else {
-                views.iter().map(|v| v.camera.center().as_vec3()).collect()
-            };
-            let (lo, hi) = splat_init::bounds(&corners);
+            let points: Vec<Vec3> = rec.points3d.values().map(|p| p.xyz.as_vec3()).collect();
+            let centres: Vec<Vec3> = views.iter().map(|v| v.camera.center().as_vec3()).collect();
+            let (lo, hi) = random_init_bounds(&points, &centres).ok_or_else(|| {
+                anyhow::anyhow!(
+                    "--init random: the dataset's 3D points and its camera centres each sit at \
+                     one place, so they bound no volume to scatter points in; give the dataset \
+                     points3D that span the scene (or use --init points3d)"
+                )
+            })?;
             splat_init::random_points(lo, hi, args.random_points, args.seed)
         }
     };
@@ -698,6 +701,28 @@ fn initial_splats(
         args.sh_degree,
     )?;
     Ok(splat_init::in_morton_order(&splats))
+}
+
+/// The box `--init random` scatters its points in: the points3D's bounds, unless they hold
+/// fewer than two points or all sit at about one place (a box under a millionth of the camera
+/// centres' across, where every random point would start in the same spot), then the camera
+/// centres' bounds. `None` when neither bounds a volume.
+fn random_init_bounds(points: &[Vec3], centres: &[Vec3]) -> Option<(Vec3, Vec3)> {
+    let diagonal = |(lo, hi): (Vec3, Vec3)| (hi - lo).length();
+    let cameras = splat_init::bounds(centres);
+    let cameras_across = if centres.is_empty() {
+        0.0
+    } else {
+        diagonal(cameras)
+    };
+    if points.len() >= 2 {
+        let box_ = splat_init::bounds(points);
+        let across = diagonal(box_);
+        if across.is_finite() && across > 0.0 && across >= 1e-6 * cameras_across {
+            return Some(box_);
+        }
+    }
+    (cameras_across.is_finite() && cameras_across > 0.0).then_some(cameras)
 }
 
 fn progress_bar(total: u32, done: u32, quiet: bool) -> ProgressBar {
@@ -812,6 +837,27 @@ mod tests {
             Ok(cli) => cli.args,
             Err(e) => panic!("{e}"),
         }
+    }
+
+    /// Points3D all at one place bound no volume: the random points fill the cameras' box
+    /// instead, and a scene whose points and cameras both collapse is refused.
+    #[test]
+    fn random_init_ignores_points_that_sit_at_one_place() {
+        let cams = [Vec3::new(-4.0, 0.0, 0.0), Vec3::new(4.0, 2.0, 1.0)];
+        let spread = [Vec3::new(-1.0, -1.0, -1.0), Vec3::new(1.0, 0.5, 1.0)];
+        assert_eq!(
+            random_init_bounds(&spread, &cams),
+            Some((spread[0], spread[1]))
+        );
+        let heap = [Vec3::splat(0.25); 100];
+        assert_eq!(random_init_bounds(&heap, &cams), Some((cams[0], cams[1])));
+        let one = [Vec3::ONE];
+        assert_eq!(random_init_bounds(&one, &cams), Some((cams[0], cams[1])));
+        assert_eq!(random_init_bounds(&heap, &[Vec3::ZERO, Vec3::ZERO]), None);
+        assert_eq!(random_init_bounds(&[], &[]), None);
+        // A flat scene (a wall) is a real box with no depth: kept.
+        let wall = [Vec3::new(-1.0, -1.0, 0.0), Vec3::new(1.0, 1.0, 0.0)];
+        assert_eq!(random_init_bounds(&wall, &cams), Some((wall[0], wall[1])));
     }
 
     /// A run started before `--photometric` existed saved no such setting: it resumes as the
