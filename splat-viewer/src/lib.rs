@@ -24,5 +24,7 @@ mod site;
 pub use error::Error;
 pub use folder::{EMBED_LIMIT, model_site, report_section, write_folder};
 pub use scene::{Scene, SceneModel, SceneView, ViewCamera, ViewImages};
-pub use server::{CONNECTION_LIFETIME, HEADER_TIMEOUT, MAX_CONNECTIONS, MAX_REQUEST_HEAD, Server};
-pub use site::{Found, Refusal, Site, content_type};
+pub use server::{
+    CONNECTION_LIFETIME, FILE_CHUNK, HEADER_TIMEOUT, MAX_CONNECTIONS, MAX_REQUEST_HEAD, Server,
+};
+pub use site::{Content, Found, Refusal, Site, content_type};

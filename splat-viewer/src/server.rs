@@ -15,15 +15,18 @@ use std::net::{SocketAddr, TcpListener};
 use std::sync::Arc;
 use std::time::Duration;
 
+use std::io::Read;
+use std::pin::Pin;
+use std::task::{Context, Poll};
+
 use bytes::Bytes;
-use http_body_util::Full;
-use hyper::body::Incoming;
+use hyper::body::{Frame, Incoming, SizeHint};
 use hyper::header::{self, HeaderValue};
 use hyper::{Method, Request, Response, StatusCode};
 use hyper_util::rt::{TokioIo, TokioTimer};
 
 use crate::Error;
-use crate::site::{Refusal, Site};
+use crate::site::{Content, Refusal, Site};
 
 /// Largest request head (request line and headers) read; hyper answers 431 beyond it. Browsers
 /// send well under 4 KiB to a local page.
@@ -34,6 +37,9 @@ pub const HEADER_TIMEOUT: Duration = Duration::from_secs(10);
 pub const MAX_CONNECTIONS: usize = 64;
 /// Longest life of one connection (a slow client cannot hold a slot for ever).
 pub const CONNECTION_LIFETIME: Duration = Duration::from_secs(600);
+
+/// Bytes of a file read at a time while a client takes it: what one connection holds of a file.
+pub const FILE_CHUNK: usize = 256 * 1024;
 
 /// What the served pages may load: only this server's files, workers from blob: URLs (the
 /// viewer's sort worker) and data: images (the report's pictures); nothing from elsewhere.
@@ -150,7 +156,7 @@ struct Handler {
 }
 
 impl Handler {
-    fn respond(&self, req: &Request<Incoming>) -> Response<Full<Bytes>> {
+    fn respond(&self, req: &Request<Incoming>) -> Response<Body> {
         if req.method() != Method::GET && req.method() != Method::HEAD {
             let mut r = plain(StatusCode::METHOD_NOT_ALLOWED, "only GET and HEAD\n");
             r.headers_mut()
@@ -182,7 +188,7 @@ impl Handler {
         }
         match self.site.resolve(target) {
             Ok(found) => {
-                let mut r = Response::new(Full::new(found.bytes));
+                let mut r = Response::new(Body::from(found.content));
                 r.headers_mut().insert(
                     header::CONTENT_TYPE,
                     HeaderValue::from_static(found.content_type),
@@ -200,9 +206,66 @@ impl Handler {
     }
 }
 
+/// A response's body: bytes in memory, or a file read [`FILE_CHUNK`] bytes at a time as hyper
+/// sends it, its exact length known up front (the `Content-Length`; a `HEAD` reads nothing). The
+/// read blocks the server's one thread for a chunk's time; a file that shrank since it was
+/// opened ends the response with an error, so the client sees a cut answer, not a short file.
+#[derive(Debug)]
+enum Body {
+    Memory(Option<Bytes>),
+    File { file: std::fs::File, left: u64 },
+}
+
+impl From<Content> for Body {
+    fn from(content: Content) -> Self {
+        match content {
+            Content::Memory(bytes) => Self::Memory(Some(bytes)),
+            Content::File { file, len } => Self::File { file, left: len },
+        }
+    }
+}
+
+impl hyper::body::Body for Body {
+    type Data = Bytes;
+    type Error = std::io::Error;
+
+    fn poll_frame(
+        self: Pin<&mut Self>,
+        _: &mut Context<'_>,
+    ) -> Poll<Option<Result<Frame<Bytes>, std::io::Error>>> {
+        Poll::Ready(match self.get_mut() {
+            Self::Memory(bytes) => bytes
+                .take()
+                .filter(|b| !b.is_empty())
+                .map(|b| Ok(Frame::data(b))),
+            Self::File { file, left } => (*left > 0).then(|| {
+                let n = usize::try_from(*left).map_or(FILE_CHUNK, |left| left.min(FILE_CHUNK));
+                let mut chunk = vec![0; n];
+                file.read_exact(&mut chunk)?;
+                *left -= n as u64;
+                Ok(Frame::data(Bytes::from(chunk)))
+            }),
+        })
+    }
+
+    fn is_end_stream(&self) -> bool {
+        match self {
+            Self::Memory(bytes) => bytes.as_ref().is_none_or(Bytes::is_empty),
+            Self::File { left, .. } => *left == 0,
+        }
+    }
+
+    fn size_hint(&self) -> SizeHint {
+        SizeHint::with_exact(match self {
+            Self::Memory(bytes) => bytes.as_ref().map_or(0, |b| b.len() as u64),
+            Self::File { left, .. } => *left,
+        })
+    }
+}
+
 /// A plain-text response with `status`.
-fn plain(status: StatusCode, text: &str) -> Response<Full<Bytes>> {
-    let mut r = Response::new(Full::new(Bytes::from(text.to_string())));
+fn plain(status: StatusCode, text: &str) -> Response<Body> {
+    let mut r = Response::new(Body::Memory(Some(Bytes::from(text.to_string()))));
     *r.status_mut() = status;
     r.headers_mut().insert(
         header::CONTENT_TYPE,
@@ -212,7 +275,7 @@ fn plain(status: StatusCode, text: &str) -> Response<Full<Bytes>> {
 }
 
 /// Adds the headers every response carries.
-fn secure(mut r: Response<Full<Bytes>>) -> Response<Full<Bytes>> {
+fn secure(mut r: Response<Body>) -> Response<Body> {
     let h = r.headers_mut();
     h.insert(
         header::CONTENT_SECURITY_POLICY,
@@ -269,5 +332,96 @@ mod host_tests {
         }
         assert!(on("[::1]:80").unwrap().contains(&"[::1]".to_owned()));
         assert_eq!(on("0.0.0.0:80"), None);
+    }
+}
+
+#[cfg(test)]
+mod streaming_tests {
+    use std::io::Write;
+    use std::net::TcpStream;
+
+    use http_body_util::BodyExt;
+
+    use super::*;
+
+    /// One request over a fresh connection: the response's head and body.
+    fn request(addr: SocketAddr, method: &str, path: &str) -> (String, Vec<u8>) {
+        let mut stream = TcpStream::connect(addr).expect("connects");
+        write!(
+            stream,
+            "{method} {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n"
+        )
+        .expect("sends");
+        let mut answer = Vec::new();
+        stream.read_to_end(&mut answer).expect("reads");
+        let split = answer
+            .windows(4)
+            .position(|w| w == b"\r\n\r\n")
+            .expect("a head");
+        let head = String::from_utf8_lossy(&answer[..split]).to_ascii_lowercase();
+        (head, answer[split + 4..].to_vec())
+    }
+
+    /// A file several chunks long (and not a whole number of them) comes back whole with its
+    /// length announced; a HEAD gets the length and no body.
+    #[test]
+    fn files_are_streamed_whole_with_their_length() {
+        let dir = tempfile::tempdir().unwrap();
+        let big: Vec<u8> = (0..FILE_CHUNK * 3 + 1234)
+            .map(|i| (i * 7 % 251) as u8)
+            .collect();
+        std::fs::write(dir.path().join("model.ply"), &big).unwrap();
+        std::fs::write(dir.path().join("empty.txt"), b"").unwrap();
+        let site = Site::new("model.ply").with_root(dir.path()).unwrap();
+        let server = Server::bind("127.0.0.1:0".parse().unwrap(), site).unwrap();
+        let addr = server.local_addr().unwrap();
+        let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+        let serving = std::thread::spawn(move || {
+            server.run_until(async move {
+                let _ = stopped.await;
+            })
+        });
+        let (head, body) = request(addr, "GET", "/model.ply");
+        assert!(head.starts_with("http/1.1 200"), "{head}");
+        assert!(
+            head.contains(&format!("content-length: {}", big.len())),
+            "{head}"
+        );
+        assert!(body == big, "{} bytes back of {}", body.len(), big.len());
+        let (head, body) = request(addr, "HEAD", "/model.ply");
+        assert!(
+            head.contains(&format!("content-length: {}", big.len())),
+            "{head}"
+        );
+        assert!(body.is_empty());
+        let (head, body) = request(addr, "GET", "/empty.txt");
+        assert!(head.contains("content-length: 0"), "{head}");
+        assert!(body.is_empty());
+        stop.send(()).unwrap();
+        serving.join().unwrap().unwrap();
+    }
+
+    /// A file cut shorter after it was opened ends its body with an error, never a short body
+    /// that looks whole.
+    #[test]
+    fn a_file_cut_while_served_ends_in_an_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a.bin");
+        std::fs::write(&path, vec![1u8; FILE_CHUNK + 10]).unwrap();
+        let file = std::fs::File::open(&path).unwrap();
+        let len = file.metadata().unwrap().len();
+        std::fs::OpenOptions::new()
+            .write(true)
+            .open(&path)
+            .unwrap()
+            .set_len(100)
+            .unwrap();
+        let body = Body::from(Content::File { file, len });
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .build()
+            .unwrap();
+        let collected = rt.block_on(body.collect());
+        let err = collected.expect_err("a cut file is an error");
+        assert_eq!(err.kind(), std::io::ErrorKind::UnexpectedEof);
     }
 }

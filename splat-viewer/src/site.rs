@@ -47,12 +47,59 @@ pub enum Refusal {
 }
 
 /// A file found for a request.
-#[derive(Clone, Debug)]
+#[derive(Debug)]
 pub struct Found {
     /// Its content.
-    pub bytes: Bytes,
+    pub content: Content,
     /// Its media type.
     pub content_type: &'static str,
+}
+
+/// What a found file holds: bytes in memory, or a file under the root opened for the request and
+/// read a chunk at a time as the client takes it, so serving a large model holds no copy of it.
+#[derive(Debug)]
+pub enum Content {
+    /// In memory (the viewer's assets, a model named on the command line).
+    Memory(Bytes),
+    /// An open regular file and its length when opened.
+    File {
+        /// The file, read from its start.
+        file: std::fs::File,
+        /// Its length in bytes when it was opened.
+        len: u64,
+    },
+}
+
+impl Content {
+    /// Its length in bytes.
+    #[must_use]
+    pub fn len(&self) -> u64 {
+        match self {
+            Self::Memory(bytes) => bytes.len() as u64,
+            Self::File { len, .. } => *len,
+        }
+    }
+
+    /// Whether it holds no bytes.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Reads it whole (for tests and small files).
+    ///
+    /// # Errors
+    /// The file's read error; a file that shrank since it was opened is `UnexpectedEof`.
+    pub fn read_all(self) -> std::io::Result<Bytes> {
+        match self {
+            Self::Memory(bytes) => Ok(bytes),
+            Self::File { mut file, len } => {
+                let mut buf = vec![0; usize::try_from(len).unwrap_or(usize::MAX)];
+                std::io::Read::read_exact(&mut file, &mut buf)?;
+                Ok(buf.into())
+            }
+        }
+    }
 }
 
 impl Site {
@@ -107,7 +154,7 @@ impl Site {
         let key = relative.join("/");
         if let Some(f) = self.memory.get(&key) {
             return Ok(Found {
-                bytes: f.bytes.clone(),
+                content: Content::Memory(f.bytes.clone()),
                 content_type: f.content_type,
             });
         }
@@ -132,12 +179,21 @@ impl Site {
         } else {
             (real, key)
         };
+        // Checked before it is opened: opening a named pipe would wait for a writer.
         if !real.is_file() {
             return Err(Refusal::NotFound);
         }
-        let bytes = std::fs::read(&real).map_err(|_| Refusal::NotFound)?;
+        // Opened, not read: the server streams it (see `Content::File`).
+        let file = std::fs::File::open(&real).map_err(|_| Refusal::NotFound)?;
+        let meta = file.metadata().map_err(|_| Refusal::NotFound)?;
+        if !meta.is_file() {
+            return Err(Refusal::NotFound);
+        }
         Ok(Found {
-            bytes: bytes.into(),
+            content: Content::File {
+                file,
+                len: meta.len(),
+            },
             content_type: content_type(&key),
         })
     }
@@ -216,6 +272,11 @@ pub fn content_type(path: &str) -> &'static str {
 mod tests {
     use super::*;
 
+    /// A found file's bytes.
+    fn body(found: Found) -> Vec<u8> {
+        found.content.read_all().expect("readable").to_vec()
+    }
+
     fn site_with(dir: &Path) -> Site {
         let mut s = Site::new("index.html").with_root(dir).unwrap();
         s.add("viewer.js", "let a;");
@@ -230,11 +291,12 @@ mod tests {
         std::fs::write(dir.path().join("sub/index.html"), b"<p>").unwrap();
         let s = site_with(dir.path());
         let f = s.resolve("/viewer.js?v=1").unwrap();
-        assert_eq!(&f.bytes[..], b"let a;");
         assert_eq!(f.content_type, "text/javascript; charset=utf-8");
+        assert_eq!(body(f), b"let a;");
         let f = s.resolve("/sub/a%20b.png").unwrap();
-        assert_eq!((&f.bytes[..], f.content_type), (&b"png"[..], "image/png"));
-        assert_eq!(&s.resolve("/sub/").unwrap().bytes[..], b"<p>");
+        assert_eq!((f.content.len(), f.content_type), (3, "image/png"));
+        assert_eq!(body(f), b"png");
+        assert_eq!(body(s.resolve("/sub/").unwrap()), b"<p>");
         assert_eq!(s.resolve("/sub/none.png").unwrap_err(), Refusal::NotFound);
     }
 
@@ -258,7 +320,7 @@ mod tests {
             assert!(
                 matches!(s.resolve(bad), Err(Refusal::Forbidden(_))),
                 "{bad}: {:?}",
-                s.resolve(bad).map(|f| f.bytes)
+                s.resolve(bad).map(body)
             );
         }
     }
@@ -279,7 +341,7 @@ mod tests {
             assert!(
                 matches!(s.resolve(bad), Err(Refusal::Malformed(_))),
                 "{bad}: {:?}",
-                s.resolve(bad).map(|f| f.bytes)
+                s.resolve(bad).map(body)
             );
         }
         // An encoded slash stays inside its segment: it cannot make an absolute path.
@@ -308,7 +370,7 @@ mod tests {
             );
         }
         // A link that stays inside is followed.
-        assert_eq!(&s.resolve("/link.txt").unwrap().bytes[..], b"in");
+        assert_eq!(body(s.resolve("/link.txt").unwrap()), b"in");
         // A folder's index.html that is a link out (it was served, as application/octet-stream).
         let sub = dir.path().join("sub");
         std::fs::create_dir(&sub).unwrap();
@@ -325,9 +387,7 @@ mod tests {
         std::fs::create_dir(&page).unwrap();
         std::fs::write(page.join("index.html"), b"<p>").unwrap();
         let found = s.resolve("/page/").unwrap();
-        assert_eq!(
-            (&found.bytes[..], found.content_type),
-            (&b"<p>"[..], "text/html; charset=utf-8")
-        );
+        assert_eq!(found.content_type, "text/html; charset=utf-8");
+        assert_eq!(body(found), b"<p>");
     }
 }
