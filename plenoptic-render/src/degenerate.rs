@@ -246,6 +246,125 @@ pub fn check_coverage(
     })
 }
 
+/// Narrowest spread of a capture rig, seen from the input's centre, that is taken as a rig
+/// around the object: the half-angle (degrees) of the cone from that centre holding every
+/// capture camera. A capture rig surrounds or at least faces its subject from several sides;
+/// one whose cameras all lie within a few degrees of one direction is a rig in another frame
+/// than the points (moved, scaled or in other units), and the view colours then come from those
+/// few directions alone.
+pub const MIN_RIG_SPREAD_DEGREES: f64 = 10.0;
+
+/// Why a plenoptic input's capture cameras look misplaced against its points. Not an error: the
+/// model trains, but on view colours that do not vary as the capture did.
+#[derive(Debug, Clone, PartialEq)]
+pub enum RigDoubt {
+    /// Every camera stands within `half_angle_degrees` (under [`MIN_RIG_SPREAD_DEGREES`]) of one
+    /// direction from the points' centre, a median `distance_radii` radii of the points' bounding
+    /// sphere away.
+    OneDirection {
+        /// Capture cameras.
+        cameras: usize,
+        /// Half-angle of the narrowest cone round their mean direction that holds them all.
+        half_angle_degrees: f64,
+        /// Median distance from the points' centre, in radii of their bounding sphere.
+        distance_radii: f64,
+    },
+    /// More than half the cameras stand inside the points' bounding box.
+    Inside {
+        /// Cameras inside the box.
+        inside: usize,
+        /// Capture cameras.
+        cameras: usize,
+    },
+}
+
+impl std::fmt::Display for RigDoubt {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::OneDirection {
+                cameras,
+                half_angle_degrees,
+                distance_radii,
+            } => write!(
+                f,
+                "all {cameras} capture cameras stand within {half_angle_degrees:.2}° of one \
+                 direction from the points, {distance_radii:.3e} radii away, so every point's view \
+                 colour comes from about one side"
+            ),
+            Self::Inside { inside, cameras } => write!(
+                f,
+                "{inside} of the {cameras} capture cameras stand inside the points' bounding box"
+            ),
+        }?;
+        write!(
+            f,
+            "; the rig_matrix comments are read in the frame of the points (voxel units after \
+             frame_to_world_scale and frame_to_world_translation): check that the rig was moved \
+             and scaled with the points"
+        )
+    }
+}
+
+/// Whether a plenoptic input's capture rig looks misplaced against its points (see
+/// [`RigDoubt`]); `None` for plain inputs, rigs of fewer than three cameras and rigs that look
+/// right.
+#[must_use]
+pub fn rig_doubt(model: &Model) -> Option<RigDoubt> {
+    let cameras = match model {
+        Model::Cloud(c) => &c.cameras,
+        Model::Mesh(m) => &m.cameras,
+    };
+    if cameras.len() < 3 {
+        return None;
+    }
+    let points = used_points(model);
+    let (lo, hi) = points
+        .iter()
+        .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), p| {
+            (lo.min(p.as_dvec3()), hi.max(p.as_dvec3()))
+        });
+    let radius = 0.5 * (hi - lo).length();
+    if points.is_empty() || radius <= 0.0 {
+        return None;
+    }
+    let centre = 0.5 * (lo + hi);
+    let inside = cameras
+        .iter()
+        .filter(|c| c.position.cmpge(lo).all() && c.position.cmple(hi).all())
+        .count();
+    if 2 * inside > cameras.len() {
+        return Some(RigDoubt::Inside {
+            inside,
+            cameras: cameras.len(),
+        });
+    }
+    let directions: Vec<DVec3> = cameras
+        .iter()
+        .map(|c| (c.position - centre).normalize_or_zero())
+        .collect();
+    let mean = directions.iter().sum::<DVec3>().normalize_or_zero();
+    if mean == DVec3::ZERO || directions.contains(&DVec3::ZERO) {
+        return None;
+    }
+    let half_angle_degrees = directions
+        .iter()
+        .map(|d| d.dot(mean).clamp(-1.0, 1.0).acos().to_degrees())
+        .fold(0.0, f64::max);
+    if half_angle_degrees >= MIN_RIG_SPREAD_DEGREES {
+        return None;
+    }
+    let mut distances: Vec<f64> = cameras
+        .iter()
+        .map(|c| (c.position - centre).length() / radius)
+        .collect();
+    distances.sort_by(f64::total_cmp);
+    Some(RigDoubt::OneDirection {
+        cameras: cameras.len(),
+        half_angle_degrees,
+        distance_radii: distances[distances.len() / 2],
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -413,6 +532,79 @@ mod tests {
             e.to_string()
                 .contains("5 of the 5 held-out views (view_000, view_001, view_002, …)"),
             "{e}"
+        );
+    }
+
+    /// A rig moved with its points is trusted; one left behind when the points moved (all its
+    /// cameras then in one direction), or written in other units (inside the object), is doubted.
+    #[test]
+    fn a_rig_that_did_not_move_with_its_points_is_doubted() {
+        use plenoptic_io::CaptureCamera;
+        let ring = |r: f64, at: DVec3| -> Vec<CaptureCamera> {
+            (0..13)
+                .map(|k| {
+                    let a = f64::from(k) * std::f64::consts::TAU / 13.0;
+                    CaptureCamera {
+                        position: at + DVec3::new(r * a.cos(), 0.3 * r, r * a.sin()),
+                        matrix: None,
+                    }
+                })
+                .collect()
+        };
+        let with_rig = |offset: f32, cameras: Vec<CaptureCamera>| {
+            let mut points = Vec::new();
+            for i in 0..10 {
+                for j in 0..10 {
+                    for k in [0.0, 9.0] {
+                        points.push(Vec3::new(i as f32, j as f32, k) + offset);
+                    }
+                }
+            }
+            Model::Cloud(PlenopticCloud {
+                colors: vec![[0.5; 3]; points.len()],
+                positions: points,
+                num_cameras: cameras.len(),
+                cameras,
+                ..Default::default()
+            })
+        };
+        let centre = DVec3::splat(4.5);
+        assert_eq!(rig_doubt(&with_rig(0.0, ring(40.0, centre))), None);
+        // A rig far off but spread wide enough (a 60-radius ring seen from 100 radii) is kept.
+        assert_eq!(
+            rig_doubt(&with_rig(0.0, ring(400.0, centre + DVec3::X * 700.0))),
+            None
+        );
+        // The points moved 10^5 units, the rig left at the origin.
+        let Some(RigDoubt::OneDirection {
+            cameras: 13,
+            half_angle_degrees,
+            distance_radii,
+        }) = rig_doubt(&with_rig(1e5, ring(40.0, centre)))
+        else {
+            panic!("a rig left behind is doubted")
+        };
+        assert!(half_angle_degrees < 0.1, "{half_angle_degrees}");
+        assert!((distance_radii - 1e5 * 3f64.sqrt() / (0.5 * 243f64.sqrt())).abs() < 200.0);
+        // A rig in metres beside points in voxels: the cameras inside the object.
+        let doubt = rig_doubt(&with_rig(0.0, ring(2.0, centre))).expect("doubted");
+        assert_eq!(
+            doubt,
+            RigDoubt::Inside {
+                inside: 13,
+                cameras: 13
+            }
+        );
+        assert!(
+            doubt
+                .to_string()
+                .contains("13 of the 13 capture cameras stand inside")
+        );
+        // Plain clouds and one- or two-camera rigs are not judged.
+        assert_eq!(rig_doubt(&cloud(&[[0.0; 3], [1.0; 3]])), None);
+        assert_eq!(
+            rig_doubt(&with_rig(1e5, ring(40.0, centre)[..2].to_vec())),
+            None
         );
     }
 }

@@ -68,14 +68,23 @@ pub enum PipelineError {
     },
     /// The input lies beyond what the SPZ model and the report's viewer can place.
     #[error(
-        "the input reaches {largest:.0} units from the origin: the SPZ model and the report's \
-         viewer store positions as 24-bit fixed point, at most {limit:.0} units out, and 32-bit \
-         floats there keep about {ulp} of a unit. Move the input near the origin (subtract its \
-         centre, {centre:?}) before converting it"
+        "the input's bounding sphere (centre {centre:?}, radius {radius:.6e}), with the 1 % \
+         margin its splats may move into, reaches {largest:.0} units from the origin: the SPZ \
+         model and the report's viewer store positions as 24-bit fixed point, at most \
+         {limit:.0} units out, and 32-bit floats there are {ulp} units apart. {}",
+        if *radius * 1.01 >= f64::from(*limit) {
+            "The input itself is wider than that: scale it down (a model in millimetres of an \
+             object metres wide is this large) before converting it".to_owned()
+        } else {
+            format!("Move the input near the origin (subtract its centre, {centre:?}) before converting it")
+        }
     )]
     TooFar {
-        /// The largest coordinate magnitude of the input's bounding sphere.
+        /// The largest coordinate magnitude the model may reach: the bounding sphere's farthest
+        /// coordinate with a 1 % margin.
         largest: f64,
+        /// The input's bounding-sphere radius.
+        radius: f64,
         /// SPZ's limit.
         limit: f32,
         /// The spacing of f32 values at `largest`.

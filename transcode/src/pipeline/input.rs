@@ -35,6 +35,9 @@ pub fn load(input: &Path, observer: Observer<'_>) -> Result<Loaded, PipelineErro
         return Err(PipelineError::EmptyInput(input.to_path_buf()));
     }
     plenoptic_render::degenerate::check_model(input, &model)?;
+    if let Some(doubt) = plenoptic_render::degenerate::rig_doubt(&model) {
+        observer(Event::Note(format!("{}: {doubt}", input.display())));
+    }
     Ok(Loaded { model, info })
 }
 

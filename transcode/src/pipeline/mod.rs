@@ -177,12 +177,39 @@ fn check_placeable(rig: &views::Rig) -> Result<(), PipelineError> {
         let at = largest as f32;
         return Err(PipelineError::TooFar {
             largest,
+            radius: rig.radius,
             limit,
             ulp: at.next_up() - at,
             centre: rig.center.to_array(),
         });
     }
     Ok(())
+}
+
+/// Coarsest spacing of 32-bit floats at the input's coordinates, as a share of its radius, that
+/// passes without a note: the reference views and the splats' positions are f32 in the input's
+/// frame, so an input far from the origin against its size is drawn and trained coarsely (the
+/// 32-unit demo moved 10⁵ units out, where floats are 1/128 apart, a share of 2.8 × 10⁻⁴,
+/// lost 0.5 dB; 10⁶ units, 1 dB; 8 · 10⁶, 2–7 dB; 10³ units nothing measurable).
+const MAX_FLOAT_STEP_SHARE: f64 = 1e-4;
+
+/// A note for an input that sits far from the origin against its size (see
+/// [`MAX_FLOAT_STEP_SHARE`]), or `None`.
+fn far_from_origin_note(rig: &views::Rig) -> Option<String> {
+    let largest = (rig.center.abs().max_element() + rig.radius) as f32;
+    let step = f64::from(largest.next_up() - largest);
+    let share = step / rig.radius;
+    (share > MAX_FLOAT_STEP_SHARE).then(|| {
+        format!(
+            "the input sits up to {largest:.0} units from the origin, where 32-bit floats are \
+             {step} units apart ({share:.1e} of its radius {:.4e}): its reference views and \
+             the splats' positions lose precision there (the demo moved 10^5 units out loses \
+             about 0.5 dB, 10^6 units about 1 dB); for the best model subtract its centre \
+             ({:?}) first",
+            rig.radius,
+            rig.center.to_array()
+        )
+    })
 }
 
 /// The stages, from the beginning or continuing `saved`: load → reference views and dataset →
@@ -238,6 +265,9 @@ fn execute(
     let mut state = open_state(input, cfg, &layout, saved, observer)?;
     let rig = views::build_rig(&loaded.model, &cfg.rig)?;
     check_placeable(&rig)?;
+    if let Some(note) = far_from_origin_note(&rig) {
+        observer(Event::Note(note));
+    }
     clock.lap("rig");
     let refs = reference_views(
         input,
@@ -426,4 +456,60 @@ fn init_train_eval(
         renders,
         splats,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::DVec3;
+
+    use super::*;
+
+    fn rig_at(center: DVec3, radius: f64) -> views::Rig {
+        views::Rig {
+            train: Vec::new(),
+            heldout: Vec::new(),
+            center,
+            radius,
+        }
+    }
+
+    /// The demo's 16-unit radius passes at the origin and 10³ units out (floats 6e-5 apart, a
+    /// share of 4e-6), and is noted 10⁵ units out (1/128 apart, 4.9e-4), where it lost 0.5 dB.
+    #[test]
+    fn inputs_far_from_the_origin_against_their_size_are_noted() {
+        assert_eq!(
+            far_from_origin_note(&rig_at(DVec3::splat(24.0), 16.0)),
+            None
+        );
+        assert_eq!(far_from_origin_note(&rig_at(DVec3::splat(1e3), 16.0)), None);
+        let note = far_from_origin_note(&rig_at(DVec3::new(1e5, 0.0, 0.0), 16.0))
+            .expect("noted 10^5 units out");
+        assert!(note.contains("100016 units from the origin"), "{note}");
+        assert!(note.contains("0.0078125 units apart"), "{note}");
+        assert!(
+            note.contains("subtract its centre ([100000.0, 0.0, 0.0])"),
+            "{note}"
+        );
+        // A paper-scale frame on its 4095-voxel grid is not.
+        assert_eq!(
+            far_from_origin_note(&rig_at(DVec3::splat(2048.0), 1500.0)),
+            None
+        );
+    }
+
+    /// The refusal says how far the model may reach and, when the input is wider than SPZ's
+    /// range itself, to scale it rather than move it.
+    #[test]
+    fn inputs_beyond_spz_are_told_to_move_or_to_shrink() {
+        let far = check_placeable(&rig_at(DVec3::new(9e6, 0.0, 0.0), 10.0)).unwrap_err();
+        let text = far.to_string();
+        assert!(text.contains("reaches 9090010 units"), "{text}");
+        assert!(
+            text.contains("subtract its centre, [9000000.0, 0.0, 0.0]"),
+            "{text}"
+        );
+        assert!(text.contains("1 units apart"), "{text}");
+        let wide = check_placeable(&rig_at(DVec3::ZERO, 5e7)).unwrap_err();
+        assert!(wide.to_string().contains("scale it down"), "{wide}");
+    }
 }
