@@ -60,6 +60,10 @@ const ON_GRID_SHARE: f64 = 0.9;
 /// spans hundreds (8iVSLF: 1024 or 4096 a side).
 const MIN_GRID_SPAN: f32 = 8.0;
 
+/// Most points whose coordinates [`grid_pitch`] reads: enough that nearly every grid plane a
+/// paper-scale capture crosses (4,096 a side) holds one of them, few enough to sort at once.
+const PITCH_SAMPLES: usize = 200_000;
+
 /// How many of the first samples are tried as the grid's origin, so that a stray first point
 /// cannot place the grid.
 const ORIGIN_CANDIDATES: usize = 8;
@@ -77,6 +81,10 @@ pub enum PointSizing {
     /// arbitrary floats): the configured size says nothing about it, so its points are drawn
     /// 1.5 measured spacings wide, whatever the cloud's scale.
     OffGrid(f32),
+    /// Voxelised on a grid of another pitch, this one (a voxelised capture scaled into metres,
+    /// say), about one point per cell of its surface: drawn one cell wide, as the configured
+    /// size draws a capture voxelised at it, so its views do not depend on its units.
+    Voxelised(f32),
 }
 
 impl PointSizing {
@@ -85,7 +93,7 @@ impl PointSizing {
     pub fn size(self, base: f32) -> f32 {
         match self {
             Self::AsConfigured => base,
-            Self::Grown(size) | Self::OffGrid(size) => size,
+            Self::Grown(size) | Self::OffGrid(size) | Self::Voxelised(size) => size,
         }
     }
 }
@@ -103,9 +111,17 @@ impl std::fmt::Display for PointSizing {
                 "the cloud samples its surface more sparsely than one point per voxel: its \
                  points are drawn {size:.2} voxels wide so the surface is closed"
             ),
+            Self::Voxelised(size) => {
+                let decimals = significant_decimals(*size);
+                write!(
+                    f,
+                    "the cloud's points lie on a grid of pitch {size:.decimals$} units, not of the \
+                     configured voxel size: each is drawn one cell of it wide, as a voxelised \
+                     capture is"
+                )
+            }
             Self::OffGrid(size) => {
-                // Four significant digits at any scale: 0.002714, 27.14, 2714.
-                let decimals = (3.0 - f64::from(*size).log10().floor()).clamp(0.0, 40.0) as usize;
+                let decimals = significant_decimals(*size);
                 write!(
                     f,
                     "the cloud's points lie on no grid of the configured voxel size: they are \
@@ -115,6 +131,11 @@ impl std::fmt::Display for PointSizing {
             }
         }
     }
+}
+
+/// Decimals that print `size` with four significant digits at any scale: 0.002714, 27.14, 2714.
+fn significant_decimals(size: f32) -> usize {
+    (3.0 - f64::from(size).log10().floor()).clamp(0.0, 40.0) as usize
 }
 
 /// The side of the cubes (in the cloud's units) that draws the surface of `positions` closed,
@@ -129,17 +150,29 @@ pub fn closing_point_size(positions: &[Vec3], base: f32) -> f32 {
 /// per voxel of its surface (measured spacing `s` ≤ 1.25 `base`), else it grows to 1.5 `s`,
 /// where `s` is the side of the square of surface each point stands for; so a dense voxelised
 /// capture is drawn exactly as PccAppRenderer draws it and a sparse one with cubes about 1.5
-/// spacings wide. A cloud off that grid is drawn 1.5 `s` wide whatever its density: cubes one
-/// unit wide would swallow a cloud a tenth of a unit across (the cameras inside them) and
-/// blur one in thousands of units. Clouds too small to measure (under 24 points) use their
-/// extent over √n as the spacing when off the grid, else keep `base`.
+/// spacings wide. A cloud off that grid is drawn 1.5 `s` wide whatever its density (cubes one
+/// unit wide would swallow a cloud a tenth of a unit across, the cameras inside them, and
+/// blur one in thousands of units), unless it lies on a grid of another pitch ([`grid_pitch`])
+/// about one point per cell: then one cell wide, as at the configured size. Clouds too small to
+/// measure (under 24 points) use their extent over √n as the spacing when off the grid, else
+/// keep `base`.
 #[must_use]
 pub fn point_sizing(positions: &[Vec3], base: f32) -> PointSizing {
     let finite = finite_points(positions);
     let on_grid = lies_on_grid(&finite, base);
     match finite_spacing(&finite) {
-        Some(s) if !on_grid => PointSizing::OffGrid(CLOSING_WIDTH * s),
-        Some(s) if s > DENSE_TOLERANCE * base => PointSizing::Grown((CLOSING_WIDTH * s).max(base)),
+        Some(s) if !on_grid => match grid_pitch(&finite) {
+            Some(pitch) if s <= DENSE_TOLERANCE * pitch => PointSizing::Voxelised(pitch),
+            _ => PointSizing::OffGrid(CLOSING_WIDTH * s),
+        },
+        // Sparse on the configured grid, or dense on a coarser one (a capture voxelised at
+        // twice the voxel: every point on even coordinates).
+        Some(s) if s > DENSE_TOLERANCE * base => match grid_pitch(&finite) {
+            Some(pitch) if pitch > base && s <= DENSE_TOLERANCE * pitch => {
+                PointSizing::Voxelised(pitch)
+            }
+            _ => PointSizing::Grown((CLOSING_WIDTH * s).max(base)),
+        },
         Some(_) => PointSizing::AsConfigured,
         None if on_grid => PointSizing::AsConfigured,
         None => match bounds(&finite) {
@@ -179,6 +212,49 @@ pub fn lies_on_grid(finite: &[Vec3], base: f32) -> bool {
             .count();
         on >= needed
     })
+}
+
+/// The pitch of the grid the points lie on, whatever the configured voxel size: on each axis
+/// the median gap between the distinct coordinates of up to [`PITCH_SAMPLES`] points (a voxelised surface fills nearly every grid plane it crosses, so most gaps are one pitch),
+/// taken when the axes that have gaps (at least two) agree within 1 % and the points lie on that grid
+/// ([`lies_on_grid`]); `None` otherwise (arbitrary floats, whose gaps are tiny and unequal).
+#[must_use]
+pub fn grid_pitch(finite: &[Vec3]) -> Option<f32> {
+    // Up to PITCH_SAMPLES points spread by the golden ratio rather than a stride: a stride can
+    // fall in step with the grid's rows and see every fifth plane only.
+    let samples: Vec<Vec3> = if finite.len() <= PITCH_SAMPLES {
+        finite.to_vec()
+    } else {
+        (0..PITCH_SAMPLES)
+            .map(|k| {
+                let at = (k as f64 * 0.618_033_988_749_894_9).fract() * finite.len() as f64;
+                finite[(at as usize).min(finite.len() - 1)]
+            })
+            .collect()
+    };
+    let median_gap = |axis: usize| -> Option<f64> {
+        let mut c: Vec<f32> = samples.iter().map(|p| p[axis]).collect();
+        c.par_sort_unstable_by(f32::total_cmp);
+        c.dedup();
+        let c: Vec<f64> = c.into_iter().map(f64::from).collect();
+        let mut gaps: Vec<f64> = c.windows(2).map(|w| w[1] - w[0]).collect();
+        if gaps.is_empty() {
+            return None;
+        }
+        let mid = gaps.len() / 2;
+        Some(*gaps.select_nth_unstable_by(mid, f64::total_cmp).1)
+    };
+    // An axis with one coordinate (a plane across it) has no gap and says nothing.
+    let gaps: Vec<f64> = (0..3).filter_map(median_gap).collect();
+    let (lo, hi) = (
+        gaps.iter().copied().fold(f64::INFINITY, f64::min),
+        gaps.iter().copied().fold(0.0, f64::max),
+    );
+    if gaps.len() < 2 || !(lo > 0.0 && hi <= 1.01 * lo) {
+        return None;
+    }
+    let pitch = ((lo + hi) / 2.0) as f32;
+    (pitch.is_normal() && lies_on_grid(finite, pitch)).then_some(pitch)
 }
 
 /// The low corner of the finite points' bounding box and its longest side; `None` for no
@@ -422,11 +498,20 @@ mod tests {
     fn dense_clouds_keep_the_voxel_size_and_sparse_ones_grow() {
         let dense = grid(300, 1.0);
         assert_eq!(closing_point_size(&dense, 1.0), 1.0);
-        let sparse = grid(300, 2.0);
+        // A random quarter of the voxels: spacing about 2, drawn 1.5 spacings wide.
+        let sparse: Vec<Vec3> = grid(600, 1.0)
+            .into_iter()
+            .enumerate()
+            .filter(|(i, _)| (*i as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15) >> 62 == 0)
+            .map(|(_, p)| p)
+            .collect();
         let size = closing_point_size(&sparse, 1.0);
         assert!((size - 3.0).abs() < 0.3, "size {size}");
-        // Measured against a coarser voxel size the same cloud is dense.
-        assert_eq!(closing_point_size(&sparse, 2.0), 2.0);
+        // Every other voxel in both directions is a grid of pitch 2, dense on it: one cell wide,
+        // whether the configured voxel is 1 or 2.
+        let coarse = grid(300, 2.0);
+        assert_eq!(point_sizing(&coarse, 1.0), PointSizing::Voxelised(2.0));
+        assert_eq!(closing_point_size(&coarse, 2.0), 2.0);
     }
 
     #[test]
@@ -452,21 +537,48 @@ mod tests {
 
     #[test]
     fn off_grid_clouds_are_drawn_at_their_own_spacing_at_every_scale() {
-        // A plane at pitch 0.7 measures 0.7 against a voxel of 1 and is drawn 1.05 wide; at
-        // 1/1000 of the scale (denser than one point per voxel) and at 1234.567 times it, the
-        // same in proportion.
+        // A plane at pitch 0.7 is on no grid of the voxel 1: it is drawn one cell of its own
+        // grid wide; at 1/1000 of the scale (denser than one point per voxel) and at 1234.567
+        // times it, the same in proportion.
         for scale in [1.0, 1e-3, 1234.567] {
             let pts = grid(300, 0.7 * scale);
             match point_sizing(&pts, 1.0) {
+                PointSizing::Voxelised(size) => {
+                    assert!(
+                        (size / scale - 0.7).abs() < 1e-3,
+                        "scale {scale}: size {size}"
+                    );
+                }
+                other => panic!("scale {scale}: {other:?}"),
+            }
+            // The same plane jittered off every grid: 1.5 measured spacings.
+            let jittered: Vec<Vec3> = pts
+                .iter()
+                .enumerate()
+                .map(|(i, &p)| {
+                    let h = (i as f32 * 0.618_034).fract() - 0.5;
+                    p + Vec3::new(0.21 * h, 0.37 * h, 0.0) * 0.7 * scale
+                })
+                .collect();
+            match point_sizing(&jittered, 1.0) {
                 PointSizing::OffGrid(size) => {
                     assert!(
                         (size / scale - 1.05).abs() < 0.1,
                         "scale {scale}: size {size}"
-                    )
+                    );
                 }
-                other => panic!("scale {scale}: {other:?}"),
+                other => panic!("jittered at scale {scale}: {other:?}"),
             }
         }
+        // A voxelised grid scaled by 2, 1/2 and 1/1024 (voxels to a metre-sized object) keeps
+        // its cell, and a sparse one (every other cell) is drawn 1.5 spacings wide.
+        for pitch in [2.0f32, 0.5, 1.0 / 1024.0] {
+            assert_eq!(
+                point_sizing(&grid(200, pitch), 1.0),
+                PointSizing::Voxelised(pitch)
+            );
+        }
+        assert_eq!(grid_pitch(&fibonacci_sphere(20_000, 37.3)), None);
         // Too few points to measure: the extent over √n.
         let few = [Vec3::ZERO, Vec3::X * 0.2, Vec3::Y * 0.2, Vec3::Z * 0.2];
         match point_sizing(&few, 1.0) {

@@ -60,7 +60,9 @@ pub mod rig;
 mod shading;
 mod zbuffer;
 
-pub use closing::{PointSizing, closing_point_size, lies_on_grid, point_sizing, surface_spacing};
+pub use closing::{
+    PointSizing, closing_point_size, grid_pitch, lies_on_grid, point_sizing, surface_spacing,
+};
 pub use cloud::render_cloud;
 pub use dataset::{DatasetOptions, dataset_image_name, remove_dataset_model, write_dataset};
 pub use degenerate::DegenerateError;

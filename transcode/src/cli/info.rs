@@ -83,6 +83,7 @@ fn drawn_as(model: &plenoptic_io::Model) -> Option<(&'static str, f32, String)> 
         PointSizing::AsConfigured => "as_configured",
         PointSizing::Grown(_) => "grown",
         PointSizing::OffGrid(_) => "off_grid",
+        PointSizing::Voxelised(_) => "voxelised",
     };
     Some((kind, sizing.size(options.point_size), sizing.to_string()))
 }
