@@ -3,6 +3,7 @@
 //!
 //! - [`write_atomic`]: writes bytes already in memory.
 //! - [`write_atomic_with`]: streams through a 1 MiB [`BufWriter`] on the temporary file.
+//! - [`stale_temporary_target`]: recognises a temporary a killed writer left behind.
 //!
 //! Both write a temporary sibling of the target (in the same folder, so the rename cannot cross
 //! file systems), named from the target's file name, the process id and a process-wide counter,
@@ -130,6 +131,28 @@ fn temporary_sibling(path: &Path) -> PathBuf {
         .unwrap_or_default();
     let n = NEXT_TEMPORARY.fetch_add(1, Ordering::Relaxed);
     path.with_file_name(format!(".{name}.{}.{n}.tmp", std::process::id()))
+}
+
+/// The file name a temporary of this crate was writing, when `file_name` is one
+/// (`.NAME.PID.N.tmp`) left by a process that is no longer running, as a process killed
+/// mid-write leaves it: `NAME`. `None` for other names, for this process's own temporaries, and
+/// where it cannot be told whether the writer still runs (no `/proc`), so that a caller
+/// clearing stale files never takes a temporary another process is still writing.
+#[must_use]
+pub fn stale_temporary_target(file_name: &str) -> Option<&str> {
+    let inner = file_name.strip_prefix('.')?.strip_suffix(".tmp")?;
+    let (rest, n) = inner.rsplit_once('.')?;
+    let (name, pid) = rest.rsplit_once('.')?;
+    let digits = |s: &str| !s.is_empty() && s.bytes().all(|b| b.is_ascii_digit());
+    if name.is_empty() || !digits(n) || !digits(pid) {
+        return None;
+    }
+    let pid: u32 = pid.parse().ok()?;
+    let proc_fs = Path::new("/proc/self");
+    let stale = pid != std::process::id()
+        && proc_fs.exists()
+        && !Path::new("/proc").join(pid.to_string()).exists();
+    stale.then_some(name)
 }
 
 /// Syncs the folder holding `path`, best effort.
@@ -324,6 +347,42 @@ mod tests {
         std::os::unix::fs::symlink("loop_a", dir.path().join("loop_b")).unwrap();
         write_atomic(&dir.path().join("loop_a"), b"x").unwrap();
         assert_eq!(std::fs::read(dir.path().join("loop_a")).unwrap(), b"x");
+    }
+
+    /// A killed writer's temporary is recognised by name and dead process; a live one's (this
+    /// process's, or pid 1's) and other names are not.
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn stale_temporaries_are_those_of_writers_gone() {
+        // Pids above the kernel's pid_max (4,194,304 at most) are never running.
+        let dead = 4_194_305 + u32::from(std::process::id() == 4_194_305);
+        assert_eq!(
+            stale_temporary_target(&format!(".view_017.png.{dead}.76.tmp")),
+            Some("view_017.png")
+        );
+        assert_eq!(
+            stale_temporary_target(&format!(".a.b.c.{dead}.0.tmp")),
+            Some("a.b.c")
+        );
+        let own = format!(".view_017.png.{}.3.tmp", std::process::id());
+        assert_eq!(stale_temporary_target(&own), None);
+        assert_eq!(stale_temporary_target(".view_017.png.1.3.tmp"), None);
+        for other in [
+            "view_017.png",
+            ".view_017.png.tmp",
+            ".view.png.x1.2.tmp",
+            ".view.png.12..tmp",
+            &format!("..{dead}.1.tmp"),
+            &format!(".view.png.{dead}.1.tmp.bak"),
+        ] {
+            assert_eq!(stale_temporary_target(other), None, "{other}");
+        }
+        // What this crate writes is what it recognises.
+        let dir = tempfile::tempdir().unwrap();
+        let temp = temporary_sibling(&dir.path().join("model.ply"));
+        let name = temp.file_name().unwrap().to_str().unwrap().to_owned();
+        let renamed = name.replacen(&std::process::id().to_string(), &dead.to_string(), 1);
+        assert_eq!(stale_temporary_target(&renamed), Some("model.ply"));
     }
 
     #[test]

@@ -194,7 +194,8 @@ pub fn remove_dataset_model(dir: &Path) -> Result<(), Error> {
     remove_model_files(&dir.join("sparse").join("0"))
 }
 
-/// Removes the files of [`STALE_MODEL_FILES`] from `sparse_dir` that are there.
+/// Removes the files of [`STALE_MODEL_FILES`] from `sparse_dir` that are there, and the
+/// temporaries a killed writer of them left.
 fn remove_model_files(sparse_dir: &Path) -> Result<(), Error> {
     for name in STALE_MODEL_FILES {
         let path = sparse_dir.join(name);
@@ -204,17 +205,28 @@ fn remove_model_files(sparse_dir: &Path) -> Result<(), Error> {
             Err(source) => return Err(Error::Io { path, source }),
         }
     }
-    Ok(())
+    remove_files_where(sparse_dir, |name| STALE_MODEL_FILES.contains(&name))
 }
 
 /// Removes the files in `folder` named as a dataset names its views (`view_NNN.png`, and
-/// `view_NNN.exr` for depth); other files, and a missing folder, are left alone.
+/// `view_NNN.exr` for depth), and the temporaries a killed writer of them left (see
+/// [`remove_files_where`]); other files, and a missing folder, are left alone.
 fn remove_view_files(folder: &Path) -> Result<(), Error> {
+    remove_files_where(folder, is_view_file)
+}
+
+/// Removes the regular files in `folder` whose name passes `named`, and the atomic writes'
+/// temporaries of such names whose writer is gone (`.view_017.png.PID.N.tmp`: a run killed
+/// while writing its dataset left them there through every later run); a missing folder is
+/// left alone.
+fn remove_files_where(folder: &Path, named: impl Fn(&str) -> bool) -> Result<(), Error> {
     let Ok(entries) = std::fs::read_dir(folder) else {
         return Ok(());
     };
     for entry in entries.flatten() {
-        let is_view = entry.file_name().to_str().is_some_and(is_view_file);
+        let is_view = entry.file_name().to_str().is_some_and(|name| {
+            named(name) || atomic_output::stale_temporary_target(name).is_some_and(&named)
+        });
         if is_view && entry.file_type().is_ok_and(|t| t.is_file()) {
             let path = entry.path();
             std::fs::remove_file(&path).map_err(|source| Error::Io { path, source })?;

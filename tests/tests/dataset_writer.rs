@@ -82,6 +82,18 @@ fn dataset_round_trips_through_colmap_io() {
     // run's views 2..4, its masks and its depth maps were left beside the new images (a reader
     // paired them with the new views). The user's own files stay.
     std::fs::write(dir.path().join("images/notes.txt"), b"mine").unwrap();
+    // A run killed while writing its views left its atomic writes' temporaries (the writer's
+    // pid is gone: above the kernel's pid_max); they went through every later run. Another
+    // live process's temporary (pid 1) and a user's dotfile stay.
+    let dead = ".view_003.png.4194305.76.tmp";
+    std::fs::write(dir.path().join("images").join(dead), b"half").unwrap();
+    std::fs::write(
+        dir.path().join("sparse/0/.images.txt.4194305.2.tmp"),
+        b"half",
+    )
+    .unwrap();
+    std::fs::write(dir.path().join("images/.view_001.png.1.9.tmp"), b"live").unwrap();
+    std::fs::write(dir.path().join("images/.notes.4194305.1.tmp"), b"mine").unwrap();
     write_dataset(
         dir.path(),
         &model,
@@ -103,10 +115,23 @@ fn dataset_round_trips_through_colmap_io() {
         names.sort();
         names
     };
-    assert_eq!(
-        listed("images"),
-        ["notes.txt", "view_000.png", "view_001.png"]
-    );
+    if cfg!(target_os = "linux") {
+        assert_eq!(
+            listed("images"),
+            [
+                ".notes.4194305.1.tmp",
+                ".view_001.png.1.9.tmp",
+                "notes.txt",
+                "view_000.png",
+                "view_001.png"
+            ]
+        );
+        assert!(
+            !listed("sparse/0").iter().any(|n| n.ends_with(".tmp")),
+            "{:?}",
+            listed("sparse/0")
+        );
+    }
     assert!(listed("masks").is_empty(), "{:?}", listed("masks"));
     assert!(listed("depth").is_empty(), "{:?}", listed("depth"));
 }
