@@ -162,6 +162,15 @@ pub enum ResumeError {
         /// What is wrong with it.
         problem: String,
     },
+    /// The run finished, but what it wrote is gone or damaged (its model or report removed,
+    /// cut short or overwritten since).
+    #[error("the run in {dir} finished, but {problem}; run without --resume to start over")]
+    OutputsGone {
+        /// The output folder.
+        dir: PathBuf,
+        /// What is missing or unreadable.
+        problem: String,
+    },
     /// The run was started with another configuration or input.
     #[error(
         "the run in {dir} was started with {what}; resume it with the same settings, or run \

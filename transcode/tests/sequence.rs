@@ -644,4 +644,21 @@ fn a_rerun_trains_again_what_changed_and_only_that() {
     assert_ne!(models(&seq)[0], before[0]);
     let manifest = json(&seq.join("sequence.json"));
     assert!(states(&manifest).iter().all(|(_, s)| s == "finished"));
+
+    // A finished frame's model cut short since (it was counted as finished), then another's
+    // report removed (the frame failed on every re-run, advising a `--resume` this command
+    // does not have): each is trained again, to the same models.
+    let current = models(&seq);
+    let frame = |k: usize| seq.join("frames").join(&names[k]);
+    std::fs::write(frame(1).join("model/splats.ply"), &current[1][..1000]).unwrap();
+    let said = run(&seq, &["--iterations", "60"]);
+    std::fs::remove_file(frame(0).join("report/report.html")).unwrap();
+    let said_then = run(&seq, &["--iterations", "60"]);
+    for (said, k, what) in [(said, 1, "its model"), (said_then, 0, "its report")] {
+        let note = format!("{}: its earlier run finished, but {what}", names[k]);
+        assert!(said.contains(&note), "{note}: {said}");
+    }
+    assert_eq!(models(&seq), current);
+    let manifest = json(&seq.join("sequence.json"));
+    assert!(states(&manifest).iter().all(|(_, s)| s == "finished"));
 }

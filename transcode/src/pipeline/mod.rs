@@ -42,7 +42,7 @@ use splat_train::eval::RenderedView;
 use crate::config::{Config, InitMode};
 use crate::progress::{Event, Observer};
 use crate::report::{CurvePoint, Report, RunReport, StageTiming};
-use crate::resume::{self, InputStamp, ResumeError, RunState, Status};
+use crate::resume::{InputStamp, ResumeError, RunState, Status};
 use budget::choose_bands;
 use initialise::{init_modes, initialise};
 use layout::{Layout, open_state, remove_dir_if_present};
@@ -131,18 +131,39 @@ pub fn run_with(
         if state.status == Status::Finished {
             let layout = Layout::new(out);
             let (model, html) = (layout.main_model(), layout.html());
-            if model.is_file() && html.is_file() {
-                return Ok(Finish::AlreadyFinished { model, html });
-            }
-            return Err(ResumeError::Malformed {
-                path: out.join(resume::STATE_FILE),
-                problem: "the run finished but its model or report is gone".into(),
-            }
-            .into());
+            return match finished_outputs_problem(&layout) {
+                None => Ok(Finish::AlreadyFinished { model, html }),
+                Some(problem) => Err(ResumeError::OutputsGone {
+                    dir: out.to_path_buf(),
+                    problem,
+                }
+                .into()),
+            };
         }
     }
     execute(input, out, cfg, observer, saved, opts.warm_start.as_ref())
         .map(|o| Finish::Completed(Box::new(o)))
+}
+
+/// What is wrong with a finished run's outputs, or `None` when its model reads whole and its
+/// report is there and parses: a finished run is checked, not taken on its state's word (a model
+/// cut short or removed since was reported as finished, and a sequence counted it).
+fn finished_outputs_problem(layout: &Layout) -> Option<String> {
+    let model = layout.main_model();
+    if let Err(e) = splat_core::ply::read_model(&model) {
+        return Some(format!("its model {} cannot be read: {e}", model.display()));
+    }
+    let html = layout.html();
+    if !html.is_file() {
+        return Some(format!("its report {} is gone", html.display()));
+    }
+    let json = layout.report_dir.join("report.json");
+    let parsed = std::fs::read(&json)
+        .map_err(|e| e.to_string())
+        .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).map_err(|e| e.to_string()));
+    parsed
+        .err()
+        .map(|e| format!("its report {} cannot be read: {e}", json.display()))
 }
 
 /// The stages of a run, in order (the numbers in [`Event::Stage`]).

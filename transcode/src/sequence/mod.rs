@@ -393,6 +393,16 @@ fn run_frame(
             )));
             run(false)
         }
+        // A finished frame whose model or report was removed or cut short since: failing it
+        // on every re-run, with advice to drop a `--resume` the command does not have, left it
+        // failed until its folder was deleted by hand.
+        Err(PipelineError::Resume(ResumeError::OutputsGone { problem, .. })) => {
+            observer(Event::Note(format!(
+                "{}: its earlier run finished, but {problem}; it is trained again",
+                frame.name
+            )));
+            run(false)
+        }
         other => other,
     }
 }
