@@ -40,7 +40,9 @@ pub enum DegenerateError {
     /// All points (nearly) coincide.
     #[error(
         "{}: the input has no extent: its {points} point(s) lie within {extent:e} of each other around ({}, {}, {}), \
-         below the {min:e} needed (16 f32 steps of its largest coordinate); nothing can be framed or rendered",
+         below the {min:e} needed (16 f32 steps of its largest coordinate); nothing can be framed or rendered. \
+         Coordinates are read as 32-bit floats, so a file holding an object much smaller than its distance \
+         from the origin (geo-referenced coordinates in `double`) loses it: subtract the centre first",
         path.display(), center[0], center[1], center[2]
     )]
     NoExtent {

@@ -26,7 +26,8 @@ pub struct Args {
     /// default 60; 0 = after every step).
     #[arg(long, value_name = "SECONDS", value_parser = super::config::parse_interval_seconds)]
     checkpoint_interval: Option<f64>,
-    /// Print nothing but errors.
+    /// Print nothing but errors and the result (the held-out scores, where the model and report
+    /// are, the total time).
     #[arg(long)]
     quiet: bool,
 }
