@@ -70,7 +70,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 }
 
 /// How the reference views draw a cloud's points with the default renderer settings
-/// ([`plenoptic_render::point_sizing`]): its kind (`as_configured`, `grown`, `off_grid`), the
+/// ([`plenoptic_render::point_sizing`]): its kind (`as_configured`, `grown`, `off_grid`, `voxelised`), the
 /// cube side in the cloud's units and the sentence a run prints; `None` for a mesh.
 fn drawn_as(model: &plenoptic_io::Model) -> Option<(&'static str, f32, String)> {
     use plenoptic_render::PointSizing;
@@ -367,7 +367,8 @@ mod tests {
     }
 
     /// `info` says how the reference views will draw a cloud: at the voxel for a voxelised
-    /// cloud, at its own spacing for one on no grid; nothing for a mesh.
+    /// cloud, a cell of its own grid for one voxelised at another pitch, at its own spacing for
+    /// one on no grid; nothing for a mesh.
     #[test]
     fn clouds_say_how_their_points_are_drawn() {
         // A plane of 60 × 60 points one voxel apart, and the same scaled by 0.00137.
@@ -382,6 +383,21 @@ mod tests {
             })
         };
         let (kind, size, sentence) = drawn_as(&plane(0.00137)).unwrap();
+        assert_eq!(kind, "voxelised");
+        assert!((size / 0.00137 - 1.0).abs() < 1e-3, "{size}");
+        assert!(
+            sentence.contains("on a grid of pitch 0.001370"),
+            "{sentence}"
+        );
+        // Off every grid (each point nudged by a different share of a spacing).
+        let plenoptic_io::Model::Cloud(mut off) = plane(0.00137) else {
+            unreachable!()
+        };
+        for (i, p) in off.positions.iter_mut().enumerate() {
+            let h = (i as f32 * 0.618_034).fract() - 0.5;
+            *p += glam::Vec3::new(0.3 * h, 0.2 * h, 0.0) * 0.00137;
+        }
+        let (kind, size, sentence) = drawn_as(&plenoptic_io::Model::Cloud(off)).unwrap();
         assert_eq!(kind, "off_grid");
         assert!((size / 0.00137 - 1.5).abs() < 0.2, "{size}");
         assert!(sentence.contains("on no grid"), "{sentence}");
