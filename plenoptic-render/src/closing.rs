@@ -215,8 +215,9 @@ pub fn lies_on_grid(finite: &[Vec3], base: f32) -> bool {
 }
 
 /// The pitch of the grid the points lie on, whatever the configured voxel size: on each axis
-/// the median gap between the distinct coordinates of up to 200,000 points (a voxelised surface fills nearly every grid plane it crosses, so most gaps are one pitch),
-/// taken when the axes that have gaps (at least two) agree within 1 % and the points lie on that grid
+/// the median gap between the distinct coordinates of up to 200,000 points (a voxelised
+/// surface fills nearly every grid plane it crosses, so most gaps are one pitch), taken when
+/// the axes that have gaps (at least two) agree within 1 % and the points lie on that grid
 /// ([`lies_on_grid`]); `None` otherwise (arbitrary floats, whose gaps are tiny and unequal).
 #[must_use]
 pub fn grid_pitch(finite: &[Vec3]) -> Option<f32> {
