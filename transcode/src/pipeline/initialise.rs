@@ -163,6 +163,12 @@ fn continuing_from_checkpoint(
             }
             .into());
         }
+        // Killed before its first checkpoint, or the checkpoint removed since: the mode starts
+        // again from its init (the same model, deterministically), which is said, not silent.
+        observer(Event::Note(format!(
+            "{mode} init: no checkpoint at {} to continue from; its training starts again",
+            ckpt.display()
+        )));
         return Ok(None);
     }
     observer(Event::Stage {

@@ -68,6 +68,7 @@ pub(super) fn reference_views(
         what: stage_description(rig, cfg),
     });
     let opts = reference_options(model, cfg, observer);
+    let written_before = state.dataset_written;
     let train = if state.dataset_written || !cfg.output.dataset {
         // The dataset's PNGs are quantised: training needs the renders themselves, which are
         // deterministic, so they are made again in memory.
@@ -103,7 +104,8 @@ pub(super) fn reference_views(
         .collect();
     plenoptic_render::degenerate::check_coverage(input, "held-out", &covered, heldout_name)?;
     clock.lap("render held-out views");
-    if cfg.output.dataset {
+    // A resumed run's dataset was written before (said above): not "written" again.
+    if cfg.output.dataset && !written_before {
         observer(Event::Note(format!(
             "dataset written to {}",
             layout.dataset_dir.display()
