@@ -110,6 +110,16 @@ pub enum DegenerateError {
 }
 
 /// The points whose spread matters: a cloud's points, or the vertices a mesh's triangles use.
+/// The corners of the box around `points`, in f64 (infinite for none): the one fold of
+/// [`check_model`], [`rig_doubt`] and the rig's bounding sphere.
+pub(crate) fn bounds(points: &[Vec3]) -> (DVec3, DVec3) {
+    points
+        .iter()
+        .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), p| {
+            (lo.min(p.as_dvec3()), hi.max(p.as_dvec3()))
+        })
+}
+
 fn used_points(model: &Model) -> Cow<'_, [Vec3]> {
     match model {
         Model::Cloud(c) => Cow::Borrowed(&c.positions),
@@ -139,11 +149,7 @@ pub fn check_model(path: &Path, model: &Model) -> Result<(), DegenerateError> {
         // The caller reports an empty input with its own message.
         return Ok(());
     }
-    let (lo, hi) = points
-        .iter()
-        .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), p| {
-            (lo.min(p.as_dvec3()), hi.max(p.as_dvec3()))
-        });
+    let (lo, hi) = bounds(&points);
     let extent = (hi - lo).max_element();
     let largest = lo.abs().max(hi.abs()).max_element();
     let min = (MIN_EXTENT_STEPS * f64::from(f32::EPSILON) * largest).max(MIN_EXTENT);
@@ -320,11 +326,7 @@ pub fn rig_doubt(model: &Model) -> Option<RigDoubt> {
         return None;
     }
     let points = used_points(model);
-    let (lo, hi) = points
-        .iter()
-        .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), p| {
-            (lo.min(p.as_dvec3()), hi.max(p.as_dvec3()))
-        });
+    let (lo, hi) = bounds(&points);
     let radius = 0.5 * (hi - lo).length();
     if points.is_empty() || radius <= 0.0 {
         return None;

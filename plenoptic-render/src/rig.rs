@@ -213,11 +213,7 @@ pub fn bounding_sphere(model: &Model) -> Result<(DVec3, f64), Error> {
             "the input has no points or vertices".into(),
         ));
     }
-    let (lo, hi) = points
-        .iter()
-        .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), p| {
-            (lo.min(p.as_dvec3()), hi.max(p.as_dvec3()))
-        });
+    let (lo, hi) = crate::degenerate::bounds(points);
     if !(lo.is_finite() && hi.is_finite()) {
         return Err(Error::InvalidModel(
             "the input has non-finite coordinates".into(),
